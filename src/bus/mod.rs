@@ -1,0 +1,3 @@
+//! The bus: one narrow interface over CAN frames.
+mod frame;
+pub use frame::Frame;
