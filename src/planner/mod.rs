@@ -1,1 +1,725 @@
-//! (in progress)
+//! Motion planner (minimal): straight moves into time-parameterised trapezoid segments.
+//!
+//! Second stage of the pipeline (`gcode → planner → interp`). Pure: no clock, no I/O; the
+//! output is a [`Plan`] whose only question downstream is [`Plan::position_at`] (as in Klipper,
+//! the sampler knows nothing about G-code or limits).
+//!
+//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_mm_s2` mm/s², `_s` seconds.
+//!
+//! # Profile
+//!
+//! Each move becomes one [`Segment`] along the straight line from the previous position, with a
+//! constant-acceleration ramp up, an optional cruise and a ramp down (a triangle when the move is
+//! too short to reach cruise speed). This planner stops exactly at every block end (G61): every
+//! segment starts and ends at rest. Segments already carry start and end speeds so that a later
+//! look-ahead (junction speeds, see `shared/seeds` 000/003) can fill them in without changing
+//! the sampler.
+//!
+//! For a move along the unit direction `u`, the path limits are
+//!
+//! - speed: `v ≤ min(feed, max_feed, min_i max_vel_i / |u_i|)` (a rapid uses `max_feed`),
+//! - acceleration: `a = min_i max_acc_i / |u_i|`,
+//!
+//! so every axis stays within its own velocity and acceleration limit (`|v_i| = v |u_i|`).
+
+use nalgebra::Vector3;
+
+use crate::gcode::{Move, Program};
+
+/// Largest value accepted for any machine limit; keeps squares and products of limits and
+/// lengths finite.
+pub const MAX_LIMIT: f64 = 1.0e9;
+
+/// Machine limits per axis (X, Y, Z) and for the path.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// Maximum speed of each axis.
+    pub max_vel_mm_s: Vector3<f64>,
+    /// Maximum acceleration (and deceleration) of each axis.
+    pub max_acc_mm_s2: Vector3<f64>,
+    /// Maximum path feed; programmed feeds above it are clamped, rapids run at it.
+    pub max_feed_mm_s: f64,
+}
+
+impl Limits {
+    /// Checks that every limit is finite, positive and at most [`MAX_LIMIT`].
+    pub fn validate(&self) -> Result<(), PlanError> {
+        const VEL: [&str; 3] = ["max_vel_mm_s.x", "max_vel_mm_s.y", "max_vel_mm_s.z"];
+        const ACC: [&str; 3] = ["max_acc_mm_s2.x", "max_acc_mm_s2.y", "max_acc_mm_s2.z"];
+        let named = (0..3)
+            .map(|i| (VEL[i], self.max_vel_mm_s[i]))
+            .chain((0..3).map(|i| (ACC[i], self.max_acc_mm_s2[i])))
+            .chain(std::iter::once(("max_feed_mm_s", self.max_feed_mm_s)));
+        for (name, value) in named {
+            if !(value > 0.0 && value <= MAX_LIMIT) {
+                return Err(PlanError::InvalidLimit { name, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a plan could not be made.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// A machine limit is not finite, not positive, or above [`MAX_LIMIT`].
+    #[error("machine limit {name} = {value} must be greater than 0 and at most 1e9")]
+    InvalidLimit {
+        /// Field name, e.g. `max_acc_mm_s2.y`.
+        name: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// The start position has a NaN or infinite coordinate.
+    #[error("start position is not finite")]
+    NonFiniteStart,
+    /// A move target has a NaN or infinite coordinate.
+    #[error("line {line}: move target is not finite")]
+    NonFiniteTarget {
+        /// 1-based source line.
+        line: usize,
+    },
+    /// A feed move with a feed that is missing, not finite or not positive.
+    #[error("line {line}: feed {feed_mm_s:?} mm/s must be finite and greater than zero")]
+    InvalidFeed {
+        /// 1-based source line.
+        line: usize,
+        /// The feed (`None` for a G1 move without feed).
+        feed_mm_s: Option<f64>,
+    },
+    /// The move is so long or so slow that its length or duration overflows.
+    #[error("line {line}: move length or duration is not finite (move too long or feed too low)")]
+    Overflow {
+        /// 1-based source line.
+        line: usize,
+    },
+}
+
+/// One straight move with its speed profile. Times in the profile are relative to the segment
+/// start; [`Segment::start_time_s`] places it in the plan.
+///
+/// Path speed: rises from `v_start_mm_s` to `v_peak_mm_s` at `accel_mm_s2` during `t_acc_s`,
+/// holds for `t_cruise_s`, falls to `v_end_mm_s` at `accel_mm_s2` during `t_dec_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Segment {
+    /// 1-based source line of the move.
+    pub line: usize,
+    /// Whether the move is a rapid (G0).
+    pub rapid: bool,
+    /// Where the segment starts (the previous segment's `end_mm`, bit for bit).
+    pub start_mm: Vector3<f64>,
+    /// Where it ends (the move's target, bit for bit).
+    pub end_mm: Vector3<f64>,
+    /// Unit vector from start to end.
+    pub direction: Vector3<f64>,
+    /// Straight-line length, > 0.
+    pub length_mm: f64,
+    /// Path speed at the start (0 in this exact-stop planner).
+    pub v_start_mm_s: f64,
+    /// Highest path speed reached (cruise speed of a trapezoid, apex of a triangle).
+    pub v_peak_mm_s: f64,
+    /// Path speed at the end (0 in this exact-stop planner).
+    pub v_end_mm_s: f64,
+    /// Path acceleration of both ramps (magnitude).
+    pub accel_mm_s2: f64,
+    /// Duration of the ramp up.
+    pub t_acc_s: f64,
+    /// Duration of the constant-speed part (0 for a triangle).
+    pub t_cruise_s: f64,
+    /// Duration of the ramp down.
+    pub t_dec_s: f64,
+    /// Time in the plan at which the segment starts.
+    pub start_time_s: f64,
+}
+
+impl Segment {
+    /// Total duration of the segment.
+    pub fn duration_s(&self) -> f64 {
+        self.t_acc_s + self.t_cruise_s + self.t_dec_s
+    }
+
+    /// Time in the plan at which the segment ends.
+    pub fn end_time_s(&self) -> f64 {
+        self.start_time_s + self.duration_s()
+    }
+
+    /// Whether the profile has no constant-speed part.
+    pub fn is_triangle(&self) -> bool {
+        self.t_cruise_s == 0.0
+    }
+
+    /// Distance travelled along the path at `t_s` after the segment start, clamped to
+    /// `[0, length_mm]`.
+    pub fn distance_at(&self, t_s: f64) -> f64 {
+        self.length_mm - self.remaining_at(t_s)
+    }
+
+    /// Path speed at `t_s` after the segment start (0 outside the segment when it starts and
+    /// ends at rest).
+    pub fn speed_at(&self, t_s: f64) -> f64 {
+        let a = self.accel_mm_s2;
+        if t_s.is_nan() || t_s <= 0.0 {
+            self.v_start_mm_s
+        } else if t_s < self.t_acc_s {
+            self.v_start_mm_s + a * t_s
+        } else if t_s < self.t_acc_s + self.t_cruise_s {
+            self.v_peak_mm_s
+        } else {
+            let tr = (self.duration_s() - t_s).max(0.0);
+            self.v_end_mm_s + a * tr
+        }
+    }
+
+    /// Position at `t_s` after the segment start. Exactly `start_mm` at `t_s <= 0` and exactly
+    /// `end_mm` at `t_s >= duration_s()`. The ramp down is measured back from the end, so the
+    /// approach to `end_mm` is as precise as the approach from `start_mm`; an axis that does not
+    /// move keeps its coordinate bit for bit.
+    pub fn position_at(&self, t_s: f64) -> Vector3<f64> {
+        let a = self.accel_mm_s2;
+        let t_ramp_end_s = self.t_acc_s + self.t_cruise_s;
+        if t_s.is_nan() || t_s <= 0.0 {
+            self.start_mm
+        } else if t_s < self.t_acc_s {
+            self.start_mm + self.direction * (self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s)
+        } else if t_s < t_ramp_end_s {
+            let d_acc_mm = self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
+            self.start_mm + self.direction * (d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s))
+        } else if t_s < self.duration_s() {
+            self.end_mm - self.direction * self.remaining_at(t_s)
+        } else {
+            self.end_mm
+        }
+    }
+
+    /// Distance still to go at `t_s` after the segment start.
+    fn remaining_at(&self, t_s: f64) -> f64 {
+        let a = self.accel_mm_s2;
+        let duration_s = self.duration_s();
+        if t_s.is_nan() || t_s <= 0.0 {
+            return self.length_mm;
+        }
+        if t_s >= duration_s {
+            return 0.0;
+        }
+        if t_s >= self.t_acc_s + self.t_cruise_s {
+            let tr = duration_s - t_s;
+            return (self.v_end_mm_s * tr + 0.5 * a * tr * tr).min(self.length_mm);
+        }
+        let d_acc_mm = self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
+        let travelled_mm = if t_s < self.t_acc_s {
+            self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s
+        } else {
+            d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s)
+        };
+        (self.length_mm - travelled_mm).clamp(0.0, self.length_mm)
+    }
+}
+
+/// Speed profile of one segment, relative to its start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Profile {
+    v_peak_mm_s: f64,
+    t_acc_s: f64,
+    t_cruise_s: f64,
+    t_dec_s: f64,
+}
+
+/// Trapezoid (or triangle) over `length_mm` from `v_start` to `v_end` with speed cap `v_max` and
+/// acceleration `accel`. `None` if the end speed cannot be reached within the length or an input
+/// is out of its domain. All speeds in mm/s, `accel` in mm/s².
+fn trapezoid(
+    length_mm: f64,
+    v_start_mm_s: f64,
+    v_end_mm_s: f64,
+    v_max_mm_s: f64,
+    accel_mm_s2: f64,
+) -> Option<Profile> {
+    let (l, v0, v1, vmax, a) = (length_mm, v_start_mm_s, v_end_mm_s, v_max_mm_s, accel_mm_s2);
+    let domain_ok = l > 0.0
+        && l.is_finite()
+        && a > 0.0
+        && a.is_finite()
+        && vmax > 0.0
+        && vmax.is_finite()
+        && (0.0..=vmax).contains(&v0)
+        && (0.0..=vmax).contains(&v1);
+    if !domain_ok || (v1 * v1 - v0 * v0).abs() > 2.0 * a * l * (1.0 + 1e-12) {
+        return None;
+    }
+    // Apex speed of the triangle that covers exactly `l`.
+    let v_apex_sq = a * l + 0.5 * (v0 * v0 + v1 * v1);
+    let profile = if v_apex_sq <= vmax * vmax {
+        let vp = v_apex_sq.sqrt().max(v0).max(v1);
+        Profile {
+            v_peak_mm_s: vp,
+            t_acc_s: (vp - v0) / a,
+            t_cruise_s: 0.0,
+            t_dec_s: (vp - v1) / a,
+        }
+    } else {
+        let d_acc = (vmax * vmax - v0 * v0) / (2.0 * a);
+        let d_dec = (vmax * vmax - v1 * v1) / (2.0 * a);
+        Profile {
+            v_peak_mm_s: vmax,
+            t_acc_s: (vmax - v0) / a,
+            t_cruise_s: ((l - d_acc - d_dec) / vmax).max(0.0),
+            t_dec_s: (vmax - v1) / a,
+        }
+    };
+    let total_s = profile.t_acc_s + profile.t_cruise_s + profile.t_dec_s;
+    total_s.is_finite().then_some(profile)
+}
+
+/// A time-parameterised path: segments back to back, starting at time 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    start_mm: Vector3<f64>,
+    segments: Vec<Segment>,
+    duration_s: f64,
+}
+
+impl Plan {
+    /// A plan with no motion that stays at `start_mm`.
+    pub fn at_rest(start_mm: Vector3<f64>) -> Plan {
+        Plan {
+            start_mm,
+            segments: Vec::new(),
+            duration_s: 0.0,
+        }
+    }
+
+    /// The segments in time order.
+    pub fn segments(&self) -> &[Segment] {
+        &self.segments
+    }
+
+    /// Total duration.
+    pub fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    /// Where the plan starts.
+    pub fn start_mm(&self) -> Vector3<f64> {
+        self.start_mm
+    }
+
+    /// Where the plan ends: the last segment's `end_mm` (the start if there is no segment).
+    pub fn end_mm(&self) -> Vector3<f64> {
+        self.segments.last().map_or(self.start_mm, |s| s.end_mm)
+    }
+
+    /// Index of the segment running at `t_s` (the first at `t_s <= 0`, the last at or after the
+    /// end); `None` for a plan without segments.
+    pub fn segment_index_at(&self, t_s: f64) -> Option<usize> {
+        if self.segments.is_empty() {
+            return None;
+        }
+        let after = self.segments.partition_point(|s| s.start_time_s <= t_s);
+        Some(after.saturating_sub(1))
+    }
+
+    /// Position at `t_s` (exact, analytic). `start_mm` before 0 (and for NaN), exactly
+    /// `end_mm()` from `duration_s()` on.
+    pub fn position_at(&self, t_s: f64) -> Vector3<f64> {
+        if t_s.is_nan() || t_s <= 0.0 {
+            return self.start_mm;
+        }
+        if t_s >= self.duration_s {
+            return self.end_mm();
+        }
+        match self
+            .segment_index_at(t_s)
+            .and_then(|i| self.segments.get(i))
+        {
+            Some(seg) => seg.position_at(t_s - seg.start_time_s),
+            None => self.start_mm,
+        }
+    }
+}
+
+/// Plans a parsed program from its start position.
+pub fn plan(program: &Program, limits: &Limits) -> Result<Plan, PlanError> {
+    plan_moves(program.start_mm, &program.moves, limits)
+}
+
+/// Plans `moves` from `start_mm`: one exact-stop trapezoid per move, zero-length moves skipped.
+pub fn plan_moves(
+    start_mm: Vector3<f64>,
+    moves: &[Move],
+    limits: &Limits,
+) -> Result<Plan, PlanError> {
+    limits.validate()?;
+    if !start_mm.iter().all(|c| c.is_finite()) {
+        return Err(PlanError::NonFiniteStart);
+    }
+    let mut segments = Vec::with_capacity(moves.len());
+    let mut position_mm = start_mm;
+    let mut time_s = 0.0;
+    for m in moves {
+        let line = m.line;
+        if !m.target_mm.iter().all(|c| c.is_finite()) {
+            return Err(PlanError::NonFiniteTarget { line });
+        }
+        let feed_mm_s = if m.rapid {
+            limits.max_feed_mm_s
+        } else {
+            match m.feed_mm_s {
+                Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
+                other => {
+                    return Err(PlanError::InvalidFeed {
+                        line,
+                        feed_mm_s: other,
+                    });
+                }
+            }
+        };
+        let delta_mm = m.target_mm - position_mm;
+        // Scaled norm: neither overflows for huge nor underflows for tiny moves.
+        let scale_mm = delta_mm.amax();
+        if scale_mm == 0.0 {
+            continue;
+        }
+        if !scale_mm.is_finite() {
+            return Err(PlanError::Overflow { line });
+        }
+        let unit_scaled = delta_mm / scale_mm;
+        let norm_scaled = unit_scaled.norm();
+        let length_mm = scale_mm * norm_scaled;
+        let direction = unit_scaled / norm_scaled;
+        let mut v_max_mm_s = feed_mm_s;
+        let mut accel_mm_s2 = f64::INFINITY;
+        for i in 0..3 {
+            let share = direction[i].abs();
+            if share > 0.0 {
+                v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / share);
+                accel_mm_s2 = accel_mm_s2.min(limits.max_acc_mm_s2[i] / share);
+            }
+        }
+        let profile = trapezoid(length_mm, 0.0, 0.0, v_max_mm_s, accel_mm_s2)
+            .ok_or(PlanError::Overflow { line })?;
+        let segment = Segment {
+            line,
+            rapid: m.rapid,
+            start_mm: position_mm,
+            end_mm: m.target_mm,
+            direction,
+            length_mm,
+            v_start_mm_s: 0.0,
+            v_peak_mm_s: profile.v_peak_mm_s,
+            v_end_mm_s: 0.0,
+            accel_mm_s2,
+            t_acc_s: profile.t_acc_s,
+            t_cruise_s: profile.t_cruise_s,
+            t_dec_s: profile.t_dec_s,
+            start_time_s: time_s,
+        };
+        time_s = segment.end_time_s();
+        if !time_s.is_finite() {
+            return Err(PlanError::Overflow { line });
+        }
+        segments.push(segment);
+        position_mm = m.target_mm;
+    }
+    Ok(Plan {
+        start_mm,
+        segments,
+        duration_s: time_s,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::parse_program;
+
+    fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
+        Vector3::new(x, y, z)
+    }
+
+    fn limits() -> Limits {
+        Limits {
+            max_vel_mm_s: v(100.0, 50.0, 20.0),
+            max_acc_mm_s2: v(1000.0, 500.0, 200.0),
+            max_feed_mm_s: 80.0,
+        }
+    }
+
+    fn feed(line: usize, target_mm: Vector3<f64>, feed_mm_s: f64) -> Move {
+        Move {
+            line,
+            rapid: false,
+            target_mm,
+            feed_mm_s: Some(feed_mm_s),
+        }
+    }
+
+    fn rapid(line: usize, target_mm: Vector3<f64>) -> Move {
+        Move {
+            line,
+            rapid: true,
+            target_mm,
+            feed_mm_s: None,
+        }
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-12 * a.abs().max(b.abs()).max(1.0)
+    }
+
+    #[test]
+    fn trapezoid_along_x() {
+        // 100 mm at 40 mm/s, 1000 mm/s²: ramps 0.04 s over 0.8 mm each, cruise 98.4 mm.
+        let p = plan_moves(
+            Vector3::zeros(),
+            &[feed(1, v(100.0, 0.0, 0.0), 40.0)],
+            &limits(),
+        )
+        .unwrap();
+        let s = p.segments()[0];
+        assert!(!s.is_triangle());
+        assert_eq!(s.v_peak_mm_s, 40.0);
+        assert_eq!(s.accel_mm_s2, 1000.0);
+        assert!(close(s.t_acc_s, 0.04) && close(s.t_dec_s, 0.04));
+        assert!(close(s.t_cruise_s, 98.4 / 40.0));
+        // Duration of a trapezoid from rest to rest: L/v + v/a.
+        assert!(close(p.duration_s(), 100.0 / 40.0 + 40.0 / 1000.0));
+        assert!(close(s.distance_at(0.04), 0.8));
+        assert!(close(p.position_at(0.04)[0], 0.8));
+        assert!(close(p.position_at(p.duration_s() - 0.04)[0], 99.2));
+        assert!(close(p.position_at(p.duration_s() / 2.0)[0], 50.0));
+        assert_eq!(p.position_at(p.duration_s()), v(100.0, 0.0, 0.0));
+        assert_eq!(p.position_at(1e9), v(100.0, 0.0, 0.0));
+        assert_eq!(p.position_at(-1.0), Vector3::zeros());
+        assert_eq!(p.position_at(f64::NAN), Vector3::zeros());
+    }
+
+    #[test]
+    fn triangle_for_a_short_move() {
+        // 0.4 mm at 1000 mm/s²: v² / a = 1.6 > 0.4, so the apex is sqrt(a L) = 20 mm/s.
+        let p = plan_moves(
+            Vector3::zeros(),
+            &[feed(1, v(0.4, 0.0, 0.0), 40.0)],
+            &limits(),
+        )
+        .unwrap();
+        let s = p.segments()[0];
+        assert!(s.is_triangle());
+        assert!(close(s.v_peak_mm_s, 20.0));
+        assert!(close(s.t_acc_s, 0.02) && close(s.t_dec_s, 0.02));
+        // Duration of a triangle: 2 sqrt(L / a).
+        assert!(close(p.duration_s(), 2.0 * (0.4f64 / 1000.0).sqrt()));
+        assert!(close(p.position_at(0.02)[0], 0.2));
+        assert!(close(s.speed_at(0.02), 20.0));
+    }
+
+    #[test]
+    fn pure_y_move_is_limited_by_y() {
+        // Rapid (max feed 80) but Y allows only 50 mm/s and 500 mm/s².
+        let p = plan_moves(v(1.0, 2.0, 3.0), &[rapid(7, v(1.0, 102.0, 3.0))], &limits()).unwrap();
+        let s = p.segments()[0];
+        assert_eq!(s.line, 7);
+        assert!(s.rapid);
+        assert_eq!(s.v_peak_mm_s, 50.0);
+        assert_eq!(s.accel_mm_s2, 500.0);
+        assert!(close(p.duration_s(), 100.0 / 50.0 + 50.0 / 500.0));
+        // X and Z do not move at all, bit for bit.
+        for k in 0..=100 {
+            let q = p.position_at(p.duration_s() * f64::from(k) / 100.0);
+            assert_eq!((q[0], q[2]), (1.0, 3.0));
+        }
+    }
+
+    #[test]
+    fn diagonal_move_is_limited_by_the_tighter_axis() {
+        // 45° in XY: |u_x| = |u_y| = 1/√2. Y is tighter: v ≤ 50 √2 ≈ 70.7 < 80, a ≤ 500 √2.
+        let p = plan_moves(
+            Vector3::zeros(),
+            &[rapid(1, v(100.0, 100.0, 0.0))],
+            &limits(),
+        )
+        .unwrap();
+        let s = p.segments()[0];
+        let sqrt2 = 2f64.sqrt();
+        assert!(close(s.v_peak_mm_s, 50.0 * sqrt2));
+        assert!(close(s.accel_mm_s2, 500.0 * sqrt2));
+        assert!(close(s.length_mm, 100.0 * sqrt2));
+        // Y runs exactly at its limits, X at half of its own.
+        assert!(close(s.v_peak_mm_s * s.direction[1], 50.0));
+        assert!(close(s.accel_mm_s2 * s.direction[1], 500.0));
+        let hand_s = (100.0 * sqrt2) / (50.0 * sqrt2) + (50.0 * sqrt2) / (500.0 * sqrt2);
+        assert!(close(p.duration_s(), hand_s));
+
+        // A feed below every axis limit wins.
+        let p = plan_moves(
+            Vector3::zeros(),
+            &[feed(1, v(3.0, 4.0, 0.0), 10.0)],
+            &limits(),
+        )
+        .unwrap();
+        let s = p.segments()[0];
+        assert_eq!(s.v_peak_mm_s, 10.0);
+        // u = (0.6, 0.8): a = min(1000/0.6, 500/0.8) = 625.
+        assert!(close(s.accel_mm_s2, 625.0));
+        assert!(close(p.duration_s(), 5.0 / 10.0 + 10.0 / 625.0));
+    }
+
+    #[test]
+    fn feed_is_clamped_to_max_feed() {
+        let p = plan_moves(
+            Vector3::zeros(),
+            &[feed(1, v(10.0, 0.0, 0.0), 1e6)],
+            &limits(),
+        )
+        .unwrap();
+        assert_eq!(p.segments()[0].v_peak_mm_s, 80.0);
+    }
+
+    #[test]
+    fn segments_chain_and_zero_length_moves_are_skipped() {
+        let moves = [
+            feed(1, v(10.0, 0.0, 0.0), 20.0),
+            feed(2, v(10.0, 0.0, 0.0), 20.0),
+            rapid(3, v(10.0, 5.0, -2.0)),
+            rapid(4, v(10.0, 5.0, -2.0)),
+        ];
+        let p = plan_moves(Vector3::zeros(), &moves, &limits()).unwrap();
+        let segs = p.segments();
+        assert_eq!(segs.len(), 2);
+        assert_eq!((segs[0].line, segs[1].line), (1, 3));
+        assert_eq!(segs[1].start_mm, segs[0].end_mm);
+        assert_eq!(segs[1].start_time_s, segs[0].duration_s());
+        assert_eq!(p.duration_s(), segs[1].end_time_s());
+        assert_eq!(p.segment_index_at(0.0), Some(0));
+        assert_eq!(p.segment_index_at(segs[1].start_time_s), Some(1));
+        assert_eq!(p.segment_index_at(1e9), Some(1));
+        assert_eq!(p.end_mm(), v(10.0, 5.0, -2.0));
+        // At the junction both segments give the junction point.
+        assert_eq!(p.position_at(segs[1].start_time_s), v(10.0, 0.0, 0.0));
+    }
+
+    #[test]
+    fn empty_plan_stays_at_start() {
+        let p = plan_moves(v(1.0, 2.0, 3.0), &[], &limits()).unwrap();
+        assert_eq!(p.duration_s(), 0.0);
+        assert_eq!(p.end_mm(), v(1.0, 2.0, 3.0));
+        assert_eq!(p.position_at(5.0), v(1.0, 2.0, 3.0));
+        assert_eq!(p.segment_index_at(0.0), None);
+        assert_eq!(Plan::at_rest(v(1.0, 2.0, 3.0)), p);
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        let mut bad = limits();
+        bad.max_acc_mm_s2[1] = 0.0;
+        assert_eq!(
+            plan_moves(Vector3::zeros(), &[], &bad),
+            Err(PlanError::InvalidLimit {
+                name: "max_acc_mm_s2.y",
+                value: 0.0
+            })
+        );
+        bad = limits();
+        bad.max_feed_mm_s = f64::INFINITY;
+        assert!(matches!(
+            bad.validate(),
+            Err(PlanError::InvalidLimit {
+                name: "max_feed_mm_s",
+                ..
+            })
+        ));
+        bad = limits();
+        bad.max_vel_mm_s[2] = f64::NAN;
+        assert!(bad.validate().is_err());
+        let l = limits();
+        assert_eq!(
+            plan_moves(v(f64::NAN, 0.0, 0.0), &[], &l),
+            Err(PlanError::NonFiniteStart)
+        );
+        assert_eq!(
+            plan_moves(
+                Vector3::zeros(),
+                &[rapid(4, v(f64::INFINITY, 0.0, 0.0))],
+                &l
+            ),
+            Err(PlanError::NonFiniteTarget { line: 4 })
+        );
+        let no_feed = Move {
+            line: 5,
+            rapid: false,
+            target_mm: v(1.0, 0.0, 0.0),
+            feed_mm_s: None,
+        };
+        assert_eq!(
+            plan_moves(Vector3::zeros(), &[no_feed], &l),
+            Err(PlanError::InvalidFeed {
+                line: 5,
+                feed_mm_s: None
+            })
+        );
+        assert_eq!(
+            plan_moves(Vector3::zeros(), &[feed(6, v(1.0, 0.0, 0.0), -1.0)], &l),
+            Err(PlanError::InvalidFeed {
+                line: 6,
+                feed_mm_s: Some(-1.0)
+            })
+        );
+        assert_eq!(
+            plan_moves(
+                Vector3::zeros(),
+                &[rapid(8, v(f64::MAX, -f64::MAX, 0.0))],
+                &l
+            ),
+            Err(PlanError::Overflow { line: 8 })
+        );
+        assert_eq!(
+            plan_moves(Vector3::zeros(), &[feed(9, v(1e9, 0.0, 0.0), 1e-300)], &l),
+            Err(PlanError::Overflow { line: 9 })
+        );
+    }
+
+    #[test]
+    fn tiny_moves_are_planned_not_lost() {
+        let target = v(1e-300, 0.0, 0.0);
+        let p = plan_moves(Vector3::zeros(), &[rapid(1, target)], &limits()).unwrap();
+        assert_eq!(p.segments().len(), 1);
+        assert_eq!(p.end_mm(), target);
+        assert!(p.duration_s() >= 0.0 && p.duration_s().is_finite());
+    }
+
+    #[test]
+    fn trapezoid_with_boundary_speeds() {
+        // 10 mm from 10 to 20 mm/s, cap 30, a = 100: d_acc = (900-100)/200 = 4,
+        // d_dec = (900-400)/200 = 2.5, cruise 3.5 mm.
+        let p = trapezoid(10.0, 10.0, 20.0, 30.0, 100.0).unwrap();
+        assert!(close(p.t_acc_s, 0.2) && close(p.t_dec_s, 0.1));
+        assert!(close(p.t_cruise_s, 3.5 / 30.0));
+        // Too short for a cruise: apex² = a L + (v0² + v1²)/2 = 200 + 250.
+        let p = trapezoid(2.0, 10.0, 20.0, 30.0, 100.0).unwrap();
+        assert!(close(p.v_peak_mm_s, 450f64.sqrt()));
+        assert_eq!(p.t_cruise_s, 0.0);
+        // End speed out of reach within the length.
+        assert_eq!(trapezoid(1.0, 0.0, 20.0, 30.0, 100.0), None);
+        assert_eq!(trapezoid(1.0, 40.0, 0.0, 30.0, 100.0), None);
+        assert_eq!(trapezoid(0.0, 0.0, 0.0, 30.0, 100.0), None);
+    }
+
+    #[test]
+    fn plans_a_parsed_program() {
+        let prog = parse_program(
+            "G21 G90\nG0 X10\nG1 Y10 F1200\nG91 Z-1\n",
+            "p.ngc",
+            v(0.0, 0.0, 5.0),
+        )
+        .unwrap();
+        let p = plan(&prog, &limits()).unwrap();
+        let lines: Vec<usize> = p.segments().iter().map(|s| s.line).collect();
+        assert_eq!(lines, vec![2, 3, 4]);
+        assert_eq!(p.start_mm(), v(0.0, 0.0, 5.0));
+        assert_eq!(p.end_mm(), v(10.0, 10.0, 4.0));
+        // F1200 mm/min = 20 mm/s on Y (limit 50), Z move limited by Z's 20 mm/s.
+        assert_eq!(p.segments()[1].v_peak_mm_s, 20.0);
+        let z = p.segments()[2];
+        assert!(z.is_triangle());
+        assert!(close(z.v_peak_mm_s, 200f64.sqrt()));
+    }
+}

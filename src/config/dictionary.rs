@@ -1,0 +1,693 @@
+//! Drive dictionaries: the object dictionary of a drive type, as TOML.
+//!
+//! ```toml
+//! [device]
+//! name = "canmotion simulated CiA 402 servo"
+//! vendor_id = 0x00000CA7
+//! product_code = 0x00000402
+//! revision = 0x00010000
+//! device_type = 0x00020192
+//!
+//! [[object]]              # a variable: the value lives at sub-index 0
+//! index = 0x6040
+//! name = "Controlword"
+//! type = "u16"            # bool i8 i16 i32 i64 u8 u16 u32 u64 f32 f64 string octets domain
+//! access = "rw"           # const | ro | wo | rw
+//! pdo = true              # PDO-mappable (default false)
+//! default = 0
+//! min = 0                 # optional inclusive range
+//! max = 0xFFFF
+//!
+//! [[object]]              # a record or array: its sub-indices
+//! index = 0x1018
+//! name = "Identity object"
+//! [[object.sub]]
+//! sub = 0
+//! name = "Highest sub-index supported"
+//! type = "u8"
+//! access = "const"
+//! default = 4
+//! ```
+//!
+//! Defaults that depend on the node id use the EDS form `"$NODEID+0x180"`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use canopen_rs::{ByteString, DataType, Value};
+use serde::Deserialize;
+
+use super::{ConfigError, read_toml};
+
+/// How an entry may be accessed over SDO.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Access {
+    /// Read-only and constant.
+    Const,
+    /// Read-only (the device may change it).
+    Ro,
+    /// Write-only.
+    Wo,
+    /// Read-write.
+    Rw,
+}
+
+impl Access {
+    /// Readable over SDO.
+    pub fn readable(self) -> bool {
+        self != Access::Wo
+    }
+    /// Writable over SDO.
+    pub fn writable(self) -> bool {
+        matches!(self, Access::Wo | Access::Rw)
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    device: RawDevice,
+    object: Vec<RawObject>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDevice {
+    name: String,
+    vendor_id: u32,
+    product_code: u32,
+    revision: u32,
+    device_type: u32,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObject {
+    index: u16,
+    name: String,
+    #[serde(rename = "type")]
+    data_type: Option<String>,
+    access: Option<Access>,
+    #[serde(default)]
+    pdo: bool,
+    default: Option<toml::Value>,
+    min: Option<toml::Value>,
+    max: Option<toml::Value>,
+    unit: Option<String>,
+    sub: Option<Vec<RawSub>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSub {
+    sub: u8,
+    name: String,
+    #[serde(rename = "type")]
+    data_type: String,
+    access: Access,
+    #[serde(default)]
+    pdo: bool,
+    default: toml::Value,
+    min: Option<toml::Value>,
+    max: Option<toml::Value>,
+    unit: Option<String>,
+}
+
+/// A default value, possibly depending on the node id.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DefaultValue {
+    /// A fixed value.
+    Fixed(Value),
+    /// `$NODEID + offset` (numeric types only).
+    NodeIdPlus(u64),
+}
+
+/// One sub-entry of the dictionary.
+#[derive(Debug, Clone)]
+pub struct SubDef {
+    /// Its name as the profile gives it.
+    pub name: String,
+    /// Data type.
+    pub data_type: DataType,
+    /// SDO access.
+    pub access: Access,
+    /// PDO-mappable.
+    pub pdo: bool,
+    /// Default (power-on) value.
+    pub default: DefaultValue,
+    /// Inclusive minimum, for numeric types.
+    pub min: Option<f64>,
+    /// Inclusive maximum, for numeric types.
+    pub max: Option<f64>,
+    /// Free-text unit.
+    pub unit: Option<String>,
+}
+
+/// One object (index) of the dictionary.
+#[derive(Debug, Clone)]
+pub struct ObjectDef {
+    /// Its name.
+    pub name: String,
+    /// Sub-entries by sub-index (a variable has only sub 0).
+    pub subs: BTreeMap<u8, SubDef>,
+}
+
+/// Identity of the device type as configured in the dictionary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Identity {
+    /// 0x1018:1.
+    pub vendor_id: u32,
+    /// 0x1018:2.
+    pub product_code: u32,
+    /// 0x1018:3.
+    pub revision: u32,
+    /// 0x1000.
+    pub device_type: u32,
+}
+
+/// A drive type's object dictionary, as loaded from TOML.
+#[derive(Debug, Clone)]
+pub struct DriveDictionary {
+    /// Where it was loaded from.
+    pub file: PathBuf,
+    /// Display name.
+    pub name: String,
+    /// Identity the drive must report.
+    pub identity: Identity,
+    /// Objects by index.
+    pub objects: BTreeMap<u16, ObjectDef>,
+}
+
+/// Parse a data type name.
+pub fn parse_type(s: &str) -> Option<DataType> {
+    Some(match s {
+        "bool" => DataType::Boolean,
+        "i8" => DataType::Integer8,
+        "i16" => DataType::Integer16,
+        "i32" => DataType::Integer32,
+        "i64" => DataType::Integer64,
+        "u8" => DataType::Unsigned8,
+        "u16" => DataType::Unsigned16,
+        "u32" => DataType::Unsigned32,
+        "u64" => DataType::Unsigned64,
+        "f32" => DataType::Real32,
+        "f64" => DataType::Real64,
+        "string" => DataType::VisibleString,
+        "octets" => DataType::OctetString,
+        "domain" => DataType::Domain,
+        _ => return None,
+    })
+}
+
+/// The numeric range of an integer type, as f64 (exact for everything up to 53 bits).
+pub fn type_range(t: DataType) -> Option<(f64, f64)> {
+    Some(match t {
+        DataType::Boolean => (0.0, 1.0),
+        DataType::Integer8 => (i8::MIN as f64, i8::MAX as f64),
+        DataType::Integer16 => (i16::MIN as f64, i16::MAX as f64),
+        DataType::Integer32 => (i32::MIN as f64, i32::MAX as f64),
+        DataType::Integer64 => (i64::MIN as f64, i64::MAX as f64),
+        DataType::Unsigned8 => (0.0, u8::MAX as f64),
+        DataType::Unsigned16 => (0.0, u16::MAX as f64),
+        DataType::Unsigned32 => (0.0, u32::MAX as f64),
+        DataType::Unsigned64 => (0.0, u64::MAX as f64),
+        DataType::Real32 => (f32::MIN as f64, f32::MAX as f64),
+        DataType::Real64 => (f64::MIN, f64::MAX),
+        _ => return None,
+    })
+}
+
+/// Build a value of type `t` from an integer, if it fits.
+pub fn int_value(t: DataType, v: i128) -> Option<Value> {
+    Some(match t {
+        DataType::Boolean => Value::Boolean(match v {
+            0 => false,
+            1 => true,
+            _ => return None,
+        }),
+        DataType::Integer8 => Value::Integer8(i8::try_from(v).ok()?),
+        DataType::Integer16 => Value::Integer16(i16::try_from(v).ok()?),
+        DataType::Integer32 => Value::Integer32(i32::try_from(v).ok()?),
+        DataType::Integer64 => Value::Integer64(i64::try_from(v).ok()?),
+        DataType::Unsigned8 => Value::Unsigned8(u8::try_from(v).ok()?),
+        DataType::Unsigned16 => Value::Unsigned16(u16::try_from(v).ok()?),
+        DataType::Unsigned32 => Value::Unsigned32(u32::try_from(v).ok()?),
+        DataType::Unsigned64 => Value::Unsigned64(u64::try_from(v).ok()?),
+        DataType::Real32 => Value::Real32(v as f32),
+        DataType::Real64 => Value::Real64(v as f64),
+        _ => return None,
+    })
+}
+
+/// A value as an integer (numeric types), for ranges and arithmetic.
+pub fn value_as_i128(v: &Value) -> Option<i128> {
+    Some(match *v {
+        Value::Boolean(b) => b as i128,
+        Value::Integer8(x) => x as i128,
+        Value::Integer16(x) => x as i128,
+        Value::Integer32(x) => x as i128,
+        Value::Integer64(x) => x as i128,
+        Value::Unsigned8(x) => x as i128,
+        Value::Unsigned16(x) => x as i128,
+        Value::Unsigned32(x) => x as i128,
+        Value::Unsigned64(x) => x as i128,
+        _ => return None,
+    })
+}
+
+/// A numeric value as f64.
+pub fn value_as_f64(v: &Value) -> Option<f64> {
+    match *v {
+        Value::Real32(x) => Some(x as f64),
+        Value::Real64(x) => Some(x),
+        _ => value_as_i128(v).map(|x| x as f64),
+    }
+}
+
+struct Ctx<'a> {
+    file: &'a Path,
+    table: String,
+}
+
+impl Ctx<'_> {
+    fn err(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_path_buf(),
+            table: self.table.clone(),
+            key: key.to_string(),
+            message: message.into(),
+        }
+    }
+}
+
+fn parse_value(
+    ctx: &Ctx,
+    key: &str,
+    t: DataType,
+    v: &toml::Value,
+) -> Result<DefaultValue, ConfigError> {
+    match v {
+        toml::Value::Integer(i) => int_value(t, i128::from(*i))
+            .map(DefaultValue::Fixed)
+            .ok_or_else(|| ctx.err(key, format!("{i} does not fit {}", type_name(t)))),
+        toml::Value::Boolean(b) if t == DataType::Boolean => {
+            Ok(DefaultValue::Fixed(Value::Boolean(*b)))
+        }
+        toml::Value::Float(f) => match t {
+            DataType::Real32 => Ok(DefaultValue::Fixed(Value::Real32(*f as f32))),
+            DataType::Real64 => Ok(DefaultValue::Fixed(Value::Real64(*f))),
+            _ => Err(ctx.err(key, format!("a float for an integer type {}", type_name(t)))),
+        },
+        toml::Value::String(s) => {
+            if let Some(rest) = s.strip_prefix("$NODEID") {
+                if type_range(t).is_none() || matches!(t, DataType::Real32 | DataType::Real64) {
+                    return Err(ctx.err(key, "$NODEID is only allowed for integer types"));
+                }
+                let rest = rest.trim();
+                let off = if rest.is_empty() {
+                    0
+                } else {
+                    let n = rest.strip_prefix('+').map(str::trim).ok_or_else(|| {
+                        ctx.err(key, format!("expected \"$NODEID+0x...\", found {s:?}"))
+                    })?;
+                    parse_int_text(n).ok_or_else(|| {
+                        ctx.err(
+                            key,
+                            format!("expected a number after \"$NODEID+\", found {n:?}"),
+                        )
+                    })?
+                };
+                return Ok(DefaultValue::NodeIdPlus(off));
+            }
+            match t {
+                DataType::VisibleString | DataType::OctetString | DataType::Domain => {
+                    let b = ByteString::from_bytes(s.as_bytes()).map_err(|_| {
+                        ctx.err(
+                            key,
+                            format!("string longer than {} bytes", canopen_rs::MAX_STRING_LEN),
+                        )
+                    })?;
+                    Ok(DefaultValue::Fixed(match t {
+                        DataType::VisibleString => Value::VisibleString(b),
+                        DataType::OctetString => Value::OctetString(b),
+                        _ => Value::Domain(b),
+                    }))
+                }
+                _ => Err(ctx.err(key, format!("a string for type {}", type_name(t)))),
+            }
+        }
+        other => Err(ctx.err(
+            key,
+            format!("unexpected {} for type {}", other.type_str(), type_name(t)),
+        )),
+    }
+}
+
+fn parse_int_text(s: &str) -> Option<u64> {
+    if let Some(h) = s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        u64::from_str_radix(&h.replace('_', ""), 16).ok()
+    } else {
+        s.replace('_', "").parse().ok()
+    }
+}
+
+fn parse_bound(
+    ctx: &Ctx,
+    key: &str,
+    t: DataType,
+    v: &Option<toml::Value>,
+) -> Result<Option<f64>, ConfigError> {
+    let Some(v) = v else { return Ok(None) };
+    let Some((lo, hi)) = type_range(t) else {
+        return Err(ctx.err(key, format!("a range on non-numeric type {}", type_name(t))));
+    };
+    let x = match v {
+        toml::Value::Integer(i) => *i as f64,
+        toml::Value::Float(f) => *f,
+        other => {
+            return Err(ctx.err(
+                key,
+                format!("expected a number, found {}", other.type_str()),
+            ));
+        }
+    };
+    if x < lo || x > hi {
+        return Err(ctx.err(
+            key,
+            format!("{x} outside the range of {} [{lo}, {hi}]", type_name(t)),
+        ));
+    }
+    Ok(Some(x))
+}
+
+/// The dictionary's name for a data type.
+pub fn type_name(t: DataType) -> &'static str {
+    match t {
+        DataType::Boolean => "bool",
+        DataType::Integer8 => "i8",
+        DataType::Integer16 => "i16",
+        DataType::Integer32 => "i32",
+        DataType::Integer64 => "i64",
+        DataType::Unsigned8 => "u8",
+        DataType::Unsigned16 => "u16",
+        DataType::Unsigned32 => "u32",
+        DataType::Unsigned64 => "u64",
+        DataType::Real32 => "f32",
+        DataType::Real64 => "f64",
+        DataType::VisibleString => "string",
+        DataType::OctetString => "octets",
+        _ => "domain",
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_sub(
+    ctx: &Ctx,
+    name: &str,
+    data_type: &str,
+    access: Access,
+    pdo: bool,
+    default: &toml::Value,
+    min: &Option<toml::Value>,
+    max: &Option<toml::Value>,
+    unit: &Option<String>,
+) -> Result<SubDef, ConfigError> {
+    let t = parse_type(data_type).ok_or_else(|| {
+        ctx.err(
+            "type",
+            format!("unknown type {data_type:?} (bool i8 i16 i32 i64 u8 u16 u32 u64 f32 f64 string octets domain)"),
+        )
+    })?;
+    let default = parse_value(ctx, "default", t, default)?;
+    let min = parse_bound(ctx, "min", t, min)?;
+    let max = parse_bound(ctx, "max", t, max)?;
+    if let (Some(lo), Some(hi)) = (min, max)
+        && lo > hi
+    {
+        return Err(ctx.err("min", format!("min {lo} is above max {hi}")));
+    }
+    if let DefaultValue::Fixed(v) = &default
+        && let Some(x) = value_as_f64(v)
+    {
+        if min.is_some_and(|lo| x < lo) || max.is_some_and(|hi| x > hi) {
+            return Err(ctx.err("default", format!("default {x} outside [min, max]")));
+        }
+    }
+    if pdo && t.fixed_size().is_none() {
+        return Err(ctx.err("pdo", "a variable-length type cannot be PDO-mapped"));
+    }
+    Ok(SubDef {
+        name: name.to_string(),
+        data_type: t,
+        access,
+        pdo,
+        default,
+        min,
+        max,
+        unit: unit.clone(),
+    })
+}
+
+impl DriveDictionary {
+    /// Load and validate a dictionary file.
+    pub fn load(path: &Path) -> Result<DriveDictionary, ConfigError> {
+        let raw: RawFile = read_toml(path)?;
+        Self::from_raw(path, raw)
+    }
+
+    /// Parse and validate a dictionary from text (`path` is used in messages).
+    pub fn parse(path: &Path, text: &str) -> Result<DriveDictionary, ConfigError> {
+        let raw: RawFile = super::parse_toml(path, text)?;
+        Self::from_raw(path, raw)
+    }
+
+    fn from_raw(path: &Path, raw: RawFile) -> Result<DriveDictionary, ConfigError> {
+        let mut objects = BTreeMap::new();
+        for o in &raw.object {
+            let mut ctx = Ctx {
+                file: path,
+                table: format!("object 0x{:04X}", o.index),
+            };
+            if objects.contains_key(&o.index) {
+                return Err(ctx.err("index", "defined twice"));
+            }
+            let mut subs = BTreeMap::new();
+            match &o.sub {
+                Some(list) => {
+                    if o.data_type.is_some() || o.access.is_some() || o.default.is_some() {
+                        return Err(ctx.err(
+                            "sub",
+                            "an object has either type/access/default (a variable) or [[object.sub]] entries, not both",
+                        ));
+                    }
+                    if list.is_empty() {
+                        return Err(ctx.err("sub", "no sub-entries"));
+                    }
+                    for s in list {
+                        ctx.table = format!("object 0x{:04X} sub {}", o.index, s.sub);
+                        if subs.contains_key(&s.sub) {
+                            return Err(ctx.err("sub", "defined twice"));
+                        }
+                        let d = build_sub(
+                            &ctx,
+                            &s.name,
+                            &s.data_type,
+                            s.access,
+                            s.pdo,
+                            &s.default,
+                            &s.min,
+                            &s.max,
+                            &s.unit,
+                        )?;
+                        subs.insert(s.sub, d);
+                    }
+                }
+                None => {
+                    let t = o.data_type.as_deref().ok_or_else(|| {
+                        ctx.err("type", "missing (or give [[object.sub]] entries)")
+                    })?;
+                    let a = o.access.ok_or_else(|| ctx.err("access", "missing"))?;
+                    let d = o
+                        .default
+                        .as_ref()
+                        .ok_or_else(|| ctx.err("default", "missing"))?;
+                    subs.insert(
+                        0,
+                        build_sub(&ctx, &o.name, t, a, o.pdo, d, &o.min, &o.max, &o.unit)?,
+                    );
+                }
+            }
+            objects.insert(
+                o.index,
+                ObjectDef {
+                    name: o.name.clone(),
+                    subs,
+                },
+            );
+        }
+        let dict = DriveDictionary {
+            file: path.to_path_buf(),
+            name: raw.device.name.clone(),
+            identity: Identity {
+                vendor_id: raw.device.vendor_id,
+                product_code: raw.device.product_code,
+                revision: raw.device.revision,
+                device_type: raw.device.device_type,
+            },
+            objects,
+        };
+        dict.validate()?;
+        Ok(dict)
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        let ctx = |table: &str| Ctx {
+            file: &self.file,
+            table: table.to_string(),
+        };
+        let fixed = |idx: u16, sub: u8| -> Option<i128> {
+            match &self.objects.get(&idx)?.subs.get(&sub)?.default {
+                DefaultValue::Fixed(v) => value_as_i128(v),
+                DefaultValue::NodeIdPlus(_) => None,
+            }
+        };
+        for (idx, sub, key, want) in [
+            (0x1000u16, 0u8, "device_type", self.identity.device_type),
+            (0x1018, 1, "vendor_id", self.identity.vendor_id),
+            (0x1018, 2, "product_code", self.identity.product_code),
+            (0x1018, 3, "revision", self.identity.revision),
+        ] {
+            match fixed(idx, sub) {
+                Some(v) if v == i128::from(want) => {}
+                Some(v) => {
+                    return Err(ctx("device").err(
+                        key,
+                        format!(
+                            "0x{want:08X} differs from object 0x{idx:04X}:{sub} default 0x{v:08X}"
+                        ),
+                    ));
+                }
+                None => {
+                    return Err(
+                        ctx("device").err(key, format!("object 0x{idx:04X}:{sub} is missing"))
+                    );
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The definition of `index:sub`.
+    pub fn sub(&self, index: u16, sub: u8) -> Option<&SubDef> {
+        self.objects.get(&index)?.subs.get(&sub)
+    }
+
+    /// Default value of a sub-entry for a node.
+    pub fn default_for(&self, def: &SubDef, node: u8) -> Value {
+        match &def.default {
+            DefaultValue::Fixed(v) => *v,
+            DefaultValue::NodeIdPlus(off) => {
+                int_value(def.data_type, i128::from(*off) + i128::from(node))
+                    .unwrap_or(Value::Unsigned32(0))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str = r#"
+[device]
+name = "t"
+vendor_id = 1
+product_code = 2
+revision = 3
+device_type = 0x192
+[[object]]
+index = 0x1000
+name = "Device type"
+type = "u32"
+access = "const"
+default = 0x192
+[[object]]
+index = 0x1018
+name = "Identity"
+[[object.sub]]
+sub = 0
+name = "n"
+type = "u8"
+access = "const"
+default = 3
+[[object.sub]]
+sub = 1
+name = "v"
+type = "u32"
+access = "ro"
+default = 1
+[[object.sub]]
+sub = 2
+name = "p"
+type = "u32"
+access = "ro"
+default = 2
+[[object.sub]]
+sub = 3
+name = "r"
+type = "u32"
+access = "ro"
+default = 3
+"#;
+
+    fn load(extra: &str) -> Result<DriveDictionary, ConfigError> {
+        DriveDictionary::parse(Path::new("d.toml"), &format!("{HEAD}{extra}"))
+    }
+
+    #[test]
+    fn loads_variables_records_and_node_id_defaults() {
+        let d = load(
+            "[[object]]\nindex = 0x1800\nname = \"TPDO1\"\n[[object.sub]]\nsub = 1\nname = \"COB-ID\"\ntype = \"u32\"\naccess = \"rw\"\ndefault = \"$NODEID+0x180\"\n",
+        )
+        .unwrap();
+        let s = d.sub(0x1800, 1).unwrap();
+        assert_eq!(d.default_for(s, 5), Value::Unsigned32(0x185));
+        assert_eq!(d.identity.device_type, 0x192);
+    }
+
+    #[test]
+    fn errors_name_file_table_and_key() {
+        let e = load("[[object]]\nindex = 0x6040\nname = \"CW\"\ntype = \"u16\"\naccess = \"rw\"\ndefault = 70000\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "d.toml: [object 0x6040] default: 70000 does not fit u16");
+        let e = load("[[object]]\nindex = 0x6040\nname = \"CW\"\ntype = \"u16\"\naccess = \"rw\"\ndefault = 0\ncolour = 1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("d.toml: ") && e.contains("colour"), "{e}");
+        let e = load("[[object]]\nindex = 0x6060\nname = \"M\"\ntype = \"i8\"\naccess = \"rw\"\ndefault = 9\nmax = 8\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "d.toml: [object 0x6060] default: default 9 outside [min, max]"
+        );
+        let e = load("[[object]]\nindex = 0x1000\nname = \"again\"\ntype = \"u8\"\naccess = \"rw\"\ndefault = 0\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "d.toml: [object 0x1000] index: defined twice");
+    }
+
+    #[test]
+    fn identity_must_match_the_objects() {
+        let text = HEAD.replace("revision = 3", "revision = 4");
+        let e = DriveDictionary::parse(Path::new("d.toml"), &text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("[device] revision") && e.contains("0x1018:3"),
+            "{e}"
+        );
+    }
+}

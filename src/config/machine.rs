@@ -1,0 +1,818 @@
+//! Machine files: the bus, SYNC and heartbeat settings, and the axes with their drives.
+//!
+//! See `dictionaries/machines/demo-xyz.toml` for a commented example. Paths of drive
+//! dictionaries are relative to the machine file.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use canopen_rs::Value;
+use serde::Deserialize;
+
+use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
+use super::{ConfigError, parse_toml};
+
+/// The demo machine file, embedded so that `canmotion run` works with no files at all.
+pub const DEMO_MACHINE: &str = include_str!("../../dictionaries/machines/demo-xyz.toml");
+/// The drive dictionary the demo machine names.
+pub const DEMO_DRIVE: &str = include_str!("../../dictionaries/drives/cia402-servo.toml");
+/// Where the embedded demo machine file lives in the source tree (for messages).
+pub const DEMO_MACHINE_PATH: &str = "dictionaries/machines/demo-xyz.toml";
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMachine {
+    machine: RawMeta,
+    bus: RawBus,
+    sync: RawSync,
+    heartbeat: RawHeartbeat,
+    axis: Vec<RawAxis>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMeta {
+    name: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBus {
+    interface: String,
+    bitrate: u32,
+    cycle_us: u32,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSync {
+    cob_id: u16,
+    window_us: u32,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHeartbeat {
+    gateway_node: u8,
+    gateway_producer_ms: u16,
+    drive_consumer_ms: u16,
+    drive_producer_ms: u16,
+    gateway_consumer_ms: u16,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAxis {
+    name: String,
+    node: u8,
+    dictionary: PathBuf,
+    mode: AxisMode,
+    counts_per_mm: f64,
+    min_mm: f64,
+    max_mm: f64,
+    max_vel_mm_s: f64,
+    max_acc_mm_s2: f64,
+    max_jerk_mm_s3: f64,
+    following_error_mm: f64,
+    following_error_timeout_ms: u16,
+    setpoint_pdo: RawPdo,
+    feedback_pdo: RawPdo,
+    #[serde(default)]
+    sdo: Vec<RawSdo>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPdo {
+    number: u8,
+    transmission: u8,
+    mapping: Vec<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSdo {
+    index: u16,
+    #[serde(default)]
+    sub: u8,
+    value: toml::Value,
+}
+
+/// The position mode an axis's drive runs in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AxisMode {
+    /// Interpolated position (CiA 402 mode 7), linear sub-mode 0, setpoint in 0x60C1:01.
+    Ip,
+    /// Cyclic synchronous position (mode 8), setpoint in 0x607A.
+    Csp,
+}
+
+impl AxisMode {
+    /// The CiA 402 mode number (0x6060).
+    pub fn number(self) -> i8 {
+        match self {
+            AxisMode::Ip => 7,
+            AxisMode::Csp => 8,
+        }
+    }
+    /// The object that carries the position setpoint in this mode.
+    pub fn setpoint_object(self) -> (u16, u8) {
+        match self {
+            AxisMode::Ip => (0x60C1, 1),
+            AxisMode::Csp => (0x607A, 0),
+        }
+    }
+}
+
+/// One PDO mapping entry: index, sub-index and length in bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MapEntry {
+    /// Object index.
+    pub index: u16,
+    /// Sub-index.
+    pub sub: u8,
+    /// Length in bits.
+    pub bits: u8,
+}
+
+impl MapEntry {
+    /// Decode `idx<<16 | sub<<8 | bits`.
+    pub fn from_u32(v: u32) -> MapEntry {
+        MapEntry {
+            index: (v >> 16) as u16,
+            sub: (v >> 8) as u8,
+            bits: v as u8,
+        }
+    }
+    /// Encode as `idx<<16 | sub<<8 | bits`.
+    pub fn to_u32(self) -> u32 {
+        (u32::from(self.index) << 16) | (u32::from(self.sub) << 8) | u32::from(self.bits)
+    }
+}
+
+/// A PDO as the gateway configures it on a drive.
+#[derive(Debug, Clone)]
+pub struct PdoConfig {
+    /// PDO number 1–4.
+    pub number: u8,
+    /// COB-ID from the predefined connection set.
+    pub cob_id: u16,
+    /// Transmission type (1–240: every n-th SYNC).
+    pub transmission: u8,
+    /// Mapped objects in frame order.
+    pub mapping: Vec<MapEntry>,
+}
+
+impl PdoConfig {
+    /// Byte offset and entry of `(index, sub)` in the frame.
+    pub fn offset_of(&self, index: u16, sub: u8) -> Option<(usize, MapEntry)> {
+        let mut off = 0usize;
+        for e in &self.mapping {
+            if e.index == index && e.sub == sub {
+                return Some((off, *e));
+            }
+            off += usize::from(e.bits / 8);
+        }
+        None
+    }
+    /// Frame length in bytes.
+    pub fn len_bytes(&self) -> usize {
+        self.mapping.iter().map(|e| usize::from(e.bits / 8)).sum()
+    }
+}
+
+/// An extra SDO write at start-up, typed from the dictionary.
+#[derive(Debug, Clone)]
+pub struct SdoWrite {
+    /// Object index.
+    pub index: u16,
+    /// Sub-index.
+    pub sub: u8,
+    /// Value, typed as the dictionary says.
+    pub value: Value,
+}
+
+/// One axis and its drive.
+#[derive(Debug, Clone)]
+pub struct AxisConfig {
+    /// Axis letter (X, Y, Z).
+    pub name: String,
+    /// CANopen node id of its drive.
+    pub node: u8,
+    /// The drive's dictionary.
+    pub dictionary: Arc<DriveDictionary>,
+    /// Position mode.
+    pub mode: AxisMode,
+    /// Encoder counts per millimetre.
+    pub counts_per_mm: f64,
+    /// Lower travel limit.
+    pub min_mm: f64,
+    /// Upper travel limit.
+    pub max_mm: f64,
+    /// Maximum velocity.
+    pub max_vel_mm_s: f64,
+    /// Maximum acceleration.
+    pub max_acc_mm_s2: f64,
+    /// Maximum jerk.
+    pub max_jerk_mm_s3: f64,
+    /// Following error window (written to 0x6065 in counts).
+    pub following_error_mm: f64,
+    /// Following error time-out (0x6066).
+    pub following_error_timeout_ms: u16,
+    /// The RPDO that carries controlword and setpoint.
+    pub setpoint_pdo: PdoConfig,
+    /// The TPDO that carries statusword and position actual.
+    pub feedback_pdo: PdoConfig,
+    /// Extra SDO writes at start-up, in order.
+    pub sdo: Vec<SdoWrite>,
+}
+
+impl AxisConfig {
+    /// Millimetres to counts (rounded to the nearest count).
+    pub fn mm_to_counts(&self, mm: f64) -> i32 {
+        (mm * self.counts_per_mm)
+            .round()
+            .clamp(i32::MIN as f64, i32::MAX as f64) as i32
+    }
+    /// Counts to millimetres.
+    pub fn counts_to_mm(&self, counts: i32) -> f64 {
+        f64::from(counts) / self.counts_per_mm
+    }
+}
+
+/// Heartbeat settings.
+#[derive(Debug, Clone, Copy)]
+pub struct Heartbeat {
+    /// The gateway's own node id (its heartbeat is 0x700 + this).
+    pub gateway_node: u8,
+    /// How often the gateway sends its heartbeat.
+    pub gateway_producer_ms: u16,
+    /// The drives' consumer time for the gateway's heartbeat (0x1016:1).
+    pub drive_consumer_ms: u16,
+    /// The drives' producer time (0x1017).
+    pub drive_producer_ms: u16,
+    /// How long the gateway waits for a drive's heartbeat before declaring it lost.
+    pub gateway_consumer_ms: u16,
+}
+
+/// A loaded, validated machine.
+#[derive(Debug, Clone)]
+pub struct Machine {
+    /// The file it came from.
+    pub file: PathBuf,
+    /// Its name.
+    pub name: String,
+    /// Default bus interface (`sim` for the in-process bus with simulated drives).
+    pub interface: String,
+    /// Bit rate (bit/s), for documentation and bus-load figures.
+    pub bitrate: u32,
+    /// The cycle (SYNC and interpolation) period.
+    pub cycle_us: u32,
+    /// COB-ID of SYNC (0x1005).
+    pub sync_cob_id: u16,
+    /// Synchronous window (0x1007), µs.
+    pub sync_window_us: u32,
+    /// Heartbeat settings.
+    pub heartbeat: Heartbeat,
+    /// Axes in machine order.
+    pub axes: Vec<AxisConfig>,
+}
+
+struct Ctx<'a> {
+    file: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn err(&self, table: impl Into<String>, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::Invalid {
+            file: self.file.to_path_buf(),
+            table: table.into(),
+            key: key.to_string(),
+            message: message.into(),
+        }
+    }
+}
+
+/// `0x60C2` encoding of a period: `value × 10^index` seconds, value ≤ 255.
+pub fn ip_time_period(cycle_us: u32) -> Option<(u8, i8)> {
+    if cycle_us == 0 {
+        return None;
+    }
+    let mut v = u64::from(cycle_us);
+    let mut idx: i8 = -6;
+    while v % 10 == 0 && idx < 0 {
+        v /= 10;
+        idx += 1;
+    }
+    u8::try_from(v).ok().map(|v| (v, idx))
+}
+
+impl Machine {
+    /// Load and validate a machine file; drive dictionaries are read relative to it.
+    pub fn load(path: &Path) -> Result<Machine, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            file: path.to_path_buf(),
+            source,
+        })?;
+        let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        Machine::parse(path, &text, |rel| DriveDictionary::load(&base.join(rel)))
+    }
+
+    /// The embedded demo machine (three simulated axes on the in-process bus).
+    pub fn demo() -> Machine {
+        Machine::parse(Path::new(DEMO_MACHINE_PATH), DEMO_MACHINE, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), DEMO_DRIVE)
+        })
+        .expect("the embedded demo machine is valid (a unit test checks it)")
+    }
+
+    /// Parse a machine file's text; `load_dict` resolves dictionary paths.
+    pub fn parse(
+        path: &Path,
+        text: &str,
+        mut load_dict: impl FnMut(&Path) -> Result<DriveDictionary, ConfigError>,
+    ) -> Result<Machine, ConfigError> {
+        let raw: RawMachine = parse_toml(path, text)?;
+        let ctx = Ctx { file: path };
+        if raw.bus.cycle_us < 250 || raw.bus.cycle_us > 100_000 {
+            return Err(ctx.err(
+                "bus",
+                "cycle_us",
+                format!("{} µs outside 250..=100000", raw.bus.cycle_us),
+            ));
+        }
+        if ip_time_period(raw.bus.cycle_us).is_none() {
+            return Err(ctx.err(
+                "bus",
+                "cycle_us",
+                format!(
+                    "{} µs cannot be written to 0x60C2 as value (≤ 255) × 10^index",
+                    raw.bus.cycle_us
+                ),
+            ));
+        }
+        if !(10_000..=1_000_000).contains(&raw.bus.bitrate) {
+            return Err(ctx.err(
+                "bus",
+                "bitrate",
+                format!("{} outside 10000..=1000000", raw.bus.bitrate),
+            ));
+        }
+        if raw.sync.cob_id == 0 || raw.sync.cob_id > 0x7FF {
+            return Err(ctx.err(
+                "sync",
+                "cob_id",
+                "must be an 11-bit identifier other than 0",
+            ));
+        }
+        if raw.sync.window_us >= raw.bus.cycle_us {
+            return Err(ctx.err(
+                "sync",
+                "window_us",
+                format!(
+                    "{} µs must be shorter than the cycle ({} µs)",
+                    raw.sync.window_us, raw.bus.cycle_us
+                ),
+            ));
+        }
+        let hb = &raw.heartbeat;
+        if hb.gateway_node == 0 || hb.gateway_node > 127 {
+            return Err(ctx.err("heartbeat", "gateway_node", "must be 1..=127"));
+        }
+        for (key, v) in [
+            ("gateway_producer_ms", hb.gateway_producer_ms),
+            ("drive_producer_ms", hb.drive_producer_ms),
+        ] {
+            if v == 0 {
+                return Err(ctx.err(
+                    "heartbeat",
+                    key,
+                    "must be above 0 (heartbeats guard the motion)",
+                ));
+            }
+        }
+        // CiA 301 practice: a consumer waits 1.5–3× the producer time.
+        if u32::from(hb.drive_consumer_ms) * 2 < u32::from(hb.gateway_producer_ms) * 3 {
+            return Err(ctx.err(
+                "heartbeat",
+                "drive_consumer_ms",
+                format!(
+                    "{} ms is less than 1.5 × gateway_producer_ms ({} ms)",
+                    hb.drive_consumer_ms, hb.gateway_producer_ms
+                ),
+            ));
+        }
+        if u32::from(hb.gateway_consumer_ms) * 2 < u32::from(hb.drive_producer_ms) * 3 {
+            return Err(ctx.err(
+                "heartbeat",
+                "gateway_consumer_ms",
+                format!(
+                    "{} ms is less than 1.5 × drive_producer_ms ({} ms)",
+                    hb.gateway_consumer_ms, hb.drive_producer_ms
+                ),
+            ));
+        }
+        if raw.axis.is_empty() {
+            return Err(ctx.err("axis", "axis", "a machine needs at least one [[axis]]"));
+        }
+        let mut names = BTreeSet::new();
+        let mut nodes = BTreeSet::new();
+        let mut axes = Vec::new();
+        let mut dicts: Vec<(PathBuf, Arc<DriveDictionary>)> = Vec::new();
+        for a in &raw.axis {
+            let table = format!("axis {}", a.name);
+            if !matches!(a.name.as_str(), "X" | "Y" | "Z") {
+                return Err(ctx.err(
+                    table,
+                    "name",
+                    format!("{:?}: the axis letter must be X, Y or Z", a.name),
+                ));
+            }
+            if !names.insert(a.name.clone()) {
+                return Err(ctx.err(table, "name", "axis defined twice"));
+            }
+            if a.node == 0 || a.node > 127 {
+                return Err(ctx.err(table, "node", format!("{} outside 1..=127", a.node)));
+            }
+            if a.node == hb.gateway_node {
+                return Err(ctx.err(table, "node", "equals heartbeat.gateway_node"));
+            }
+            if !nodes.insert(a.node) {
+                return Err(ctx.err(table, "node", format!("node {} used by two axes", a.node)));
+            }
+            for (key, v) in [
+                ("counts_per_mm", a.counts_per_mm),
+                ("max_vel_mm_s", a.max_vel_mm_s),
+                ("max_acc_mm_s2", a.max_acc_mm_s2),
+                ("max_jerk_mm_s3", a.max_jerk_mm_s3),
+                ("following_error_mm", a.following_error_mm),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(ctx.err(table, key, format!("{v} must be a positive number")));
+                }
+            }
+            if !(a.min_mm.is_finite() && a.max_mm.is_finite() && a.min_mm < a.max_mm) {
+                return Err(ctx.err(
+                    table,
+                    "max_mm",
+                    format!("min_mm {} must be below max_mm {}", a.min_mm, a.max_mm),
+                ));
+            }
+            for (key, v) in [("min_mm", a.min_mm), ("max_mm", a.max_mm)] {
+                if (v * a.counts_per_mm).abs() >= i32::MAX as f64 {
+                    return Err(ctx.err(table, key, "beyond the INT32 range of position counts"));
+                }
+            }
+            let dict = match dicts.iter().find(|(p, _)| *p == a.dictionary) {
+                Some((_, d)) => d.clone(),
+                None => {
+                    let d = Arc::new(load_dict(&a.dictionary)?);
+                    dicts.push((a.dictionary.clone(), d.clone()));
+                    d
+                }
+            };
+            // The drive must support the mode (0x6502 bit mode−1).
+            let supported = dict
+                .sub(0x6502, 0)
+                .and_then(|s| match &s.default {
+                    super::dictionary::DefaultValue::Fixed(v) => value_as_i128(v),
+                    _ => None,
+                })
+                .unwrap_or(0);
+            let bit = 1i128 << (a.mode.number() - 1);
+            if supported & bit == 0 {
+                return Err(ctx.err(
+                    table,
+                    "mode",
+                    format!(
+                        "{:?} (mode {}) is not in the drive's supported modes 0x6502 = 0x{supported:08X} ({})",
+                        a.mode,
+                        a.mode.number(),
+                        dict.file.display()
+                    ),
+                ));
+            }
+            let setpoint_pdo = pdo(
+                &ctx,
+                &table,
+                "setpoint_pdo",
+                &a.setpoint_pdo,
+                &dict,
+                a.node,
+                true,
+            )?;
+            let feedback_pdo = pdo(
+                &ctx,
+                &table,
+                "feedback_pdo",
+                &a.feedback_pdo,
+                &dict,
+                a.node,
+                false,
+            )?;
+            let (si, ss) = a.mode.setpoint_object();
+            for (idx, sub, what) in [
+                (0x6040u16, 0u8, "controlword 0x6040"),
+                (si, ss, "the mode's setpoint"),
+            ] {
+                if setpoint_pdo.offset_of(idx, sub).is_none() {
+                    return Err(ctx.err(
+                        table.as_str(),
+                        "setpoint_pdo.mapping",
+                        format!(
+                            "must map {what} (0x{idx:04X}:{sub:02X}) for mode {:?}",
+                            a.mode
+                        ),
+                    ));
+                }
+            }
+            for (idx, what) in [
+                (0x6041u16, "statusword 0x6041"),
+                (0x6064, "position actual 0x6064"),
+            ] {
+                if feedback_pdo.offset_of(idx, 0).is_none() {
+                    return Err(ctx.err(
+                        table.as_str(),
+                        "feedback_pdo.mapping",
+                        format!("must map {what}"),
+                    ));
+                }
+            }
+            let mut sdo = Vec::new();
+            for (i, w) in a.sdo.iter().enumerate() {
+                let key = format!("sdo[{i}]");
+                let def = dict.sub(w.index, w.sub).ok_or_else(|| {
+                    ctx.err(
+                        table.as_str(),
+                        &key,
+                        format!(
+                            "0x{:04X}:{:02X} is not in {}",
+                            w.index,
+                            w.sub,
+                            dict.file.display()
+                        ),
+                    )
+                })?;
+                if !def.access.writable() {
+                    return Err(ctx.err(
+                        table.as_str(),
+                        &key,
+                        format!(
+                            "0x{:04X}:{:02X} ({}) is not writable",
+                            w.index, w.sub, def.name
+                        ),
+                    ));
+                }
+                let value = match &w.value {
+                    toml::Value::Integer(x) => int_value(def.data_type, i128::from(*x)),
+                    toml::Value::Float(x) => match def.data_type {
+                        canopen_rs::DataType::Real32 => Some(Value::Real32(*x as f32)),
+                        canopen_rs::DataType::Real64 => Some(Value::Real64(*x)),
+                        _ => None,
+                    },
+                    _ => None,
+                }
+                .ok_or_else(|| {
+                    ctx.err(
+                        table.as_str(),
+                        &key,
+                        format!(
+                            "value {} does not fit {} ({})",
+                            w.value,
+                            type_name(def.data_type),
+                            def.name
+                        ),
+                    )
+                })?;
+                if let Some(x) = super::dictionary::value_as_f64(&value)
+                    && (def.min.is_some_and(|lo| x < lo) || def.max.is_some_and(|hi| x > hi))
+                {
+                    return Err(ctx.err(
+                        table.as_str(),
+                        &key,
+                        format!(
+                            "value {x} outside the range [{:?}, {:?}] of {}",
+                            def.min, def.max, def.name
+                        ),
+                    ));
+                }
+                sdo.push(SdoWrite {
+                    index: w.index,
+                    sub: w.sub,
+                    value,
+                });
+            }
+            axes.push(AxisConfig {
+                name: a.name.clone(),
+                node: a.node,
+                dictionary: dict,
+                mode: a.mode,
+                counts_per_mm: a.counts_per_mm,
+                min_mm: a.min_mm,
+                max_mm: a.max_mm,
+                max_vel_mm_s: a.max_vel_mm_s,
+                max_acc_mm_s2: a.max_acc_mm_s2,
+                max_jerk_mm_s3: a.max_jerk_mm_s3,
+                following_error_mm: a.following_error_mm,
+                following_error_timeout_ms: a.following_error_timeout_ms,
+                setpoint_pdo,
+                feedback_pdo,
+                sdo,
+            });
+        }
+        Ok(Machine {
+            file: path.to_path_buf(),
+            name: raw.machine.name,
+            interface: raw.bus.interface,
+            bitrate: raw.bus.bitrate,
+            cycle_us: raw.bus.cycle_us,
+            sync_cob_id: raw.sync.cob_id,
+            sync_window_us: raw.sync.window_us,
+            heartbeat: Heartbeat {
+                gateway_node: hb.gateway_node,
+                gateway_producer_ms: hb.gateway_producer_ms,
+                drive_consumer_ms: hb.drive_consumer_ms,
+                drive_producer_ms: hb.drive_producer_ms,
+                gateway_consumer_ms: hb.gateway_consumer_ms,
+            },
+            axes,
+        })
+    }
+
+    /// The cycle period in seconds.
+    pub fn cycle_s(&self) -> f64 {
+        f64::from(self.cycle_us) * 1e-6
+    }
+
+    /// The axis with letter `name`.
+    pub fn axis(&self, name: &str) -> Option<&AxisConfig> {
+        self.axes.iter().find(|a| a.name == name)
+    }
+}
+
+fn pdo(
+    ctx: &Ctx,
+    table: &str,
+    key: &str,
+    raw: &RawPdo,
+    dict: &DriveDictionary,
+    node: u8,
+    receive: bool,
+) -> Result<PdoConfig, ConfigError> {
+    if !(1..=4).contains(&raw.number) {
+        return Err(ctx.err(
+            table,
+            &format!("{key}.number"),
+            format!("{} outside 1..=4", raw.number),
+        ));
+    }
+    if !(1..=240).contains(&raw.transmission) {
+        return Err(ctx.err(
+            table,
+            &format!("{key}.transmission"),
+            format!(
+                "{}: cyclic process data must be synchronous (1..=240)",
+                raw.transmission
+            ),
+        ));
+    }
+    if raw.mapping.is_empty() || raw.mapping.len() > 8 {
+        return Err(ctx.err(table, &format!("{key}.mapping"), "1 to 8 entries"));
+    }
+    let mut bits = 0u32;
+    let mut mapping = Vec::new();
+    for (i, &m) in raw.mapping.iter().enumerate() {
+        let e = MapEntry::from_u32(m);
+        let k = format!("{key}.mapping[{i}]");
+        let def = dict.sub(e.index, e.sub).ok_or_else(|| {
+            ctx.err(
+                table,
+                &k,
+                format!(
+                    "0x{m:08X}: object 0x{:04X}:{:02X} is not in {}",
+                    e.index,
+                    e.sub,
+                    dict.file.display()
+                ),
+            )
+        })?;
+        if !def.pdo {
+            return Err(ctx.err(
+                table,
+                &k,
+                format!("0x{m:08X}: {} is not PDO-mappable", def.name),
+            ));
+        }
+        let want = def.data_type.size() * 8;
+        if usize::from(e.bits) != want {
+            return Err(ctx.err(
+                table,
+                &k,
+                format!("0x{m:08X}: {} is {want} bits, not {}", def.name, e.bits),
+            ));
+        }
+        if receive && !def.access.writable() {
+            return Err(ctx.err(
+                table,
+                &k,
+                format!(
+                    "0x{m:08X}: {} is read-only and cannot be received",
+                    def.name
+                ),
+            ));
+        }
+        if !receive && !def.access.readable() {
+            return Err(ctx.err(
+                table,
+                &k,
+                format!("0x{m:08X}: {} is write-only and cannot be sent", def.name),
+            ));
+        }
+        bits += u32::from(e.bits);
+        mapping.push(e);
+    }
+    if bits > 64 {
+        return Err(ctx.err(
+            table,
+            &format!("{key}.mapping"),
+            format!("{bits} bits exceed the 64 of one frame"),
+        ));
+    }
+    let base: u16 = match (receive, raw.number) {
+        (true, n) => 0x100 + 0x100 * u16::from(n),
+        (false, n) => 0x080 + 0x100 * u16::from(n),
+    };
+    Ok(PdoConfig {
+        number: raw.number,
+        cob_id: base + u16::from(node),
+        transmission: raw.transmission,
+        mapping,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_demo_machine_loads() {
+        let m = Machine::demo();
+        assert_eq!(m.axes.len(), 3);
+        let names: Vec<_> = m.axes.iter().map(|a| (a.name.as_str(), a.node)).collect();
+        assert_eq!(names, [("X", 1), ("Y", 2), ("Z", 3)]);
+        assert_eq!(m.axes[0].setpoint_pdo.cob_id, 0x201);
+        assert_eq!(m.axes[2].feedback_pdo.cob_id, 0x183);
+    }
+
+    #[test]
+    fn the_demo_machine_file_on_disk_loads_too() {
+        let m = Machine::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/dictionaries/machines/demo-xyz.toml"
+        )))
+        .unwrap();
+        assert_eq!(m.axes.len(), 3);
+    }
+
+    #[test]
+    fn ip_period_encoding() {
+        assert_eq!(ip_time_period(1000), Some((1, -3)));
+        assert_eq!(ip_time_period(2000), Some((2, -3)));
+        assert_eq!(ip_time_period(250), Some((250, -6)));
+        assert_eq!(ip_time_period(1500), Some((15, -4)));
+        assert_eq!(ip_time_period(1234), None);
+    }
+
+    fn demo_with(from: &str, to: &str) -> String {
+        assert!(DEMO_MACHINE.contains(from), "demo file lacks {from:?}");
+        let text = DEMO_MACHINE.replacen(from, to, 1);
+        match Machine::parse(Path::new("m.toml"), &text, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), DEMO_DRIVE)
+        }) {
+            Ok(_) => panic!("accepted {to:?}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn errors_name_the_table_and_key() {
+        assert_eq!(
+            demo_with("node = 2", "node = 1"),
+            "m.toml: [axis Y] node: node 1 used by two axes"
+        );
+        let e = demo_with(
+            "mapping = [0x60400010, 0x60C10120]",
+            "mapping = [0x60400010, 0x60410010]",
+        );
+        assert!(
+            e.starts_with("m.toml: [axis X] setpoint_pdo.mapping[1]: 0x60410010"),
+            "{e}"
+        );
+        let e = demo_with("cycle_us = 2000", "cycle_us = 1234");
+        assert!(e.starts_with("m.toml: [bus] cycle_us: 1234"), "{e}");
+        let e = demo_with("[machine]", "[machine]\nspeed = 3");
+        assert!(e.contains("speed"), "{e}");
+    }
+}

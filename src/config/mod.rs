@@ -1,0 +1,64 @@
+//! Configuration: drive dictionaries and machine files, both TOML.
+//!
+//! Loading is strict: unknown keys are errors (`deny_unknown_fields`), and after parsing every
+//! value is validated. Every error names the file, the table and the key, and the bound that was
+//! broken, so the integrator can fix the file without reading code.
+
+pub mod dictionary;
+pub mod machine;
+
+use std::path::{Path, PathBuf};
+
+pub use dictionary::{Access, DriveDictionary, ObjectDef, SubDef};
+pub use machine::{AxisConfig, AxisMode, Machine, PdoConfig};
+
+/// A configuration error: which file, which table and key, and what is wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not fit the schema (unknown key, wrong type).
+    #[error("{file}: {message}")]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// The TOML parser's message (it names the line, column and key).
+        message: String,
+    },
+    /// A value broke a rule.
+    #[error("{file}: [{table}] {key}: {message}")]
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// The table, e.g. `axis X` or `object 0x6040 sub 0`.
+        table: String,
+        /// The key.
+        key: String,
+        /// What is wrong, with the bound.
+        message: String,
+    },
+}
+
+pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    parse_toml(path, &text)
+}
+
+pub(crate) fn parse_toml<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    text: &str,
+) -> Result<T, ConfigError> {
+    toml::from_str(text).map_err(|e| ConfigError::Parse {
+        file: path.to_path_buf(),
+        message: e.to_string().trim_end().to_string(),
+    })
+}

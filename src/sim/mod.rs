@@ -1,0 +1,884 @@
+//! A simulated CiA 402 servo drive: a real CANopen peer, sans-I/O.
+//!
+//! It loads its object dictionary from a drive dictionary, answers SDOs with the abort codes of
+//! CiA 301, enforces the PDO remap procedure, follows SYNC (synchronous RPDOs take effect at the
+//! next SYNC, synchronous TPDOs are sent on it), produces and consumes heartbeats, and runs the
+//! CiA 402 power state machine with interpolated position (mode 7, linear sub-mode 0) and cyclic
+//! synchronous position (mode 8) over a position loop with lag and velocity/acceleration limits.
+//!
+//! Time is an argument (`now`, a [`Duration`] since any fixed origin): the same drive runs in
+//! unit tests with a made-up clock, in-process next to the gateway, and on vcan0 as
+//! `canmotion simdrive`. [`runner`] puts drives on a bus.
+//!
+//! Units of the motion model are the drive's: counts, counts/s, counts/s².
+
+pub mod runner;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use canopen_rs::Value;
+
+use crate::bus::Frame;
+use crate::canopen::emcy::{Emcy, code as emcy_code};
+use crate::canopen::od::Od;
+use crate::canopen::sdo_server::{SdoServer, SdoTarget};
+use crate::canopen::{AbortCode, NmtState, cob, nmt};
+use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
+use crate::config::DriveDictionary;
+use crate::config::machine::MapEntry;
+
+/// Position loop gain (1/s): the actual position approaches the demand with a ~5 ms time constant.
+const KP_PER_S: f64 = 200.0;
+/// Velocity feed-forward fraction: what remains gives a following error proportional to speed,
+/// as on a real servo.
+const K_FF: f64 = 0.95;
+/// Physics integration step.
+const STEP: Duration = Duration::from_micros(250);
+/// EMCY code for a parameter the drive cannot run with (CiA 301: 0x6320 "parameter error").
+pub const EMCY_PARAMETER: u16 = 0x6320;
+
+/// Why the drive went to Fault (what 0x603F and the EMCY say).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultCause {
+    /// The following error exceeded 0x6065 for longer than 0x6066.
+    FollowingError,
+    /// The heartbeat of a consumed node (0x1016) timed out and 0x6007 says fault.
+    HeartbeatLost,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Interp {
+    /// Where the demand was when the current setpoint was latched.
+    from: f64,
+    /// The setpoint latched at the last SYNC.
+    to: f64,
+    /// When it was latched.
+    at: Duration,
+}
+
+/// One simulated drive.
+#[derive(Debug)]
+pub struct SimDrive {
+    node: u8,
+    od: Od,
+    nmt: NmtState,
+    sdo: SdoServer,
+    power: PowerStateMachine,
+    /// Synchronous RPDO data waiting for the next SYNC, per RPDO.
+    pending_rpdo: [Option<([u8; 8], usize)>; 4],
+    /// SYNCs counted per TPDO for transmission types 2–240.
+    tpdo_sync_count: [u32; 4],
+    /// Last data sent and when, per event-driven TPDO.
+    tpdo_last: [Option<(Vec<u8>, Duration)>; 4],
+    last_sync: Option<Duration>,
+    sync_missing_reported: bool,
+    next_heartbeat: Option<Duration>,
+    /// Per 0x1016 entry: last heartbeat seen, and whether its loss was reported.
+    consumer: [(Option<Duration>, bool); 4],
+    // motion, in counts
+    pos: f64,
+    vel: f64,
+    demand: f64,
+    interp: Option<Interp>,
+    ip_active: bool,
+    last_cw: u16,
+    ferr_since: Option<Duration>,
+    ferr_flag: bool,
+    limit_flag: bool,
+    fault_cause: Option<FaultCause>,
+    last_physics: Option<Duration>,
+    /// Frames produced inside an SDO write, sent after its response.
+    deferred: Vec<Frame>,
+}
+
+fn rpdo_base(n: usize) -> u16 {
+    0x1400 + n as u16
+}
+fn rpdo_map(n: usize) -> u16 {
+    0x1600 + n as u16
+}
+fn tpdo_base(n: usize) -> u16 {
+    0x1800 + n as u16
+}
+fn tpdo_map(n: usize) -> u16 {
+    0x1A00 + n as u16
+}
+
+impl SimDrive {
+    /// A drive with `node` id, powered on but not yet booted: call [`SimDrive::boot`].
+    pub fn new(dict: Arc<DriveDictionary>, node: u8) -> SimDrive {
+        let od = Od::new(dict, node);
+        SimDrive {
+            node,
+            od,
+            nmt: NmtState::BootUp,
+            sdo: SdoServer::new(),
+            power: PowerStateMachine::new(),
+            pending_rpdo: [None; 4],
+            tpdo_sync_count: [0; 4],
+            tpdo_last: Default::default(),
+            last_sync: None,
+            sync_missing_reported: false,
+            next_heartbeat: None,
+            consumer: [(None, false); 4],
+            pos: 0.0,
+            vel: 0.0,
+            demand: 0.0,
+            interp: None,
+            ip_active: false,
+            last_cw: 0,
+            ferr_since: None,
+            ferr_flag: false,
+            limit_flag: false,
+            fault_cause: None,
+            last_physics: None,
+            deferred: Vec::new(),
+        }
+    }
+
+    /// Start with the motor at `counts` (where the machine was left).
+    pub fn with_position(mut self, counts: i32) -> SimDrive {
+        self.pos = f64::from(counts);
+        self.demand = self.pos;
+        self.refresh();
+        self
+    }
+
+    /// Node id.
+    pub fn node(&self) -> u8 {
+        self.node
+    }
+    /// NMT state.
+    pub fn nmt_state(&self) -> NmtState {
+        self.nmt
+    }
+    /// CiA 402 state.
+    pub fn state(&self) -> State {
+        self.power.state()
+    }
+    /// Position actual (0x6064).
+    pub fn position_counts(&self) -> i32 {
+        self.pos.round() as i32
+    }
+    /// Statusword (0x6041).
+    pub fn statusword(&self) -> u16 {
+        self.od.int(0x6041, 0) as u16
+    }
+    /// Why the drive faulted last, if it did.
+    pub fn fault_cause(&self) -> Option<FaultCause> {
+        self.fault_cause
+    }
+    /// The object dictionary (read access for tests and diagnostics).
+    pub fn od(&self) -> &Od {
+        &self.od
+    }
+
+    /// Leave initialisation: boot-up message, then Pre-operational (CiA 301 §7.3.2.2.1).
+    pub fn boot(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        self.power.boot();
+        self.nmt = NmtState::PreOperational;
+        self.sdo.reset();
+        self.pending_rpdo = [None; 4];
+        self.tpdo_sync_count = [0; 4];
+        self.tpdo_last = Default::default();
+        self.last_sync = None;
+        self.sync_missing_reported = false;
+        self.consumer = [(None, false); 4];
+        self.last_physics = Some(now);
+        out.push(Frame::new(cob::HEARTBEAT + u16::from(self.node), &[0x00]).expect("id"));
+        self.schedule_heartbeat(now);
+        self.refresh();
+    }
+
+    fn schedule_heartbeat(&mut self, now: Duration) {
+        let ms = self.od.int(0x1017, 0) as u64;
+        self.next_heartbeat = (ms > 0).then(|| now + Duration::from_millis(ms));
+    }
+
+    fn sync_period(&self) -> Option<Duration> {
+        let us = self.od.int(0x1006, 0) as u64;
+        (us > 0).then(|| Duration::from_micros(us))
+    }
+
+    /// The IP time period from 0x60C2 (value × 10^index s).
+    fn ip_period(&self) -> Option<Duration> {
+        let v = self.od.int(0x60C2, 1) as f64;
+        let idx = self.od.int(0x60C2, 2) as i32;
+        let s = v * 10f64.powi(idx);
+        (s > 0.0).then(|| Duration::from_secs_f64(s))
+    }
+
+    /// When [`SimDrive::poll`] must run next at the latest.
+    pub fn poll_at(&self, now: Duration) -> Duration {
+        let mut t = now + Duration::from_millis(10);
+        if let Some(h) = self.next_heartbeat {
+            t = t.min(h);
+        }
+        if let (Some(last), Some(p), false) = (self.last_sync, self.sync_period(), self.sync_missing_reported)
+            && self.nmt == NmtState::Operational
+        {
+            t = t.min(last + p * 3 / 2 + Duration::from_micros(1));
+        }
+        for (i, (seen, lost)) in self.consumer.iter().enumerate() {
+            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            let ms = u64::from(e & 0xFFFF);
+            if let (Some(seen), false, true) = (seen, lost, ms > 0) {
+                t = t.min(*seen + Duration::from_millis(ms) + Duration::from_micros(1));
+            }
+        }
+        if self.vel != 0.0 || self.interp.is_some() || self.power.power_enabled() {
+            t = t.min(now + Duration::from_millis(1));
+        }
+        t
+    }
+
+    /// Advance time: the motor, the heartbeat producer, the SYNC and heartbeat consumers.
+    pub fn poll(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        if self.nmt == NmtState::BootUp {
+            return;
+        }
+        self.physics(now, out);
+        if let Some(h) = self.next_heartbeat
+            && now >= h
+        {
+            out.push(Frame::new(cob::HEARTBEAT + u16::from(self.node), &[self.nmt.byte()]).expect("id"));
+            let ms = self.od.int(0x1017, 0) as u64;
+            // Keep the beat on its grid; if we fell far behind, restart from now.
+            let mut next = h + Duration::from_millis(ms.max(1));
+            if next <= now {
+                next = now + Duration::from_millis(ms.max(1));
+            }
+            self.next_heartbeat = (ms > 0).then_some(next);
+        }
+        if self.nmt == NmtState::Operational
+            && let (Some(last), Some(p)) = (self.last_sync, self.sync_period())
+            && !self.sync_missing_reported
+            && now > last + p * 3 / 2
+        {
+            self.sync_missing_reported = true;
+            self.emcy(emcy_code::COMMUNICATION, 0x10, out);
+        }
+        for i in 0..4 {
+            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            let ms = u64::from(e & 0xFFFF);
+            let (seen, lost) = self.consumer[i];
+            if let (Some(seen), false, true) = (seen, lost, ms > 0)
+                && now > seen + Duration::from_millis(ms)
+            {
+                self.consumer[i].1 = true;
+                self.heartbeat_lost(now, out);
+            }
+        }
+        self.send_event_tpdos(now, out);
+    }
+
+    fn heartbeat_lost(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        self.emcy(emcy_code::HEARTBEAT, 0x10, out);
+        // 0x6007 abort connection option: 1 fault, 2 disable voltage, 3 quick stop.
+        match self.od.int(0x6007, 0) {
+            1 => self.raise_fault(FaultCause::HeartbeatLost, now, out, false),
+            2 => {
+                self.power.on_controlword(cw_bits::DISABLE_VOLTAGE);
+            }
+            3 => {
+                self.power.on_controlword(cw_bits::QUICK_STOP_CMD);
+            }
+            _ => {}
+        }
+        // 0x1029:1 communication error behaviour: 0 pre-operational, 1 no change, 2 stopped.
+        match self.od.int(0x1029, 1) {
+            0 if self.nmt == NmtState::Operational => self.nmt = NmtState::PreOperational,
+            2 => self.nmt = NmtState::Stopped,
+            _ => {}
+        }
+        self.refresh();
+    }
+
+    fn raise_fault(&mut self, cause: FaultCause, _now: Duration, out: &mut Vec<Frame>, send_emcy: bool) {
+        if self.power.fault().is_some() {
+            self.fault_cause = Some(cause);
+            let code = match cause {
+                FaultCause::FollowingError => emcy_code::FOLLOWING_ERROR,
+                FaultCause::HeartbeatLost => emcy_code::HEARTBEAT,
+            };
+            self.od.set_int(0x603F, 0, i64::from(code));
+            self.ip_active = false;
+            self.interp = None;
+            if send_emcy {
+                self.emcy(code, 0x20, out);
+            }
+        }
+    }
+
+    /// Send an EMCY (if 0x1014 is valid), set the error register and the error history.
+    fn emcy(&mut self, code: u16, register_bits: u8, out: &mut Vec<Frame>) {
+        let reg = if code == 0 { 0 } else { (self.od.int(0x1001, 0) as u8) | 0x01 | register_bits };
+        self.od.set_int(0x1001, 0, i64::from(reg));
+        if code != 0 {
+            for s in (2..=8u8).rev() {
+                let prev = self.od.int(0x1003, s - 1);
+                self.od.set_int(0x1003, s, prev);
+            }
+            self.od.set_int(0x1003, 1, i64::from(code));
+            let n = (self.od.int(0x1003, 0) + 1).min(8);
+            self.od.set_int(0x1003, 0, n);
+        }
+        let cob_id = self.od.int(0x1014, 0) as u32;
+        if cob_id & 0x8000_0000 != 0 || self.nmt == NmtState::Stopped {
+            return;
+        }
+        let e = Emcy {
+            node: self.node,
+            code,
+            register: reg,
+            vendor: [0; 5],
+        };
+        let f = e.to_frame();
+        out.push(Frame::new((cob_id & 0x7FF) as u16, f.data()).expect("id"));
+    }
+
+    /// Handle one received frame.
+    pub fn handle(&mut self, now: Duration, frame: &Frame, out: &mut Vec<Frame>) {
+        if self.nmt == NmtState::BootUp {
+            return;
+        }
+        self.physics(now, out);
+        let id = frame.id();
+        let data = frame.data();
+        if id == cob::NMT {
+            if data.len() == 2 && (data[1] == 0 || data[1] == self.node) {
+                self.nmt_command(data[0], now, out);
+            }
+            return;
+        }
+        // Heartbeats of nodes we consume.
+        if (0x701..=0x77F).contains(&id) && !frame.is_remote() {
+            let producer = (id - cob::HEARTBEAT) as u32;
+            for i in 0..4 {
+                let e = self.od.int(0x1016, i as u8 + 1) as u32;
+                if e & 0xFFFF != 0 && (e >> 16) & 0x7F == producer {
+                    self.consumer[i] = (Some(now), false);
+                }
+            }
+            return;
+        }
+        if self.nmt == NmtState::Stopped {
+            return;
+        }
+        if id == cob::SDO_RX + u16::from(self.node) {
+            let mut server = std::mem::take(&mut self.sdo);
+            let r = server.handle(self, data);
+            self.sdo = server;
+            if let Some(r) = r {
+                out.push(Frame::new(cob::SDO_TX + u16::from(self.node), &r).expect("id"));
+            }
+            out.append(&mut self.deferred);
+            self.refresh();
+            return;
+        }
+        let sync_id = (self.od.int(0x1005, 0) as u32 & 0x7FF) as u16;
+        if id == sync_id {
+            self.on_sync(now, data, out);
+            return;
+        }
+        if self.nmt != NmtState::Operational {
+            return;
+        }
+        for n in 0..4 {
+            let c = self.od.int(rpdo_base(n), 1) as u32;
+            if c & 0x8000_0000 == 0 && (c & 0x7FF) as u16 == id {
+                self.on_rpdo(n, data, out);
+                return;
+            }
+        }
+    }
+
+    fn nmt_command(&mut self, cs: u8, now: Duration, out: &mut Vec<Frame>) {
+        match cs {
+            nmt::START => self.nmt = NmtState::Operational,
+            nmt::STOP => {
+                self.leave_operational();
+                self.nmt = NmtState::Stopped;
+            }
+            nmt::PRE_OPERATIONAL => {
+                self.leave_operational();
+                self.nmt = NmtState::PreOperational;
+            }
+            nmt::RESET_NODE => {
+                let pos = self.pos;
+                *self = SimDrive::new(self.od.dictionary().clone(), self.node);
+                self.pos = pos;
+                self.demand = pos;
+                self.boot(now, out);
+            }
+            nmt::RESET_COMMUNICATION => {
+                self.od.reset_range(0x1000..=0x1FFF);
+                self.boot(now, out);
+            }
+            _ => {}
+        }
+        self.refresh();
+    }
+
+    /// Leaving Operational stops process data: the drive no longer receives setpoints, so it holds.
+    fn leave_operational(&mut self) {
+        self.pending_rpdo = [None; 4];
+        self.last_sync = None;
+        self.interp = None;
+    }
+
+    fn on_rpdo(&mut self, n: usize, data: &[u8], out: &mut Vec<Frame>) {
+        let map = self.mapping(rpdo_map(n));
+        let len: usize = map.iter().map(|e| usize::from(e.bits / 8)).sum();
+        if data.len() < len {
+            self.emcy(emcy_code::PDO_LENGTH, 0x10, out);
+            return;
+        }
+        if data.len() > len {
+            self.emcy(emcy_code::PDO_TOO_LONG, 0x10, out);
+        }
+        let mut buf = [0u8; 8];
+        buf[..data.len()].copy_from_slice(data);
+        let tt = self.od.int(rpdo_base(n), 2);
+        if tt <= 240 {
+            self.pending_rpdo[n] = Some((buf, len));
+        } else {
+            self.apply_rpdo(n, &buf[..len], out);
+        }
+    }
+
+    fn apply_rpdo(&mut self, n: usize, data: &[u8], out: &mut Vec<Frame>) {
+        let map = self.mapping(rpdo_map(n));
+        let mut off = 0;
+        for e in map {
+            let bytes = usize::from(e.bits / 8);
+            if let Some(def) = self.od.def(e.index, e.sub)
+                && let Ok(v) = Value::decode_le(def.data_type, &data[off..off + bytes])
+            {
+                self.od.set(e.index, e.sub, v);
+                self.on_written(e.index, e.sub, out);
+            }
+            off += bytes;
+        }
+    }
+
+    fn mapping(&self, map_index: u16) -> Vec<MapEntry> {
+        let n = self.od.int(map_index, 0) as u8;
+        (1..=n)
+            .map(|s| MapEntry::from_u32(self.od.int(map_index, s) as u32))
+            .collect()
+    }
+
+    fn on_sync(&mut self, now: Duration, data: &[u8], out: &mut Vec<Frame>) {
+        let expect = if self.od.int(0x1019, 0) == 0 { 0 } else { 1 };
+        if data.len() != expect {
+            self.emcy(emcy_code::SYNC_LENGTH, 0x10, out);
+        }
+        if self.nmt != NmtState::Operational {
+            return;
+        }
+        self.last_sync = Some(now);
+        self.sync_missing_reported = false;
+        // 1. Synchronous RPDOs received since the last SYNC take effect now.
+        for n in 0..4 {
+            if let Some((buf, len)) = self.pending_rpdo[n].take() {
+                self.apply_rpdo(n, &buf[..len], out);
+            }
+        }
+        // 2. The setpoint in force from this SYNC on.
+        self.latch_setpoint(now);
+        self.refresh();
+        // 3. Synchronous TPDOs.
+        for n in 0..4 {
+            let c = self.od.int(tpdo_base(n), 1) as u32;
+            let tt = self.od.int(tpdo_base(n), 2) as u32;
+            if c & 0x8000_0000 != 0 || !(1..=240).contains(&tt) {
+                continue;
+            }
+            self.tpdo_sync_count[n] += 1;
+            if self.tpdo_sync_count[n] >= tt {
+                self.tpdo_sync_count[n] = 0;
+                let d = self.pack(tpdo_map(n));
+                out.push(Frame::new((c & 0x7FF) as u16, &d).expect("≤ 8 bytes"));
+            }
+        }
+    }
+
+    fn send_event_tpdos(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        if self.nmt != NmtState::Operational {
+            return;
+        }
+        for n in 0..4 {
+            let c = self.od.int(tpdo_base(n), 1) as u32;
+            let tt = self.od.int(tpdo_base(n), 2);
+            if c & 0x8000_0000 != 0 || tt < 254 {
+                continue;
+            }
+            let inhibit = Duration::from_micros(self.od.int(tpdo_base(n), 3) as u64 * 100);
+            let timer = Duration::from_millis(self.od.int(tpdo_base(n), 5) as u64);
+            let d = self.pack(tpdo_map(n));
+            let due = match &self.tpdo_last[n] {
+                None => true,
+                Some((last, at)) => {
+                    now >= *at + inhibit && (*last != d || (!timer.is_zero() && now >= *at + timer))
+                }
+            };
+            if due {
+                out.push(Frame::new((c & 0x7FF) as u16, &d).expect("≤ 8 bytes"));
+                self.tpdo_last[n] = Some((d, now));
+            }
+        }
+    }
+
+    fn pack(&self, map_index: u16) -> Vec<u8> {
+        let mut d = Vec::with_capacity(8);
+        for e in self.mapping(map_index) {
+            let mut b = [0u8; 8];
+            let n = self
+                .od
+                .get(e.index, e.sub)
+                .and_then(|v| v.encode_le(&mut b).ok())
+                .unwrap_or(0);
+            let want = usize::from(e.bits / 8);
+            d.extend_from_slice(&b[..want.min(8)]);
+            let _ = n;
+        }
+        d.truncate(8);
+        d
+    }
+
+    /// The mode in force (0x6061).
+    fn mode(&self) -> i8 {
+        self.od.int(0x6061, 0) as i8
+    }
+
+    /// The setpoint object of the active mode becomes the interpolation target.
+    fn latch_setpoint(&mut self, now: Duration) {
+        let target = match self.mode() {
+            7 if self.ip_active => self.od.int(0x60C1, 1),
+            8 if self.power.is_operation_enabled() => self.od.int(0x607A, 0),
+            _ => {
+                self.interp = None;
+                return;
+            }
+        } as f64;
+        self.interp = Some(Interp {
+            from: self.demand,
+            to: target,
+            at: now,
+        });
+    }
+
+    /// Side effects of a write (by SDO or RPDO).
+    fn on_written(&mut self, index: u16, sub: u8, out: &mut Vec<Frame>) {
+        match (index, sub) {
+            (0x6040, 0) => self.on_controlword(self.od.int(0x6040, 0) as u16, out),
+            (0x6060, 0) => {
+                let m = self.od.int(0x6060, 0);
+                self.od.set_int(0x6061, 0, m);
+                self.ip_active = false;
+                self.interp = None;
+            }
+            (0x605A, 0) => {
+                let _ = self.power.set_quick_stop_option(self.od.int(0x605A, 0) as i16);
+            }
+            (0x1017, 0) => {
+                let now = self.last_physics.unwrap_or_default();
+                self.schedule_heartbeat(now);
+            }
+            (0x1016, _) => self.consumer = [(None, false); 4],
+            (0x60C4, 6) => {
+                // Buffer clear: the one-deep buffer holds the actual position.
+                let p = self.pos.round() as i64;
+                self.od.set_int(0x60C1, 1, p);
+            }
+            _ => {}
+        }
+    }
+
+    fn on_controlword(&mut self, cw: u16, out: &mut Vec<Frame>) {
+        let was_fault = self.power.state() == State::Fault;
+        let was_enabled = self.power.is_operation_enabled();
+        self.power.on_controlword(cw);
+        if self.power.is_operation_enabled() && !was_enabled {
+            // Bumpless enable: the loop holds where the motor is.
+            self.demand = self.pos;
+            self.vel = 0.0;
+            self.interp = None;
+        }
+        if was_fault && self.power.state() != State::Fault {
+            self.ferr_flag = false;
+            self.fault_cause = None;
+            self.od.set_int(0x603F, 0, 0);
+            self.emcy(emcy_code::RESET, 0, out);
+            self.od.set_int(0x1001, 0, 0);
+        }
+        // IP: bit 4 enables interpolation (rising edge), clearing it stops it.
+        let bit4 = cw & cw_bits::IP_ENABLE != 0;
+        let was4 = self.last_cw & cw_bits::IP_ENABLE != 0;
+        self.last_cw = cw;
+        if self.mode() == 7 && self.power.is_operation_enabled() {
+            if bit4 && !was4 {
+                match (self.ip_period(), self.sync_period()) {
+                    (Some(ip), Some(sync)) if ip != sync => {
+                        // 0x60C2 must equal the SYNC period: refuse to interpolate.
+                        self.emcy(EMCY_PARAMETER, 0x80, out);
+                    }
+                    _ => {
+                        self.ip_active = true;
+                        self.interp = None;
+                    }
+                }
+            } else if !bit4 {
+                self.ip_active = false;
+                self.interp = None;
+            }
+        } else {
+            self.ip_active = false;
+        }
+        self.refresh();
+    }
+
+    /// Integrate the motor from the last update to `now`.
+    fn physics(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        let Some(mut t) = self.last_physics else {
+            self.last_physics = Some(now);
+            return;
+        };
+        while t < now {
+            let dt = (now - t).min(STEP);
+            t += dt;
+            self.step(t, dt.as_secs_f64(), out);
+        }
+        self.last_physics = Some(now);
+        self.refresh();
+    }
+
+    fn step(&mut self, t: Duration, dt: f64, out: &mut Vec<Frame>) {
+        let vmax = self.od.int(0x607F, 0).max(1) as f64;
+        let amax = self.od.int(0x6083, 0).max(1) as f64;
+        match self.power.state() {
+            State::OperationEnabled => {
+                let mut v_ff = 0.0;
+                if let Some(ip) = self.interp {
+                    let period = self.ip_period().or(self.sync_period()).unwrap_or(Duration::from_millis(1));
+                    let p = period.as_secs_f64();
+                    let frac = ((t.saturating_sub(ip.at)).as_secs_f64() / p).min(1.0);
+                    self.demand = ip.from + (ip.to - ip.from) * frac;
+                    if frac < 1.0 {
+                        v_ff = (ip.to - ip.from) / p;
+                    }
+                }
+                // Software position limits (0x607D) bound the demand.
+                let lo = self.od.int(0x607D, 1) as f64;
+                let hi = self.od.int(0x607D, 2) as f64;
+                self.limit_flag = self.demand < lo || self.demand > hi;
+                self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
+                let v_cmd = (K_FF * v_ff + KP_PER_S * (self.demand - self.pos)).clamp(-vmax, vmax);
+                let dv = (v_cmd - self.vel).clamp(-amax * dt, amax * dt);
+                self.vel += dv;
+                self.pos += self.vel * dt;
+                // Following error: beyond 0x6065 for longer than 0x6066 ms.
+                let window = self.od.int(0x6065, 0) as f64;
+                let err = (self.demand - self.pos).abs();
+                if err > window {
+                    let since = *self.ferr_since.get_or_insert(t);
+                    if t - since > Duration::from_millis(self.od.int(0x6066, 0) as u64) {
+                        self.ferr_flag = true;
+                        self.raise_fault(FaultCause::FollowingError, t, out, true);
+                    }
+                } else {
+                    self.ferr_since = None;
+                }
+            }
+            State::QuickStopActive | State::FaultReactionActive => {
+                let dec = self.od.int(0x6085, 0).max(1) as f64;
+                let dv = self.vel.abs().min(dec * dt);
+                self.vel -= dv * self.vel.signum();
+                self.pos += self.vel * dt;
+                self.demand = self.pos;
+                if self.vel == 0.0 {
+                    if self.power.state() == State::FaultReactionActive {
+                        self.power.fault_reaction_done();
+                    } else {
+                        self.power.quick_stop_done();
+                    }
+                }
+            }
+            _ => {
+                // No torque: the motor coasts to rest (friction).
+                let dv = self.vel.abs().min(amax * dt);
+                self.vel -= dv * self.vel.signum();
+                self.pos += self.vel * dt;
+                self.demand = self.pos;
+            }
+        }
+    }
+
+    /// Refresh the process values in the dictionary from the model.
+    fn refresh(&mut self) {
+        let mut s = self.power.statusword() | sw::REMOTE;
+        let enabled = self.power.is_operation_enabled();
+        if self.ferr_flag {
+            s |= sw::OP_MODE_SPECIFIC_13;
+        }
+        if self.limit_flag && enabled {
+            s |= sw::INTERNAL_LIMIT;
+        }
+        match self.mode() {
+            7 if enabled && self.ip_active => s |= sw::OP_MODE_SPECIFIC_12,
+            8 if enabled => s |= sw::OP_MODE_SPECIFIC_12,
+            _ => {}
+        }
+        let window = self.od.int(0x6067, 0) as f64;
+        if (self.demand - self.pos).abs() <= window && self.vel.abs() < 1.0 {
+            s |= sw::TARGET_REACHED;
+        }
+        self.od.set_int(0x6041, 0, i64::from(s));
+        self.od.set_int(0x6064, 0, self.pos.round() as i64);
+        self.od.set_int(0x6062, 0, self.demand.round() as i64);
+        self.od.set_int(0x606C, 0, self.vel.round() as i64);
+        self.od.set_int(0x60F4, 0, (self.demand - self.pos).round() as i64);
+    }
+
+    /// The PDO number (0-based) and whether it is receive, for a communication or mapping index.
+    fn pdo_of(index: u16) -> Option<(usize, bool, bool)> {
+        match index {
+            0x1400..=0x1403 => Some(((index - 0x1400) as usize, true, false)),
+            0x1600..=0x1603 => Some(((index - 0x1600) as usize, true, true)),
+            0x1800..=0x1803 => Some(((index - 0x1800) as usize, false, false)),
+            0x1A00..=0x1A03 => Some(((index - 0x1A00) as usize, false, true)),
+            _ => None,
+        }
+    }
+
+    fn pdo_valid(&self, n: usize, rx: bool) -> bool {
+        let base = if rx { rpdo_base(n) } else { tpdo_base(n) };
+        self.od.int(base, 1) as u32 & 0x8000_0000 == 0
+    }
+
+    /// CiA 301 §7.5.2.36: a mapping entry must name an existing, mappable object of that length.
+    fn check_map_entry(&self, v: u32, rx: bool) -> Result<(), AbortCode> {
+        if v == 0 {
+            return Ok(());
+        }
+        let e = MapEntry::from_u32(v);
+        let Some(def) = self.od.def(e.index, e.sub) else {
+            return Err(if self.od.dictionary().objects.contains_key(&e.index) {
+                AbortCode::NO_SUB
+            } else {
+                AbortCode::NO_OBJECT
+            });
+        };
+        let ok_access = if rx { def.access.writable() } else { def.access.readable() };
+        if !def.pdo || !ok_access || usize::from(e.bits) != def.data_type.size() * 8 {
+            return Err(AbortCode::NOT_MAPPABLE);
+        }
+        Ok(())
+    }
+
+    /// Device rules on a decoded SDO write, before it is stored.
+    fn check_device_rules(&self, index: u16, sub: u8, v: &Value) -> Result<(), AbortCode> {
+        let x = crate::config::dictionary::value_as_i128(v).unwrap_or(0);
+        if let Some((n, rx, is_map)) = Self::pdo_of(index) {
+            let valid = self.pdo_valid(n, rx);
+            if is_map {
+                let map_index = index;
+                // Mapping may change only while the PDO is invalid, and entries only while sub0 = 0.
+                if valid {
+                    return Err(AbortCode::UNSUPPORTED_ACCESS);
+                }
+                if sub == 0 {
+                    let count = x as u8;
+                    let mut bits = 0u32;
+                    for s in 1..=count {
+                        let e = self.od.int(map_index, s) as u32;
+                        if e == 0 {
+                            return Err(AbortCode::PARAM_INCOMPATIBLE);
+                        }
+                        self.check_map_entry(e, rx)?;
+                        bits += e & 0xFF;
+                    }
+                    if bits > 64 {
+                        return Err(AbortCode::PDO_TOO_LONG);
+                    }
+                } else {
+                    if self.od.int(map_index, 0) != 0 {
+                        return Err(AbortCode::UNSUPPORTED_ACCESS);
+                    }
+                    self.check_map_entry(x as u32, rx)?;
+                }
+            } else {
+                match sub {
+                    1 => {
+                        let new = x as u32;
+                        let old = self.od.int(index, 1) as u32;
+                        if new & 0x2000_0000 != 0 {
+                            return Err(AbortCode::INVALID_VALUE); // 29-bit ids not supported
+                        }
+                        let map_index = if rx { rpdo_map(n) } else { tpdo_map(n) };
+                        if new & 0x8000_0000 == 0 {
+                            if old & 0x8000_0000 == 0 && (new & 0x7FF) != (old & 0x7FF) {
+                                return Err(AbortCode::INVALID_VALUE);
+                            }
+                            if self.od.int(map_index, 0) == 0 {
+                                return Err(AbortCode::INVALID_VALUE);
+                            }
+                        }
+                    }
+                    2 => {
+                        if (241..=251).contains(&x) || (rx && (252..=253).contains(&x)) {
+                            return Err(AbortCode::INVALID_VALUE);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+            return Ok(());
+        }
+        match (index, sub) {
+            (0x1019, 0) if self.od.int(0x1006, 0) != 0 => Err(AbortCode::DEVICE_STATE),
+            (0x1019, 0) if x == 1 => Err(AbortCode::INVALID_VALUE),
+            (0x1003, 0) if x != 0 => Err(AbortCode::INVALID_VALUE),
+            (0x6060, 0) => {
+                let supported = self.od.int(0x6502, 0);
+                if x != 0 && (x < 1 || x > 32 || supported & (1 << (x - 1)) == 0) {
+                    return Err(AbortCode::INVALID_VALUE);
+                }
+                if self.power.is_operation_enabled() && (self.ip_active || self.mode() == 8) && x as i8 != self.mode() {
+                    return Err(AbortCode::DEVICE_STATE);
+                }
+                Ok(())
+            }
+            (0x60C2, _) if self.ip_active => Err(AbortCode::DEVICE_STATE),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl SdoTarget for SimDrive {
+    fn sdo_read(&mut self, index: u16, sub: u8) -> Result<Value, AbortCode> {
+        self.od.sdo_read(index, sub)
+    }
+
+    fn sdo_check_write(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+        self.od.sdo_check_write(index, sub, size)
+    }
+
+    fn sdo_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let v = self.od.sdo_decode_write(index, sub, data)?;
+        self.check_device_rules(index, sub, &v)?;
+        self.od.set(index, sub, v);
+        if index == 0x1003 {
+            for s in 1..=8 {
+                self.od.set_int(0x1003, s, 0);
+            }
+        }
+        let mut out = Vec::new();
+        self.on_written(index, sub, &mut out);
+        // EMCYs raised by an SDO write (e.g. a parameter error) go out with the next poll.
+        self.deferred.extend(out);
+        Ok(())
+    }
+}

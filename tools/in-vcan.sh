@@ -1,0 +1,204 @@
+#!/usr/bin/env bash
+# Run a command with a real, up `vcan0` available; exit with the command's exit code.
+#
+#   tools/in-vcan.sh CMD [ARGS...]
+#
+# Where the host kernel has SocketCAN (vcan0 already up, or `modprobe vcan` plus
+# `ip link add dev vcan0 type vcan` work), CMD runs directly on the host. Otherwise CMD runs
+# inside a User-Mode Linux guest (Debian's user-mode-linux package) that sees the host's `/`
+# read-write through hostfs and has its own real vcan0; see shared/docs/vcan-in-ci.md.
+#
+# In the guest, CMD's stdout and stderr both go to the guest console, which is this script's
+# stdout (live). CMD's stdin is empty.
+#
+# Environment:
+#   VCAN_TIMEOUT   seconds bounding the whole UML run (default 900)
+#   VCAN_MODE      auto (default) | host | uml   (uml: always boot UML, even if the host has vcan)
+#   VCAN_MEM       guest memory (default 1G)
+#   VCAN_PASS_ENV  extra variable names (space-separated) to pass into the guest
+#   VCAN_VERBOSE   1: show the guest kernel's boot messages and timings
+#   VCAN_KEEP      1: keep the temp dir under .uml/ (init script, exit code) for debugging
+set -euo pipefail
+
+die() {
+    echo "in-vcan.sh: ERROR: $*" >&2
+    exit 1
+}
+VERBOSE=${VCAN_VERBOSE:-0}
+[[ "$VERBOSE" == 1 ]] || VERBOSE=0
+note() {
+    if [[ "$VERBOSE" == 1 ]]; then echo "in-vcan.sh: $*" >&2; fi
+}
+
+[[ $# -ge 1 ]] || die "usage: tools/in-vcan.sh CMD [ARGS...]"
+
+REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd -P)
+TIMEOUT=${VCAN_TIMEOUT:-900}
+MODE=${VCAN_MODE:-auto}
+[[ "$TIMEOUT" =~ ^[0-9]+$ ]] || die "VCAN_TIMEOUT must be a whole number of seconds, got '$TIMEOUT'"
+
+# ---------------------------------------------------------------- host path
+host_vcan_up() {
+    [[ -r /sys/class/net/vcan0/flags ]] || return 1
+    local flags
+    flags=$(cat /sys/class/net/vcan0/flags)
+    (((flags & 1) == 1)) # IFF_UP
+}
+
+host_try_vcan() {
+    host_vcan_up && return 0
+    modprobe vcan >/dev/null 2>&1 || true
+    if [[ ! -e /sys/class/net/vcan0 ]]; then
+        ip link add dev vcan0 type vcan >/dev/null 2>&1 || return 1
+    fi
+    ip link set dev vcan0 up >/dev/null 2>&1 || return 1
+    host_vcan_up
+}
+
+case "$MODE" in
+auto)
+    if host_try_vcan; then
+        note "host has vcan0 up: running directly"
+        exec "$@"
+    fi
+    ;;
+host)
+    host_try_vcan || die "VCAN_MODE=host but the host cannot bring up vcan0"
+    exec "$@"
+    ;;
+uml) ;;
+*) die "VCAN_MODE must be auto, host or uml, got '$MODE'" ;;
+esac
+
+# ---------------------------------------------------------------- UML path
+ensure_uml() {
+    if command -v linux.uml >/dev/null && command -v busybox >/dev/null; then
+        return 0
+    fi
+    echo "in-vcan.sh: linux.uml/busybox missing: installing user-mode-linux busybox-static" >&2
+    command -v apt-get >/dev/null || die "no apt-get: install Debian's user-mode-linux and busybox-static by hand"
+    local sudo=()
+    if [[ $(id -u) -ne 0 ]]; then
+        command -v sudo >/dev/null || die "not root and no sudo: cannot apt-get install user-mode-linux"
+        sudo=(sudo)
+    fi
+    "${sudo[@]}" apt-get update -q >&2 || die "apt-get update failed"
+    DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -q user-mode-linux busybox-static >&2 ||
+        die "apt-get install user-mode-linux busybox-static failed"
+    command -v linux.uml >/dev/null || die "linux.uml still missing after apt-get install"
+    command -v busybox >/dev/null || die "busybox still missing after apt-get install"
+}
+ensure_uml
+command -v ip >/dev/null || die "ip (iproute2) missing on the host; the guest uses the host's binaries"
+
+MODDIR=$(find /usr/lib/uml/modules -mindepth 2 -maxdepth 2 -type d -name kernel 2>/dev/null | sort | tail -1)
+[[ -n "$MODDIR" ]] || die "no UML kernel modules under /usr/lib/uml/modules"
+for k in net/can/can.ko net/can/can-raw.ko net/can/can-bcm.ko drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko; do
+    [[ -f "$MODDIR/$k" ]] || die "UML module missing: $MODDIR/$k"
+done
+
+# Private temp dir under the repo (git-ignored); the guest sees it at the same path.
+mkdir -p "$REPO/.uml"
+WORK=$(mktemp -d "$REPO/.uml/run.XXXXXXXX")
+# shellcheck disable=SC2317 # called by the trap
+cleanup() {
+    if [[ "${VCAN_KEEP:-0}" == 1 ]]; then
+        echo "in-vcan.sh: kept $WORK" >&2
+    else
+        rm -rf "$WORK"
+    fi
+}
+trap cleanup EXIT
+
+# Single-quote a string for /bin/sh.
+sq() {
+    local s=${1//\'/\'\\\'\'}
+    printf "'%s'" "$s"
+}
+
+# Environment for the guest: it starts with an empty one.
+# Host PATH plus cargo's and the sbin dirs (ip, modprobe), without duplicates.
+GUEST_PATH=$(printf '%s' "$HOME/.cargo/bin:$PATH:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin" |
+    awk -v RS=: -v ORS=: 'length($0) && !seen[$0]++' | sed 's/:$//')
+PASS=(CI RUST_BACKTRACE RUST_LOG RUST_LIB_BACKTRACE RUST_TEST_THREADS CARGO_TARGET_DIR CARGO_HOME
+    CARGO_TERM_COLOR RUSTUP_HOME RUSTUP_TOOLCHAIN PYTHONPATH PYTHONUNBUFFERED VIRTUAL_ENV
+    PYENV_ROOT PYENV_VERSION USER LOGNAME LANG LC_ALL TZ TERM NO_COLOR)
+# shellcheck disable=SC2206 # word splitting of the user's list is intended
+PASS+=(${VCAN_PASS_ENV:-})
+while IFS= read -r name; do PASS+=("$name"); done < <(compgen -e | grep '^CANMOTION_' || true)
+
+CMDLINE=""
+for a in "$@"; do CMDLINE+=" $(sq "$a")"; done
+
+TTY_OUT=0
+if [[ -t 1 ]]; then TTY_OUT=1; fi
+INIT="$WORK/init.sh"
+RCFILE="$WORK/exit-code"
+{
+    echo '#!/bin/sh'
+    echo '# generated by tools/in-vcan.sh: PID 1 of the UML guest, which starts with an empty env'
+    echo "export PATH=$(sq "$GUEST_PATH") HOME=$(sq "$HOME")"
+    for name in "${PASS[@]}"; do
+        if [[ -n "${!name+x}" ]]; then echo "export $name=$(sq "${!name}")"; fi
+    done
+    echo "M=$(sq "$MODDIR") D=$(sq "$PWD") RCFILE=$(sq "$RCFILE") VERBOSE=$VERBOSE TTY_OUT=$TTY_OUT"
+    echo "run_cmd() {$CMDLINE; }"
+    cat <<'EOF'
+unset mem uml_dir # the kernel hands unknown boot parameters to init as env variables
+stty -onlcr </dev/console 2>/dev/null # no CRLF in the host's logs
+mount -t proc proc /proc
+mount -t sysfs sys /sys # NOT /tmp: the guest's /tmp is the host's
+fail() {
+    echo "in-vcan guest: $*" >&2
+    busybox sync
+    busybox poweroff -f
+}
+# Order matters: can before can-raw/can-bcm, can-dev before vcan.
+for k in net/can/can.ko net/can/can-raw.ko net/can/can-bcm.ko \
+    drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko; do
+    busybox insmod "$M/$k" || fail "insmod $k failed"
+done
+ip link set lo up || fail "lo up failed"
+{ ip link add dev vcan0 type vcan && ip link set vcan0 up; } || fail "vcan0 setup failed"
+if [ "$VERBOSE" = 1 ]; then
+    echo "in-vcan guest: vcan0 up at uptime $(cut -d' ' -f1 /proc/uptime) s" >&2
+fi
+cd "$D" || fail "cannot cd to $D"
+# The console is a tty. When the host's stdout is not one (CI), give CMD a pipe as on the host:
+# no colour codes or tty-only behaviour in the logs.
+if [ "$TTY_OUT" = 1 ]; then
+    run_cmd </dev/null
+    echo "$?" >"$RCFILE.tmp"
+else
+    { run_cmd </dev/null; echo "$?" >"$RCFILE.tmp"; } 2>&1 | cat
+fi
+mv "$RCFILE.tmp" "$RCFILE"
+busybox sync # hostfs writes go through the guest's page cache
+busybox poweroff -f
+EOF
+} >"$INIT"
+chmod +x "$INIT"
+
+KERNEL_LOG=(quiet loglevel=0)
+if [[ "$VERBOSE" == 1 ]]; then KERNEL_LOG=(); fi
+
+note "booting UML (timeout ${TIMEOUT}s), init $INIT"
+start=$(date +%s.%N)
+set +e
+# timeout signals the whole process group (UML's helper processes too); -k: SIGKILL after 10 s.
+timeout -k 10 "$TIMEOUT" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
+    init="$INIT" uml_dir="$WORK" con=null con0=null,fd:1 "${KERNEL_LOG[@]}" </dev/null
+uml_rc=$?
+set -e
+note "UML ran $(awk -v s="$start" -v e="$(date +%s.%N)" 'BEGIN { printf "%.2f", e - s }') s"
+
+if [[ $uml_rc -eq 124 || $uml_rc -eq 137 ]]; then
+    die "TIMEOUT: UML guest did not finish within ${TIMEOUT}s (VCAN_TIMEOUT); command: $*"
+fi
+if [[ ! -s "$RCFILE" ]]; then
+    die "no exit code came back from the UML guest (linux.uml exit $uml_rc): the guest crashed or" \
+        "never ran the command; rerun with VCAN_VERBOSE=1 VCAN_KEEP=1. Command: $*"
+fi
+rc=$(cat "$RCFILE")
+[[ "$rc" =~ ^[0-9]+$ ]] || die "garbled exit code '$rc' from the UML guest"
+exit "$rc"
