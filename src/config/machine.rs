@@ -780,7 +780,7 @@ mod tests {
     fn ip_period_encoding() {
         assert_eq!(ip_time_period(1000), Some((1, -3)));
         assert_eq!(ip_time_period(2000), Some((2, -3)));
-        assert_eq!(ip_time_period(250), Some((250, -6)));
+        assert_eq!(ip_time_period(250), Some((25, -5)));
         assert_eq!(ip_time_period(1500), Some((15, -4)));
         assert_eq!(ip_time_period(1234), None);
     }
