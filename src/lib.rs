@@ -7,3 +7,5 @@ pub mod gcode;
 pub mod interp;
 pub mod planner;
 pub mod sim;
+pub mod gateway;
+pub mod rt;

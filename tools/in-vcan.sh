@@ -147,7 +147,12 @@ RCFILE="$WORK/exit-code"
 unset mem uml_dir # the kernel hands unknown boot parameters to init as env variables
 stty -onlcr </dev/console 2>/dev/null # no CRLF in the host's logs
 mount -t proc proc /proc
-mount -t sysfs sys /sys # NOT /tmp: the guest's /tmp is the host's
+mount -t sysfs sys /sys
+# /dev is the guest's own devtmpfs: give it /dev/shm (POSIX semaphores, e.g. Python's
+# multiprocessing) and /dev/pts. Do NOT mount over /tmp: the guest's /tmp is the host's.
+mkdir -p /dev/shm /dev/pts
+mount -t tmpfs -o mode=1777 shm /dev/shm
+mount -t devpts -o gid=5,mode=620 devpts /dev/pts
 fail() {
     echo "in-vcan guest: $*" >&2
     busybox sync
@@ -182,16 +187,45 @@ chmod +x "$INIT"
 KERNEL_LOG=(quiet loglevel=0)
 if [[ "$VERBOSE" == 1 ]]; then KERNEL_LOG=(); fi
 
+# UML's console (con0) writes to its fd 1. That fd is a FIFO read by cat, not our stdout itself:
+# UML puts a tty on fd 1 into raw mode (Ctrl-C would no longer interrupt), and it cannot poll a
+# regular file.
+mkfifo "$WORK/console"
+cat "$WORK/console" &
+
+# Ctrl-C / CI cancellation: stop the guest rather than leave it running until the timeout.
+uml_pid=""
+interrupted=""
+# shellcheck disable=SC2317 # called by the traps
+on_signal() {
+    interrupted=$1
+    if [[ -n "$uml_pid" ]]; then kill -TERM "$uml_pid" 2>/dev/null || true; fi
+}
+trap 'on_signal INT' INT
+trap 'on_signal TERM' TERM
+trap 'on_signal HUP' HUP
+
 note "booting UML (timeout ${TIMEOUT}s), init $INIT"
 start=$(date +%s.%N)
-set +e
-# timeout signals the whole process group (UML's helper processes too); -k: SIGKILL after 10 s.
+# timeout puts UML in its own process group and signals the whole group (UML's helper processes
+# too) on expiry or when it is itself sent TERM/INT/HUP; -k: SIGKILL 10 s later if still alive.
 timeout -k 10 "$TIMEOUT" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
-    init="$INIT" uml_dir="$WORK" con=null con0=null,fd:1 "${KERNEL_LOG[@]}" </dev/null
-uml_rc=$?
-set -e
+    init="$INIT" uml_dir="$WORK" con=null con0=null,fd:1 "${KERNEL_LOG[@]}" \
+    </dev/null >"$WORK/console" &
+uml_pid=$!
+if [[ -n "$interrupted" ]]; then on_signal "$interrupted"; fi
+uml_rc=0
+wait "$uml_pid" || uml_rc=$?
+while kill -0 "$uml_pid" 2>/dev/null; do # wait was cut short by a signal
+    uml_rc=0
+    wait "$uml_pid" || uml_rc=$?
+done
+wait # for cat: all of the guest's output is out before we report
 note "UML ran $(awk -v s="$start" -v e="$(date +%s.%N)" 'BEGIN { printf "%.2f", e - s }') s"
 
+if [[ -n "$interrupted" ]]; then
+    die "interrupted (SIG$interrupted): UML guest stopped; command: $*"
+fi
 if [[ $uml_rc -eq 124 || $uml_rc -eq 137 ]]; then
     die "TIMEOUT: UML guest did not finish within ${TIMEOUT}s (VCAN_TIMEOUT); command: $*"
 fi

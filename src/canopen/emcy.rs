@@ -41,6 +41,13 @@ pub mod code {
     pub const POSITION_LIMIT: u16 = 0x8612;
 }
 
+/// Whether an EMCY code is a communication warning after which the drive keeps running
+/// (SYNC late, CAN overrun, error passive, recovered from bus-off, SYNC length): reported, but
+/// not a reason to stop the group. Every other non-zero code is.
+pub fn is_warning(code: u16) -> bool {
+    matches!(code, 0x8100 | 0x8110 | 0x8120 | 0x8140 | 0x8240)
+}
+
 /// What an EMCY code means.
 pub fn meaning(code: u16) -> &'static str {
     match code {

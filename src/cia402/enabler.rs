@@ -57,6 +57,24 @@ pub enum Action {
 /// Bits outside the command bits (0–3, 7), e.g. IP enable (bit 4) or halt (bit 8), are the
 /// caller's: set them with [`with_bits`](Self::with_bits) / [`set_bits`](Self::set_bits) and
 /// they are ORed into every controlword.
+///
+/// ```
+/// use canmotion::cia402::{Action, Enabler, PowerStateMachine, State, Target};
+///
+/// let mut drive = PowerStateMachine::new();
+/// drive.boot();
+/// let mut enabler = Enabler::new(Target::OperationEnabled);
+/// for _cycle in 0..10 {
+///     let state = State::from_statusword(drive.statusword()).expect("valid statusword");
+///     match enabler.update(state) {
+///         Action::Done => break,
+///         Action::Fault => panic!("fault did not clear"),
+///         Action::Next(_) => {}
+///     }
+///     drive.on_controlword(enabler.controlword()); // one RPDO per SYNC on a real bus
+/// }
+/// assert!(drive.is_operation_enabled());
+/// ```
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Enabler {
     target: Target,

@@ -1,0 +1,580 @@
+//! The cyclic master, sans-I/O: once per SYNC period it takes the drives' feedback (TPDOs) and
+//! gives the frames of the next cycle (one RPDO per axis, then SYNC).
+//!
+//! Its phases follow CiA 402 and the IP start sequence of the checklist:
+//!
+//! 1. **Enabling**: walk every drive to Operation enabled through the controlword in the RPDO,
+//!    with the setpoint tracking position actual (bumpless).
+//! 2. **Arming**: setpoint held at position actual; IP axes get controlword bit 4 and must
+//!    answer with statusword bit 12 before any motion (CSP axes: bit 12 = following).
+//! 3. **Armed**: holding, waiting for the motion (an [`Interpolator`] planned from the armed
+//!    positions on another thread) to be supplied.
+//! 4. **Streaming**: one setpoint per axis per cycle from the interpolator, each checked against
+//!    the axis's travel limits and its largest step (max velocity × period).
+//! 5. **Settling**: holding the final setpoint until every axis is within one count of it.
+//! 6. **Disabling**: bit 4 cleared, drives walked to Switch on disabled.
+//!
+//! Any alarm (drive fault bit, EMCY, lost heartbeat, unexpected boot-up, missing process data)
+//! freezes the axis it concerns and stops the others along their current direction within their
+//! acceleration limits, then disables; the outcome is a failure naming the axis and the cause.
+
+use nalgebra::Vector3;
+
+use crate::bus::Frame;
+use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
+use crate::config::{AxisConfig, AxisMode, Machine};
+use crate::interp::{Interpolator, Status};
+
+/// Cycles a drive may take to reach Operation enabled, or to answer bit 4 with bit 12.
+const STATE_TIMEOUT_S: f64 = 2.0;
+/// How long the final position may take to settle within one count.
+const SETTLE_TIMEOUT_S: f64 = 3.0;
+/// Feedback older than this many cycles is an alarm.
+const STALE_CYCLES: u64 = 20;
+
+/// What the master needs to know of one axis, resolved from the machine file.
+#[derive(Debug, Clone)]
+pub struct AxisIo {
+    /// Axis letter.
+    pub name: String,
+    /// Node id.
+    pub node: u8,
+    /// X = 0, Y = 1, Z = 2.
+    pub xyz: usize,
+    /// Mode.
+    pub mode: AxisMode,
+    rpdo_cob: u16,
+    rpdo_len: usize,
+    cw_off: usize,
+    sp_off: usize,
+    /// COB-ID of the feedback TPDO.
+    pub tpdo_cob: u16,
+    sw_off: usize,
+    pos_off: usize,
+    counts_per_mm: f64,
+    min_mm: f64,
+    max_mm: f64,
+    max_vel_mm_s: f64,
+    max_acc_mm_s2: f64,
+}
+
+impl AxisIo {
+    /// Resolve one axis.
+    pub fn new(a: &AxisConfig) -> AxisIo {
+        let (si, ss) = a.mode.setpoint_object();
+        let off = |p: &crate::config::PdoConfig, i, s| p.offset_of(i, s).map(|(o, _)| o).expect("validated");
+        AxisIo {
+            name: a.name.clone(),
+            node: a.node,
+            xyz: match a.name.as_str() {
+                "X" => 0,
+                "Y" => 1,
+                _ => 2,
+            },
+            mode: a.mode,
+            rpdo_cob: a.setpoint_pdo.cob_id,
+            rpdo_len: a.setpoint_pdo.len_bytes(),
+            cw_off: off(&a.setpoint_pdo, 0x6040, 0),
+            sp_off: off(&a.setpoint_pdo, si, ss),
+            tpdo_cob: a.feedback_pdo.cob_id,
+            sw_off: off(&a.feedback_pdo, 0x6041, 0),
+            pos_off: off(&a.feedback_pdo, 0x6064, 0),
+            counts_per_mm: a.counts_per_mm,
+            min_mm: a.min_mm,
+            max_mm: a.max_mm,
+            max_vel_mm_s: a.max_vel_mm_s,
+            max_acc_mm_s2: a.max_acc_mm_s2,
+        }
+    }
+
+    fn to_counts(&self, mm: f64) -> i32 {
+        (mm * self.counts_per_mm).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+    }
+
+    fn to_mm(&self, counts: i32) -> f64 {
+        f64::from(counts) / self.counts_per_mm
+    }
+
+    fn rpdo(&self, cw: u16, setpoint: i32) -> Frame {
+        let mut d = [0u8; 8];
+        d[self.cw_off..self.cw_off + 2].copy_from_slice(&cw.to_le_bytes());
+        d[self.sp_off..self.sp_off + 4].copy_from_slice(&setpoint.to_le_bytes());
+        Frame::new(self.rpdo_cob, &d[..self.rpdo_len]).expect("validated PDO")
+    }
+}
+
+/// The phases of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Walking the drives to Operation enabled.
+    Enabling,
+    /// Waiting for statusword bit 12.
+    Arming,
+    /// Holding, waiting for the motion.
+    Armed,
+    /// Streaming setpoints.
+    Streaming,
+    /// Holding the end point until the axes settle.
+    Settling,
+    /// Controlled stop after an alarm.
+    Stopping,
+    /// Walking the drives to Switch on disabled.
+    Disabling,
+    /// Finished (see [`CyclicMaster::failure`]).
+    Done,
+}
+
+/// The latest feedback of one axis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Feedback {
+    /// 0x6041.
+    pub statusword: u16,
+    /// 0x6064.
+    pub position: i32,
+    /// Cycle it arrived in.
+    pub cycle: u64,
+}
+
+/// One cycle's numbers, for the log.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleRecord {
+    /// Cycle number.
+    pub cycle: u64,
+    /// Phase during the cycle.
+    pub phase: Phase,
+    /// Program line in execution (while streaming).
+    pub line: Option<usize>,
+    /// Setpoint sent, per axis in machine order (mm); up to 3 axes.
+    pub cmd_mm: [f64; 3],
+    /// Position actual, per axis (mm).
+    pub act_mm: [f64; 3],
+    /// Following error, per axis (mm): setpoint in force at the drive minus position actual.
+    pub ferr_mm: [f64; 3],
+}
+
+/// The cyclic master.
+#[derive(Debug)]
+pub struct CyclicMaster {
+    axes: Vec<AxisIo>,
+    enablers: Vec<Enabler>,
+    fb: Vec<Option<Feedback>>,
+    /// Setpoint history per axis (mm): [this cycle, 1 ago, 2 ago].
+    sp_mm: Vec<[f64; 3]>,
+    motion: Option<Interpolator>,
+    phase: Phase,
+    phase_since: u64,
+    cycle: u64,
+    period_s: f64,
+    line: Option<usize>,
+    armed_mm: Option<Vector3<f64>>,
+    stop_vel: Vec<f64>,
+    frozen: Vec<bool>,
+    failure: Option<String>,
+    /// First cycle in which every IP axis reported statusword bit 12.
+    pub bit12_cycle: Option<u64>,
+    /// First cycle whose setpoint differed from the armed position.
+    pub first_motion_cycle: Option<u64>,
+    /// Largest |following error| per axis while streaming and settling (mm).
+    pub max_ferr_mm: Vec<f64>,
+    /// Cycles spent streaming.
+    pub streaming_cycles: u64,
+}
+
+impl CyclicMaster {
+    /// A master for the machine's axes, starting in [`Phase::Enabling`].
+    pub fn new(machine: &Machine) -> CyclicMaster {
+        let axes: Vec<AxisIo> = machine.axes.iter().map(AxisIo::new).collect();
+        let n = axes.len();
+        CyclicMaster {
+            enablers: vec![Enabler::new(Target::OperationEnabled); n],
+            fb: vec![None; n],
+            sp_mm: vec![[0.0; 3]; n],
+            motion: None,
+            phase: Phase::Enabling,
+            phase_since: 0,
+            cycle: 0,
+            period_s: machine.cycle_s(),
+            line: None,
+            armed_mm: None,
+            stop_vel: vec![0.0; n],
+            frozen: vec![false; n],
+            failure: None,
+            bit12_cycle: None,
+            first_motion_cycle: None,
+            max_ferr_mm: vec![0.0; n],
+            streaming_cycles: 0,
+            axes,
+        }
+    }
+
+    /// The axes.
+    pub fn axes(&self) -> &[AxisIo] {
+        &self.axes
+    }
+    /// The phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+    /// Why the run failed, once it has.
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+    /// The positions at which the drives were armed (the start of the motion), once armed.
+    pub fn armed_mm(&self) -> Option<Vector3<f64>> {
+        self.armed_mm
+    }
+    /// The program line last executed.
+    pub fn line(&self) -> Option<usize> {
+        self.line
+    }
+    /// The motion, once supplied.
+    pub fn motion(&self) -> Option<&Interpolator> {
+        self.motion.as_ref()
+    }
+
+    /// Last position actual per axis (counts; 0 when none arrived).
+    pub fn final_counts(&self) -> Vec<i32> {
+        self.fb.iter().map(|f| f.map_or(0, |f| f.position)).collect()
+    }
+
+    /// Last setpoint per axis (counts).
+    pub fn setpoint_counts(&self) -> Vec<i32> {
+        self.axes.iter().zip(&self.sp_mm).map(|(a, h)| a.to_counts(h[0])).collect()
+    }
+
+    /// Supply the motion once [`Phase::Armed`]: an interpolator planned from [`Self::armed_mm`].
+    pub fn supply_motion(&mut self, interp: Interpolator) {
+        self.motion = Some(interp);
+    }
+
+    /// Feed a received frame; TPDOs of our axes update their feedback.
+    pub fn on_frame(&mut self, f: &Frame) {
+        for (i, a) in self.axes.iter().enumerate() {
+            if f.id() == a.tpdo_cob {
+                let d = f.data();
+                if d.len() >= a.sw_off + 2 && d.len() >= a.pos_off + 4 {
+                    self.fb[i] = Some(Feedback {
+                        statusword: u16::from_le_bytes([d[a.sw_off], d[a.sw_off + 1]]),
+                        position: i32::from_le_bytes([
+                            d[a.pos_off],
+                            d[a.pos_off + 1],
+                            d[a.pos_off + 2],
+                            d[a.pos_off + 3],
+                        ]),
+                        cycle: self.cycle,
+                    });
+                }
+            }
+        }
+    }
+
+    /// Raise an alarm on an axis (by node id), from outside the cyclic data: an EMCY, a lost
+    /// heartbeat, a boot-up. The axis is frozen and the group stops.
+    pub fn alarm(&mut self, node: u8, message: String) {
+        if let Some(i) = self.axes.iter().position(|a| a.node == node) {
+            self.frozen[i] = true;
+        }
+        self.fail(message);
+    }
+
+    fn fail(&mut self, message: String) {
+        if self.failure.is_none() {
+            let at = match self.line {
+                Some(l) => format!(" (last program line {l})"),
+                None => String::new(),
+            };
+            self.failure = Some(format!("{message}{at}"));
+        }
+        match self.phase {
+            Phase::Streaming | Phase::Settling | Phase::Armed | Phase::Arming => {
+                // Stop along the current direction: every axis decelerates so that all reach
+                // rest at the same time, each within its own acceleration limit.
+                let t_stop = self
+                    .axes
+                    .iter()
+                    .enumerate()
+                    .map(|(i, a)| {
+                        let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
+                        v.abs() / a.max_acc_mm_s2
+                    })
+                    .fold(0.0, f64::max);
+                for i in 0..self.axes.len() {
+                    self.stop_vel[i] = if self.frozen[i] || t_stop == 0.0 {
+                        0.0
+                    } else {
+                        (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s
+                    };
+                }
+                self.set_phase(Phase::Stopping);
+            }
+            Phase::Enabling => self.start_disabling(),
+            Phase::Stopping | Phase::Disabling | Phase::Done => {}
+        }
+    }
+
+    fn set_phase(&mut self, p: Phase) {
+        self.phase = p;
+        self.phase_since = self.cycle;
+    }
+
+    fn start_disabling(&mut self) {
+        for e in &mut self.enablers {
+            e.set_bits(0);
+            e.set_target(Target::SwitchOnDisabled);
+        }
+        self.set_phase(Phase::Disabling);
+    }
+
+    fn phase_time_s(&self) -> f64 {
+        (self.cycle - self.phase_since) as f64 * self.period_s
+    }
+
+    /// One cycle: read the feedback received since the last call, decide, and append the frames
+    /// to send (RPDOs, then SYNC with `sync_cob_id`) to `out`. Returns the cycle's record.
+    pub fn cycle(&mut self, sync_cob_id: u16, out: &mut Vec<Frame>) -> CycleRecord {
+        self.cycle += 1;
+        let n = self.axes.len();
+        // Alarms from the process data itself.
+        for i in 0..n {
+            match self.fb[i] {
+                Some(fb) if fb.statusword & swb::FAULT != 0 && self.phase != Phase::Done => {
+                    if !self.frozen[i] {
+                        self.frozen[i] = true;
+                        let a = &self.axes[i];
+                        let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
+                            "following error (statusword bit 13)"
+                        } else {
+                            "fault (statusword bit 3)"
+                        };
+                        let msg = format!("axis {} (node {}): drive reports {what}, statusword 0x{:04X}", a.name, a.node, fb.statusword);
+                        self.fail(msg);
+                    }
+                }
+                Some(fb) if self.cycle - fb.cycle > STALE_CYCLES && self.phase != Phase::Done => {
+                    if !self.frozen[i] {
+                        self.frozen[i] = true;
+                        let a = &self.axes[i];
+                        let msg = format!(
+                            "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
+                            a.name, a.node, a.tpdo_cob, self.cycle - fb.cycle
+                        );
+                        self.fail(msg);
+                    }
+                }
+                None if self.cycle > STALE_CYCLES && self.phase != Phase::Done && !self.frozen[i] => {
+                    self.frozen[i] = true;
+                    let a = &self.axes[i];
+                    let msg = format!("axis {} (node {}): no process data (TPDO 0x{:03X}) since start", a.name, a.node, a.tpdo_cob);
+                    self.fail(msg);
+                }
+                _ => {}
+            }
+        }
+        let states: Vec<Option<State>> = self
+            .fb
+            .iter()
+            .map(|f| f.and_then(|f| State::from_statusword(f.statusword)))
+            .collect();
+        let actual_mm: Vec<Option<f64>> =
+            (0..n).map(|i| self.fb[i].map(|f| self.axes[i].to_mm(f.position))).collect();
+
+        // Shift the setpoint history.
+        for h in &mut self.sp_mm {
+            h[2] = h[1];
+            h[1] = h[0];
+        }
+
+        match self.phase {
+            Phase::Enabling => {
+                let mut all = true;
+                for i in 0..n {
+                    if let Some(p) = actual_mm[i] {
+                        self.sp_mm[i] = [p; 3];
+                    }
+                    match states[i] {
+                        Some(s) => match self.enablers[i].update(s) {
+                            Action::Done => {}
+                            Action::Next(_) => all = false,
+                            Action::Fault => {
+                                let a = &self.axes[i];
+                                let msg = format!("axis {} (node {}): fault reset did not clear the fault", a.name, a.node);
+                                self.fail(msg);
+                                all = false;
+                            }
+                        },
+                        None => all = false,
+                    }
+                }
+                if self.phase == Phase::Enabling {
+                    if all {
+                        for e in &mut self.enablers {
+                            e.set_bits(cwb::IP_ENABLE);
+                        }
+                        // The IP buffer is preloaded with position actual (this cycle's RPDO
+                        // already carries it), and bit 4 goes out from the next cycle on.
+                        self.set_phase(Phase::Arming);
+                    } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                        let late: Vec<String> = (0..n)
+                            .filter(|&i| states[i] != Some(State::OperationEnabled))
+                            .map(|i| format!("{} (node {}) in {}", self.axes[i].name, self.axes[i].node, states[i].map_or("no statusword", |s| s.name())))
+                            .collect();
+                        self.fail(format!("drives did not reach Operation enabled within {STATE_TIMEOUT_S} s: {}", late.join(", ")));
+                    }
+                }
+            }
+            Phase::Arming => {
+                for e in self.enablers.iter_mut().zip(&states) {
+                    if let Some(s) = e.1 {
+                        let _ = e.0.update(*s);
+                    }
+                }
+                let ready = (0..n).all(|i| {
+                    self.fb[i].is_some_and(|f| {
+                        f.cycle > self.phase_since && f.statusword & swb::OP_MODE_SPECIFIC_12 != 0
+                    })
+                });
+                if ready {
+                    self.bit12_cycle = Some(self.cycle);
+                    let mut p = Vector3::zeros();
+                    for (i, a) in self.axes.iter().enumerate() {
+                        p[a.xyz] = self.sp_mm[i][0];
+                    }
+                    self.armed_mm = Some(p);
+                    self.set_phase(Phase::Armed);
+                } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                    let late: Vec<String> = (0..n)
+                        .filter(|&i| self.fb[i].is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0))
+                        .map(|i| format!("{} (node {})", self.axes[i].name, self.axes[i].node))
+                        .collect();
+                    self.fail(format!(
+                        "statusword bit 12 (IP active / following) not set within {STATE_TIMEOUT_S} s on {}; check 0x60C2 equals the SYNC period",
+                        late.join(", ")
+                    ));
+                }
+            }
+            Phase::Armed => {
+                if self.motion.is_some() {
+                    self.set_phase(Phase::Streaming);
+                }
+            }
+            _ => {}
+        }
+
+        if self.phase == Phase::Streaming {
+            self.streaming_cycles += 1;
+            let mut p = Vector3::zeros();
+            let status = self.motion.as_mut().map(|m| m.update(&mut p));
+            self.line = match status {
+                Some(Status::Working { line }) => Some(line),
+                _ => self.line,
+            };
+            for i in 0..n {
+                let a = &self.axes[i];
+                let target = p[a.xyz];
+                let prev = self.sp_mm[i][1];
+                let step = (target - prev).abs();
+                // Last line of defence; the plan is checked against these before motion starts.
+                if !(a.min_mm..=a.max_mm).contains(&target) {
+                    let msg = format!("axis {}: setpoint {target:.4} mm outside the travel limits [{}, {}] mm", a.name, a.min_mm, a.max_mm);
+                    self.fail(msg);
+                    break;
+                }
+                if step > a.max_vel_mm_s * self.period_s * 1.01 + 1e-9 {
+                    let msg = format!("axis {}: setpoint step {step:.4} mm exceeds max_vel × period", a.name);
+                    self.fail(msg);
+                    break;
+                }
+                self.sp_mm[i][0] = target;
+                if self.first_motion_cycle.is_none() && self.axes[i].to_counts(target) != self.axes[i].to_counts(prev) {
+                    self.first_motion_cycle = Some(self.cycle);
+                }
+            }
+            if self.phase == Phase::Streaming && status == Some(Status::Finished) {
+                self.set_phase(Phase::Settling);
+            }
+        } else if self.phase == Phase::Settling {
+            let settled = (0..n).all(|i| {
+                self.fb[i].is_some_and(|f| {
+                    f.cycle > self.phase_since
+                        && (f.position - self.axes[i].to_counts(self.sp_mm[i][0])).abs() <= 1
+                })
+            });
+            if settled {
+                for e in &mut self.enablers {
+                    e.set_bits(0);
+                }
+                self.start_disabling();
+            } else if self.phase_time_s() > SETTLE_TIMEOUT_S {
+                self.fail(format!("axes did not settle within one count of the end point in {SETTLE_TIMEOUT_S} s"));
+            }
+        } else if self.phase == Phase::Stopping {
+            let mut moving = false;
+            for i in 0..n {
+                if self.frozen[i] {
+                    continue;
+                }
+                let a = &self.axes[i];
+                let v = self.stop_vel[i];
+                // Decelerate at the axis's limit, scaled so all axes stop together.
+                let dv = a.max_acc_mm_s2 * self.period_s;
+                let nv = if v > 0.0 { (v - dv).max(0.0) } else { (v + dv).min(0.0) };
+                self.stop_vel[i] = nv;
+                let next = (self.sp_mm[i][1] + nv * self.period_s).clamp(a.min_mm, a.max_mm);
+                self.sp_mm[i][0] = next;
+                moving |= nv != 0.0;
+            }
+            if !moving {
+                self.start_disabling();
+            }
+        } else if self.phase == Phase::Disabling {
+            let mut all = true;
+            for i in 0..n {
+                match states[i] {
+                    Some(State::Fault) | None => {}
+                    Some(s) => {
+                        if self.enablers[i].update(s) != Action::Done {
+                            all = false;
+                        }
+                    }
+                }
+            }
+            if all || self.phase_time_s() > STATE_TIMEOUT_S {
+                self.set_phase(Phase::Done);
+            }
+        }
+
+        // Following error: the drive interpolates towards the setpoint latched at the last SYNC,
+        // and its TPDO reports the position at that SYNC, when the setpoint sent two cycles ago
+        // was the demand.
+        let mut rec = CycleRecord {
+            cycle: self.cycle,
+            phase: self.phase,
+            line: self.line,
+            cmd_mm: [0.0; 3],
+            act_mm: [0.0; 3],
+            ferr_mm: [0.0; 3],
+        };
+        for i in 0..n.min(3) {
+            rec.cmd_mm[i] = self.sp_mm[i][0];
+            if let Some(p) = actual_mm[i] {
+                rec.act_mm[i] = p;
+                let ferr = self.sp_mm[i][2] - p;
+                rec.ferr_mm[i] = ferr;
+                if matches!(self.phase, Phase::Streaming | Phase::Settling) {
+                    self.max_ferr_mm[i] = self.max_ferr_mm[i].max(ferr.abs());
+                }
+            }
+        }
+
+        if self.phase != Phase::Done {
+            for i in 0..n {
+                let a = &self.axes[i];
+                let cw = self.enablers[i].controlword();
+                let cw = if a.mode == AxisMode::Csp { cw & !cwb::IP_ENABLE } else { cw };
+                out.push(a.rpdo(cw, a.to_counts(self.sp_mm[i][0])));
+            }
+            out.push(Frame::new(sync_cob_id, &[]).expect("valid SYNC id"));
+        }
+        rec
+    }
+}

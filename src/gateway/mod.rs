@@ -1,0 +1,553 @@
+//! The gateway: start the drives up over SDO, stream the program's setpoints on SYNC from the
+//! cyclic thread, watch the drives, and bring everything down in order.
+
+pub mod cyclic;
+pub mod io;
+pub mod startup;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use nalgebra::Vector3;
+
+use crate::bus::{Bus, BusError, Filter, Frame};
+use crate::canopen::{AbortCode, emcy};
+use crate::config::{ConfigError, Machine};
+use crate::interp::Interpolator;
+use crate::planner::{Limits, Plan, PlanError};
+use crate::rt::{self, Ticker, Timing};
+use cyclic::{CycleRecord, CyclicMaster, Phase};
+use io::NodeIo;
+
+/// Everything that can stop a run, with what a person needs to act on it.
+#[derive(Debug, thiserror::Error)]
+pub enum GatewayError {
+    /// A configuration file is wrong.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The program does not parse.
+    #[error(transparent)]
+    Program(#[from] crate::gcode::Error),
+    /// The program cannot be planned.
+    #[error("{file}: {source}")]
+    Plan {
+        /// Program file.
+        file: String,
+        /// Why.
+        source: PlanError,
+    },
+    /// A move leaves an axis's travel.
+    #[error("{file}:{line}: axis {axis} would move to {target_mm:.4} mm, outside its travel [{min_mm}, {max_mm}] mm")]
+    OutOfTravel {
+        /// Program file.
+        file: String,
+        /// Line of the move.
+        line: usize,
+        /// Axis letter.
+        axis: String,
+        /// Where it would go.
+        target_mm: f64,
+        /// Travel.
+        min_mm: f64,
+        /// Travel.
+        max_mm: f64,
+    },
+    /// The program moves an axis the machine does not have.
+    #[error("{file}:{line}: the program moves {axis}, which machine '{machine}' does not have")]
+    NoSuchAxis {
+        /// Program file.
+        file: String,
+        /// Line.
+        line: usize,
+        /// Axis letter.
+        axis: char,
+        /// Machine name.
+        machine: String,
+    },
+    /// The bus failed.
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    /// An SDO transfer was aborted.
+    #[error("node {node}: SDO {index:04X}:{sub:02X} aborted with {code}")]
+    SdoAbort {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// Abort code and meaning.
+        code: AbortCode,
+    },
+    /// A node did not answer an SDO request.
+    #[error("node {node}: no answer to SDO {index:04X}:{sub:02X} within {} ms (abort 0x05040000 sent)", io::SDO_TIMEOUT.as_millis())]
+    SdoTimeout {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+    },
+    /// An SDO answer that does not fit the request.
+    #[error("node {node}: SDO {index:04X}:{sub:02X}: unexpected answer")]
+    SdoProtocol {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+    },
+    /// Nodes that did not boot.
+    #[error("no boot-up from {} within {timeout_ms} ms after NMT reset communication on bus {bus}: is the drive powered, wired, at that node id and bitrate?", missing.join(", "))]
+    MissingNodes {
+        /// "axis X (node 1)" …
+        missing: Vec<String>,
+        /// Wait.
+        timeout_ms: u64,
+        /// Bus name.
+        bus: String,
+    },
+    /// A node is not the configured device.
+    #[error("axis {axis} (node {node}): {object} is 0x{found:08X}, the dictionary {dictionary} expects 0x{expected:08X}: wrong drive or wrong dictionary")]
+    WrongIdentity {
+        /// Axis.
+        axis: String,
+        /// Node.
+        node: u8,
+        /// Which object, named.
+        object: &'static str,
+        /// Expected.
+        expected: u32,
+        /// Found.
+        found: u32,
+        /// The dictionary file.
+        dictionary: String,
+    },
+    /// A value read back differs from what was written.
+    #[error("node {node}: {index:04X}:{sub:02X} reads back {found} after writing {written}")]
+    ReadBack {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// Written.
+        written: String,
+        /// Read.
+        found: String,
+    },
+    /// 0x6061 did not confirm the mode.
+    #[error("axis {axis} (node {node}): modes of operation display 0x6061 shows {found}, not mode {mode}, within 1 s")]
+    ModeNotConfirmed {
+        /// Axis.
+        axis: String,
+        /// Node.
+        node: u8,
+        /// Wanted.
+        mode: i8,
+        /// Last read.
+        found: i8,
+    },
+    /// Unknown node.
+    #[error("node {node} is not an axis of this machine")]
+    UnknownNode {
+        /// Node.
+        node: u8,
+    },
+    /// The motion stopped because of a fault.
+    #[error("motion stopped: {0}")]
+    Motion(String),
+    /// Writing the log failed.
+    #[error("{file}: {source}")]
+    Log {
+        /// File.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct Summary {
+    /// Program time (streaming), s.
+    pub program_s: f64,
+    /// Cycles streamed.
+    pub streaming_cycles: u64,
+    /// All cycles of the cyclic thread.
+    pub cycles: u64,
+    /// Axis letters, machine order.
+    pub axes: Vec<String>,
+    /// Max |following error| per axis, mm.
+    pub max_ferr_mm: Vec<f64>,
+    /// Final position actual per axis, counts.
+    pub final_counts: Vec<i32>,
+    /// Final setpoint per axis, counts.
+    pub target_counts: Vec<i32>,
+    /// Cycle in which statusword bit 12 was seen on all axes.
+    pub bit12_cycle: Option<u64>,
+    /// First cycle with a moving setpoint.
+    pub first_motion_cycle: Option<u64>,
+    /// Loop timing.
+    pub timing: Timing,
+    /// Real-time set-up.
+    pub rt: String,
+    /// Log rows dropped because the writer fell behind.
+    pub log_dropped: u64,
+    /// Warnings the drives reported (EMCYs after which they kept running).
+    pub warnings: Vec<String>,
+}
+
+impl std::fmt::Display for Summary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(f, "program time      {:.3} s", self.program_s)?;
+        writeln!(f, "cycles            {} streamed, {} in all ({} overruns)", self.streaming_cycles, self.cycles, self.timing.overruns)?;
+        for (i, a) in self.axes.iter().enumerate() {
+            writeln!(
+                f,
+                "axis {a}            max following error {:.4} mm, end {} counts (setpoint {})",
+                self.max_ferr_mm[i], self.final_counts[i], self.target_counts[i]
+            )?;
+        }
+        for w in &self.warnings {
+            writeln!(f, "warning           {w}")?;
+        }
+        if self.log_dropped > 0 {
+            writeln!(f, "warning           {} log rows dropped (the log writer fell behind)", self.log_dropped)?;
+        }
+        write!(f, "cyclic thread     {}, latest wake-up {} µs late", self.rt, self.timing.max_wake_late.as_micros())
+    }
+}
+
+/// Options of a run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Program file name (for messages).
+    pub program_name: String,
+    /// Program text.
+    pub program_text: String,
+    /// CSV log.
+    pub log: Option<PathBuf>,
+    /// Start simulated drives in-process (with the in-process bus).
+    pub simulate: bool,
+}
+
+/// The planner's limits from the machine's axes (axes the machine lacks get none: moving them is
+/// an error before planning).
+pub fn limits(machine: &Machine) -> Limits {
+    let mut v = Vector3::repeat(1.0);
+    let mut a = Vector3::repeat(1.0);
+    let mut feed: f64 = 0.0;
+    for ax in &machine.axes {
+        let i = cyclic::AxisIo::new(ax).xyz;
+        v[i] = ax.max_vel_mm_s;
+        a[i] = ax.max_acc_mm_s2;
+        feed = feed.max(ax.max_vel_mm_s);
+    }
+    Limits {
+        max_vel_mm_s: v,
+        max_acc_mm_s2: a,
+        max_feed_mm_s: feed,
+    }
+}
+
+/// Parse and plan a program from `start_mm`, checking every move against the machine's axes and
+/// travel. Nothing moves before this has succeeded for the whole program.
+pub fn plan_program(machine: &Machine, name: &str, text: &str, start_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
+    let program = crate::gcode::parse_program(text, name, start_mm)?;
+    let mut prev = start_mm;
+    for m in &program.moves {
+        for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            let axis = machine.axes.iter().find(|a| a.name.starts_with(letter));
+            match axis {
+                None if (m.target_mm[i] - prev[i]).abs() > 0.0 => {
+                    return Err(GatewayError::NoSuchAxis {
+                        file: name.to_string(),
+                        line: m.line,
+                        axis: letter,
+                        machine: machine.name.clone(),
+                    });
+                }
+                Some(a) if !(a.min_mm..=a.max_mm).contains(&m.target_mm[i]) => {
+                    return Err(GatewayError::OutOfTravel {
+                        file: name.to_string(),
+                        line: m.line,
+                        axis: a.name.clone(),
+                        target_mm: m.target_mm[i],
+                        min_mm: a.min_mm,
+                        max_mm: a.max_mm,
+                    });
+                }
+                _ => {}
+            }
+        }
+        prev = m.target_mm;
+    }
+    crate::planner::plan(&program, &limits(machine)).map_err(|source| GatewayError::Plan {
+        file: name.to_string(),
+        source,
+    })
+}
+
+/// CSV header: `cycle,t_s`, then `<axis>_cmd_mm` for each axis, then `_act_mm`, then `_ferr_mm`.
+pub fn csv_header(axes: &[String]) -> String {
+    let mut h = String::from("cycle,t_s");
+    for suffix in ["cmd_mm", "act_mm", "ferr_mm"] {
+        for a in axes {
+            h.push_str(&format!(",{a}_{suffix}"));
+        }
+    }
+    h
+}
+
+fn csv_row(r: &CycleRecord, n: usize, period_s: f64) -> String {
+    let mut s = format!("{},{:.6}", r.cycle, r.cycle as f64 * period_s);
+    for v in [&r.cmd_mm, &r.act_mm, &r.ferr_mm] {
+        for x in v.iter().take(n) {
+            s.push_str(&format!(",{x:.6}"));
+        }
+    }
+    s
+}
+
+/// Run a program on a machine over `bus`: start-up, streaming, orderly stop. Returns the summary
+/// when the whole program ran with every drive healthy.
+pub fn run(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, GatewayError> {
+    // The whole program must parse and stay in travel before anything happens on the bus. The
+    // start position is not known yet: parse from the origin for the syntax, and plan again from
+    // the armed position below.
+    crate::gcode::parse_program(&opts.program_text, &opts.program_name, Vector3::zeros())?;
+
+    let _sims = if opts.simulate {
+        let drives = machine
+            .axes
+            .iter()
+            .map(|a| crate::sim::SimDrive::new(a.dictionary.clone(), a.node))
+            .collect();
+        Some(crate::sim::runner::spawn(bus, drives)?)
+    } else {
+        None
+    };
+
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("tokio runtime");
+    runtime.block_on(run_async(machine, bus, opts))
+}
+
+async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, GatewayError> {
+    let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
+    let mut io = NodeIo::start(bus, &nodes)?;
+    let start_counts = startup::start(machine, bus, &mut io).await?;
+    let mut start_mm = Vector3::zeros();
+    for (a, c) in machine.axes.iter().zip(&start_counts) {
+        start_mm[cyclic::AxisIo::new(a).xyz] = a.counts_to_mm(*c);
+    }
+    // Check the program against the travel from where the machine is, before any motion.
+    plan_program(machine, &opts.program_name, &opts.program_text, start_mm)?;
+
+    let (log_tx, log_thread) = match &opts.log {
+        Some(path) => {
+            let (tx, thread) = spawn_logger(path, machine)?;
+            (Some(tx), Some(thread))
+        }
+        None => (None, None),
+    };
+
+    // The cyclic thread.
+    let health = io.health();
+    let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
+    let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
+    let m = machine.clone();
+    let tpdo_filters: Vec<Filter> = machine.axes.iter().map(|a| Filter::exact(a.feedback_pdo.cob_id)).collect();
+    let mut port = bus.open(&tpdo_filters)?;
+    let cyc = std::thread::Builder::new()
+        .name("canmotion-cyclic".into())
+        .spawn(move || cyclic_thread(&m, port.as_mut(), &health, plan_rx, armed_tx, log_tx))
+        .expect("spawn cyclic thread");
+
+    // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
+    let plan_result = match armed_rx.await {
+        Ok(armed_mm) => {
+            let r = plan_program(machine, &opts.program_name, &opts.program_text, armed_mm)
+                .and_then(|plan| Interpolator::new(plan, machine.cycle_s()).map_err(|e| GatewayError::Motion(e.to_string())));
+            match r {
+                Ok(interp) => {
+                    let _ = plan_tx.send(interp);
+                    Ok(())
+                }
+                Err(e) => Err(e),
+            }
+        }
+        Err(_) => Ok(()), // the cyclic thread ended before arming: its result says why
+    };
+    drop(plan_tx);
+    let (master, timing, rt_setup, port_err, dropped, warnings) =
+        tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked")).await.expect("join");
+    if let Some(t) = log_thread {
+        t.join().expect("log thread").map_err(|source| GatewayError::Log {
+            file: opts.log.clone().unwrap_or_default(),
+            source,
+        })?;
+    }
+    plan_result?;
+    if let Some(e) = port_err {
+        return Err(GatewayError::Bus(e));
+    }
+    if let Some(f) = master.failure() {
+        return Err(GatewayError::Motion(f.to_string()));
+    }
+    let final_counts = master.final_counts();
+    Ok(Summary {
+        program_s: master.motion().map_or(0.0, |m| m.plan().duration_s()),
+        streaming_cycles: master.streaming_cycles,
+        cycles: timing.cycles,
+        axes: machine.axes.iter().map(|a| a.name.clone()).collect(),
+        max_ferr_mm: master.max_ferr_mm.clone(),
+        final_counts,
+        target_counts: master.setpoint_counts(),
+        bit12_cycle: master.bit12_cycle,
+        first_motion_cycle: master.first_motion_cycle,
+        timing,
+        rt: rt_setup,
+        log_dropped: dropped,
+        warnings,
+    })
+}
+
+type CyclicResult = (CyclicMaster, Timing, String, Option<BusError>, u64, Vec<String>);
+
+fn cyclic_thread(
+    machine: &Machine,
+    port: &mut dyn crate::bus::Port,
+    health: &io::Health,
+    plan_rx: mpsc::Receiver<Interpolator>,
+    armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
+    log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+) -> CyclicResult {
+    let rt_setup = rt::make_realtime(80).to_string();
+    let mut master = CyclicMaster::new(machine);
+    let mut ticker = Ticker::new(Duration::from_micros(u64::from(machine.cycle_us)));
+    let mut out: Vec<Frame> = Vec::with_capacity(machine.axes.len() + 1);
+    let mut armed_tx = Some(armed_tx);
+    let mut dropped = 0u64;
+    let mut seen_emcys = vec![0usize; machine.axes.len()];
+    let mut bootups_at_start: Vec<u32> = {
+        let g = health.lock().unwrap();
+        machine.axes.iter().map(|a| g.get(&a.node).map_or(0, |h| h.bootups)).collect()
+    };
+    let consumer = Duration::from_millis(u64::from(machine.heartbeat.gateway_consumer_ms));
+    let mut port_err = None;
+    let mut warnings = Vec::new();
+    loop {
+        ticker.wait();
+        // Feedback received since the last cycle.
+        loop {
+            match port.recv_timeout(Duration::ZERO) {
+                Ok(Some(f)) => master.on_frame(&f),
+                Ok(None) => break,
+                Err(e) => {
+                    port_err = Some(e);
+                    break;
+                }
+            }
+        }
+        if let Some(e) = &port_err {
+            master.alarm(0, format!("bus error: {e}"));
+        }
+        // Health from the non-cyclic side.
+        if let Ok(g) = health.try_lock() {
+            for (i, a) in machine.axes.iter().enumerate() {
+                let Some(h) = g.get(&a.node) else { continue };
+                for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
+                    if emcy::is_warning(e.code) {
+                        warnings.push(format!("axis {} (node {}): EMCY 0x{:04X} {} at cycle {}", a.name, a.node, e.code, emcy::meaning(e.code), ticker.timing.cycles));
+                    } else {
+                        master.alarm(a.node, format!("axis {} (node {}): EMCY 0x{:04X} {}", a.name, a.node, e.code, emcy::meaning(e.code)));
+                    }
+                }
+                seen_emcys[i] = h.emcys.len();
+                if h.bootups > bootups_at_start[i] {
+                    bootups_at_start[i] = h.bootups;
+                    master.alarm(a.node, format!("axis {} (node {}): boot-up during the run: the drive reset", a.name, a.node));
+                }
+                if let Some((_, at)) = h.last_heartbeat
+                    && at.elapsed() > consumer
+                {
+                    master.alarm(
+                        a.node,
+                        format!("axis {} (node {}): heartbeat lost (none for {} ms)", a.name, a.node, at.elapsed().as_millis()),
+                    );
+                }
+            }
+        }
+        if master.phase() == Phase::Armed
+            && let Some(tx) = armed_tx.take()
+        {
+            let _ = tx.send(master.armed_mm().expect("armed"));
+        }
+        if master.phase() == Phase::Armed
+            && let Ok(m) = plan_rx.try_recv()
+        {
+            master.supply_motion(m);
+        }
+        out.clear();
+        let rec = master.cycle(machine.sync_cob_id, &mut out);
+        for f in &out {
+            if let Err(e) = port.send(f) {
+                master.alarm(0, format!("bus error: {e}"));
+                port_err.get_or_insert(e);
+                break;
+            }
+        }
+        if let Some(tx) = &log_tx
+            && tx.try_send(rec).is_err()
+        {
+            dropped += 1;
+        }
+        if master.phase() == Phase::Done {
+            break;
+        }
+    }
+    // Orderly end: Pre-operational right after the last SYNC, so no drive waits for a SYNC that
+    // will not come.
+    for a in &machine.axes {
+        let f = Frame::new(crate::canopen::cob::NMT, &[crate::canopen::nmt::PRE_OPERATIONAL, a.node]).expect("NMT");
+        if let Err(e) = port.send(&f) {
+            port_err.get_or_insert(e);
+        }
+    }
+    drop(armed_tx);
+    (master, ticker.timing, rt_setup, port_err, dropped, warnings)
+}
+
+type LogThread = std::thread::JoinHandle<std::io::Result<()>>;
+
+fn spawn_logger(path: &Path, machine: &Machine) -> Result<(mpsc::SyncSender<CycleRecord>, LogThread), GatewayError> {
+    let file = std::fs::File::create(path).map_err(|source| GatewayError::Log {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    let axes: Vec<String> = machine.axes.iter().map(|a| a.name.clone()).collect();
+    let period = machine.cycle_s();
+    let (tx, rx) = mpsc::sync_channel::<CycleRecord>(65_536);
+    let t = std::thread::Builder::new()
+        .name("canmotion-log".into())
+        .spawn(move || {
+            let mut w = std::io::BufWriter::new(file);
+            writeln!(w, "{}", csv_header(&axes))?;
+            for r in rx {
+                writeln!(w, "{}", csv_row(&r, axes.len(), period))?;
+            }
+            w.flush()
+        })
+        .expect("spawn log thread");
+    Ok((tx, t))
+}
