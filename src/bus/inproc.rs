@@ -105,6 +105,14 @@ pub struct InProcPort {
 }
 
 impl Port for InProcPort {
+    fn set_filters(&mut self, filters: &[Filter]) -> Result<(), BusError> {
+        let mut inner = self.bus.inner.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(m) = inner.members.iter_mut().find(|m| m.id == self.id) {
+            m.filters = filters.to_vec();
+        }
+        Ok(())
+    }
+
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
         self.bus.deliver(self.id, frame);
         Ok(())

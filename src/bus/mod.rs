@@ -110,6 +110,8 @@ pub trait Port: Send {
     fn send(&mut self, frame: &Frame) -> Result<(), BusError>;
     /// Wait up to `timeout` for a frame; `Ok(None)` on timeout. A zero timeout polls.
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<Frame>, BusError>;
+    /// Replace the receive filters (an empty set receives everything).
+    fn set_filters(&mut self, filters: &[Filter]) -> Result<(), BusError>;
 }
 
 /// Which bus to open ports on.

@@ -133,6 +133,7 @@ impl SocketCanPort {
         let sock = socketcan::CanSocket::open(iface).map_err(|e| open_error(iface, e))?;
         check_interface(iface)?;
         configure(&sock, iface, filters)?;
+        sock.set_nonblocking(true).map_err(|e| io_error(iface, e))?;
         Ok(SocketCanPort {
             iface: iface.to_string(),
             sock,
@@ -141,13 +142,21 @@ impl SocketCanPort {
 }
 
 impl Port for SocketCanPort {
+    fn set_filters(&mut self, filters: &[Filter]) -> Result<(), BusError> {
+        if filters.is_empty() {
+            self.sock.set_filter_accept_all().map_err(|e| io_error(&self.iface, e))
+        } else {
+            configure(&self.sock, &self.iface, filters)
+        }
+    }
+
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
         let f = to_socketcan(frame);
         let start = Instant::now();
         loop {
             match self.sock.write_frame(&f) {
                 Ok(()) => return Ok(()),
-                Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) => {
+                Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) || e.kind() == io::ErrorKind::WouldBlock => {
                     let waited = start.elapsed();
                     if waited >= SEND_DEADLINE {
                         return Err(BusError::TxQueueFull {
@@ -167,29 +176,43 @@ impl Port for SocketCanPort {
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<Frame>, BusError> {
         let deadline = Instant::now() + timeout;
         loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            // A zero read timeout means "block forever" to the kernel: poll with 1 µs instead.
-            let r = self
-                .sock
-                .read_frame_timeout(left.max(Duration::from_micros(1)));
-            match r {
+            // The socket is non-blocking: a queued frame costs one system call, an empty queue
+            // one more, and only then do we sleep in ppoll (whose nanosecond timeout, unlike
+            // poll's milliseconds, does not round a short wait to zero and spin).
+            match self.sock.read_frame() {
                 Ok(f) => {
                     if let Some(f) = from_socketcan(&self.iface, f)? {
                         return Ok(Some(f));
                     }
+                    continue;
                 }
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut
-                    ) =>
-                {
-                    return Ok(None);
-                }
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(e) => return Err(io_error(&self.iface, e)),
             }
-            if Instant::now() >= deadline {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            let ts = libc::timespec {
+                tv_sec: left.as_secs() as libc::time_t,
+                tv_nsec: left.subsec_nanos() as libc::c_long,
+            };
+            let mut pfd = libc::pollfd {
+                fd: std::os::fd::AsRawFd::as_raw_fd(&self.sock),
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: one pollfd we own, a timespec we own, no signal mask.
+            let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+            if r < 0 {
+                let e = io::Error::last_os_error();
+                if e.kind() == io::ErrorKind::Interrupted {
+                    continue;
+                }
+                return Err(io_error(&self.iface, e));
+            }
+            if r == 0 {
                 return Ok(None);
             }
         }

@@ -810,7 +810,7 @@ mod tests {
             e.starts_with("m.toml: [axis X] setpoint_pdo.mapping[1]: 0x60410010"),
             "{e}"
         );
-        let e = demo_with("cycle_us = 2000", "cycle_us = 1234");
+        let e = demo_with("cycle_us = 4000", "cycle_us = 1234");
         assert!(e.starts_with("m.toml: [bus] cycle_us: 1234"), "{e}");
         let e = demo_with("[machine]", "[machine]\nspeed = 3");
         assert!(e.contains("speed"), "{e}");

@@ -209,6 +209,26 @@ impl SimDrive {
         (s > 0.0).then(|| Duration::from_secs_f64(s))
     }
 
+    /// The identifiers this drive listens to, from its current configuration: NMT, SYNC (0x1005),
+    /// its SDO channel, its valid RPDOs and every heartbeat (0x700–0x77F). A runner installs them
+    /// as receive filters so the drive is not woken by other nodes' traffic.
+    pub fn rx_filters(&self) -> Vec<crate::bus::Filter> {
+        use crate::bus::Filter;
+        let mut f = vec![
+            Filter::exact(cob::NMT),
+            Filter::exact((self.od.int(0x1005, 0) as u32 & 0x7FF) as u16),
+            Filter::exact(cob::SDO_RX + u16::from(self.node)),
+            Filter { id: cob::HEARTBEAT, mask: 0x780 },
+        ];
+        for n in 0..4 {
+            let c = self.od.int(rpdo_base(n), 1) as u32;
+            if c & 0x8000_0000 == 0 {
+                f.push(Filter::exact((c & 0x7FF) as u16));
+            }
+        }
+        f
+    }
+
     /// When [`SimDrive::poll`] must run next at the latest.
     pub fn poll_at(&self, now: Duration) -> Duration {
         let mut t = now + Duration::from_millis(10);
@@ -343,23 +363,28 @@ impl SimDrive {
         if self.nmt == NmtState::BootUp {
             return;
         }
-        self.physics(now, out);
         let id = frame.id();
         let data = frame.data();
-        if id == cob::NMT {
-            if data.len() == 2 && (data[1] == 0 || data[1] == self.node) {
-                self.nmt_command(data[0], now, out);
+        // Heartbeats and other nodes' traffic do not touch the motor: no need to advance it.
+        if id != cob::NMT && (0x701..=0x77F).contains(&id) {
+            if !frame.is_remote() {
+                self.on_heartbeat(id, now);
             }
             return;
         }
-        // Heartbeats of nodes we consume.
-        if (0x701..=0x77F).contains(&id) && !frame.is_remote() {
-            let producer = (id - cob::HEARTBEAT) as u32;
-            for i in 0..4 {
-                let e = self.od.int(0x1016, i as u8 + 1) as u32;
-                if e & 0xFFFF != 0 && (e >> 16) & 0x7F == producer {
-                    self.consumer[i] = (Some(now), false);
-                }
+        let sync_id = (self.od.int(0x1005, 0) as u32 & 0x7FF) as u16;
+        let rpdo = (0..4).find(|&n| {
+            let c = self.od.int(rpdo_base(n), 1) as u32;
+            c & 0x8000_0000 == 0 && (c & 0x7FF) as u16 == id
+        });
+        let mine = id == cob::NMT || id == sync_id || id == cob::SDO_RX + u16::from(self.node) || rpdo.is_some();
+        if !mine {
+            return;
+        }
+        self.physics(now, out);
+        if id == cob::NMT {
+            if data.len() == 2 && (data[1] == 0 || data[1] == self.node) {
+                self.nmt_command(data[0], now, out);
             }
             return;
         }
@@ -377,7 +402,6 @@ impl SimDrive {
             self.refresh();
             return;
         }
-        let sync_id = (self.od.int(0x1005, 0) as u32 & 0x7FF) as u16;
         if id == sync_id {
             self.on_sync(now, data, out);
             return;
@@ -385,11 +409,18 @@ impl SimDrive {
         if self.nmt != NmtState::Operational {
             return;
         }
-        for n in 0..4 {
-            let c = self.od.int(rpdo_base(n), 1) as u32;
-            if c & 0x8000_0000 == 0 && (c & 0x7FF) as u16 == id {
-                self.on_rpdo(n, data, out);
-                return;
+        if let Some(n) = rpdo {
+            self.on_rpdo(n, data, out);
+        }
+    }
+
+    /// A heartbeat of a node we may consume (0x1016).
+    fn on_heartbeat(&mut self, id: u16, now: Duration) {
+        let producer = u32::from(id - cob::HEARTBEAT);
+        for i in 0..4 {
+            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            if e & 0xFFFF != 0 && (e >> 16) & 0x7F == producer {
+                self.consumer[i] = (Some(now), false);
             }
         }
     }
@@ -646,6 +677,9 @@ impl SimDrive {
             self.last_physics = Some(now);
             return;
         };
+        if t >= now {
+            return;
+        }
         while t < now {
             let dt = (now - t).min(STEP);
             t += dt;

@@ -53,43 +53,71 @@ impl Drop for SimHandle {
     }
 }
 
-/// Start `drives` on `bus`, each on its own port and thread. They boot (send their boot-up
-/// message) once their port is open.
+/// Start `drives` on `bus`: one thread and one port for all of them (one socket read per frame,
+/// however many drives), with receive filters from the drives' configuration. They boot (send
+/// their boot-up messages) once the port is open.
 pub fn spawn(bus: &Bus, drives: Vec<SimDrive>) -> Result<SimHandle, BusError> {
     let stop = Arc::new(AtomicBool::new(false));
     let epoch = Instant::now();
-    let mut threads = Vec::new();
-    for drive in drives {
-        let port = bus.open(&[])?;
-        let stop = stop.clone();
-        let name = format!("simdrive-{}", drive.node());
-        threads.push(
-            std::thread::Builder::new()
-                .name(name)
-                .spawn(move || run(drive, port, epoch, &stop))
-                .expect("spawn a thread"),
-        );
-    }
-    Ok(SimHandle { stop, threads })
+    let port = bus.open(&filters_of(&drives))?;
+    let nodes: Vec<u8> = drives.iter().map(|d| d.node()).collect();
+    let stop2 = stop.clone();
+    let thread = std::thread::Builder::new()
+        .name(format!("simdrive-{nodes:?}"))
+        .spawn(move || {
+            let r = run(drives, port, epoch, &stop2);
+            if let Err(e) = &r {
+                tracing::error!("simulated drives {nodes:?} stopped: {e}");
+                eprintln!("canmotion simdrive: nodes {nodes:?} stopped: {e}");
+            }
+            r
+        })
+        .expect("spawn a thread");
+    Ok(SimHandle {
+        stop,
+        threads: vec![thread],
+    })
 }
 
-fn run(mut drive: SimDrive, mut port: Box<dyn Port>, epoch: Instant, stop: &AtomicBool) -> Result<(), BusError> {
+fn filters_of(drives: &[SimDrive]) -> Vec<crate::bus::Filter> {
+    let mut f: Vec<crate::bus::Filter> = drives.iter().flat_map(|d| d.rx_filters()).collect();
+    f.sort_by_key(|f| (f.id, f.mask));
+    f.dedup();
+    f
+}
+
+fn run(mut drives: Vec<SimDrive>, mut port: Box<dyn Port>, epoch: Instant, stop: &AtomicBool) -> Result<(), BusError> {
     let mut out = Vec::new();
-    drive.boot(epoch.elapsed(), &mut out);
+    for d in &mut drives {
+        d.boot(epoch.elapsed(), &mut out);
+    }
+    let mut filters = filters_of(&drives);
     while !stop.load(Ordering::Relaxed) {
         for f in out.drain(..) {
             port.send(&f)?;
         }
         let now = epoch.elapsed();
-        let wait = drive.poll_at(now).saturating_sub(now).min(Duration::from_millis(20));
-        if let Some(f) = port.recv_timeout(wait)? {
-            drive.handle(epoch.elapsed(), &f, &mut out);
-            // Drain whatever else is queued before polling, so a burst is handled in order.
-            while let Some(f) = port.recv_timeout(Duration::ZERO)? {
-                drive.handle(epoch.elapsed(), &f, &mut out);
+        let next = drives.iter().map(|d| d.poll_at(now)).min().unwrap_or(now);
+        let wait = next.saturating_sub(now).min(Duration::from_millis(20));
+        let mut got = port.recv_timeout(wait)?;
+        // Handle everything queued, in order, before polling. Frames queued together arrived
+        // together: one clock reading serves the batch (a system call saved per frame matters
+        // inside User-Mode Linux, where each costs ~20 µs).
+        let now = epoch.elapsed();
+        while let Some(f) = got {
+            for d in &mut drives {
+                d.handle(now, &f, &mut out);
             }
+            got = port.recv_timeout(Duration::ZERO)?;
         }
-        drive.poll(epoch.elapsed(), &mut out);
+        for d in &mut drives {
+            d.poll(now, &mut out);
+        }
+        let f = filters_of(&drives);
+        if f != filters {
+            port.set_filters(&f)?;
+            filters = f;
+        }
     }
     Ok(())
 }

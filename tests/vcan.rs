@@ -1,0 +1,212 @@
+//! The vcan0 suite: the gateway and the simulated drives as separate processes on a real
+//! SocketCAN `vcan0`. Built only with `--features vcan-tests`; `tools/vcan-suite.sh` runs it
+//! where vcan0 exists (inside User-Mode Linux on kernels without CAN).
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use canmotion::bus::Bus;
+use canmotion::canopen::AbortCode;
+use canmotion::gateway::io::NodeIo;
+use canmotion::gateway::{self, GatewayError, RunOptions};
+use canopen_rs::{DataType, Value};
+
+const IFACE: &str = "vcan0";
+const BIN: &str = env!("CARGO_BIN_EXE_canmotion");
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+/// One bus, one set of node ids: the tests take turns.
+static BUS: Mutex<()> = Mutex::new(());
+
+struct SimDrives(Child);
+
+impl Drop for SimDrives {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Start `canmotion simdrive` for `nodes` and wait until it says its ports are open.
+fn simdrive(nodes: &[u8], dictionary: Option<&std::path::Path>) -> SimDrives {
+    let mut cmd = Command::new(BIN);
+    cmd.args(["simdrive", "--bus", IFACE]);
+    for n in nodes {
+        cmd.args(["--node", &n.to_string()]);
+    }
+    if let Some(d) = dictionary {
+        cmd.arg("--dictionary").arg(d);
+    }
+    let mut child = cmd.stderr(Stdio::piped()).stdout(Stdio::null()).spawn().expect("start simdrive");
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            eprintln!("[simdrive] {line}");
+            let _ = tx.send(line);
+        }
+    });
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(line) if line.contains("Ctrl-C to stop") => return SimDrives(child),
+            Ok(_) => {}
+            Err(_) => panic!("simdrive did not come up within 10 s"),
+        }
+    }
+}
+
+fn lock() -> std::sync::MutexGuard<'static, ()> {
+    BUS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[test]
+fn vcan0_is_really_there() {
+    // Not a skip: this suite only runs where vcan0 is provided, and must fail loudly otherwise.
+    let flags = std::fs::read_to_string(format!("/sys/class/net/{IFACE}/flags")).expect("vcan0 exists");
+    let flags = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap();
+    assert_ne!(flags & 1, 0, "vcan0 is up");
+    let kind = std::fs::read_link(format!("/sys/class/net/{IFACE}/device")).ok();
+    eprintln!("running on a real {IFACE} (flags 0x{flags:x}, device {kind:?})");
+}
+
+#[test]
+fn two_processes_run_a_program_and_write_the_csv() {
+    let _g = lock();
+    let _drives = simdrive(&[1, 2, 3], None);
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("out.csv");
+    let out = Command::new(BIN)
+        .current_dir(ROOT)
+        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc", "--log"])
+        .arg(&csv)
+        .output()
+        .expect("run canmotion");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{stdout}\n{stderr}");
+    assert!(out.status.success(), "canmotion run failed: {stderr}");
+    assert!(stdout.contains("program time") && stdout.contains("max following error"), "{stdout}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "cycle,t_s,X_cmd_mm,Y_cmd_mm,Z_cmd_mm,X_act_mm,Y_act_mm,Z_act_mm,X_ferr_mm,Y_ferr_mm,Z_ferr_mm"
+    );
+    let last: Vec<f64> = lines.last().unwrap().split(',').map(|x| x.parse().unwrap()).collect();
+    // Final setpoints are the program's end point; positions within one count (X, Y: 1000/mm,
+    // Z: 2000/mm).
+    assert_eq!(&last[2..5], &[15.0, 12.5, -0.5]);
+    assert!((last[5] - 15.0).abs() <= 0.001 && (last[6] - 12.5).abs() <= 0.001 && (last[7] + 0.5).abs() <= 0.0005, "{last:?}");
+}
+
+#[test]
+fn bit12_before_the_first_setpoint_and_no_following_error_on_vcan0() {
+    let _g = lock();
+    let _drives = simdrive(&[1, 2, 3], None);
+    let m = common::machine(|t| t);
+    let s = gateway::run(
+        &m,
+        &Bus::SocketCan(IFACE.into()),
+        &RunOptions {
+            program_name: "common::PROGRAM".into(),
+            program_text: common::PROGRAM.into(),
+            log: None,
+            simulate: false,
+        },
+    )
+    .expect("run over vcan0");
+    assert!(s.bit12_cycle.unwrap() < s.first_motion_cycle.unwrap(), "{s}");
+    for (i, want) in common::PROGRAM_END_COUNTS.iter().enumerate() {
+        assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
+        assert!(s.max_ferr_mm[i] < m.axes[i].following_error_mm, "{s}");
+    }
+}
+
+fn abort_of(r: Result<impl std::fmt::Debug, GatewayError>) -> u32 {
+    match r {
+        Err(GatewayError::SdoAbort { code, .. }) => code.0,
+        other => panic!("expected an SDO abort, got {other:?}"),
+    }
+}
+
+#[test]
+fn sdo_abort_paths_on_vcan0() {
+    let _g = lock();
+    let _drives = simdrive(&[5], None);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let io = NodeIo::start(&Bus::SocketCan(IFACE.into()), &[5]).unwrap();
+        let n = 5;
+        // Reads
+        assert_eq!(abort_of(io.read(n, 0x2345, 0, DataType::Unsigned8).await), AbortCode::NO_OBJECT.0);
+        assert_eq!(abort_of(io.read(n, 0x1018, 9, DataType::Unsigned32).await), AbortCode::NO_SUB.0);
+        assert_eq!(abort_of(io.read(n, 0x60C4, 6, DataType::Unsigned8).await), AbortCode::WRITE_ONLY.0);
+        // Writes
+        assert_eq!(abort_of(io.write(n, 0x6041, 0, Value::Unsigned16(1)).await), AbortCode::READ_ONLY.0);
+        assert_eq!(abort_of(io.write(n, 0x6040, 0, Value::Unsigned32(6)).await), AbortCode::LENGTH_MISMATCH.0);
+        assert_eq!(abort_of(io.write(n, 0x6060, 0, Value::Integer8(11)).await), AbortCode::VALUE_TOO_HIGH.0);
+        assert_eq!(abort_of(io.write(n, 0x60C2, 2, Value::Integer8(-7)).await), AbortCode::VALUE_TOO_LOW.0);
+        io.write(n, 0x1006, 0, Value::Unsigned32(2000)).await.unwrap();
+        assert_eq!(abort_of(io.write(n, 0x1019, 0, Value::Unsigned8(10)).await), AbortCode::DEVICE_STATE.0);
+        // PDO remap rules (CiA 301): mapping while the PDO is valid, too long, empty enable.
+        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await), AbortCode::UNSUPPORTED_ACCESS.0);
+        io.write(n, 0x1400, 1, Value::Unsigned32(0x8000_0205)).await.unwrap();
+        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await), AbortCode::UNSUPPORTED_ACCESS.0);
+        io.write(n, 0x1600, 0, Value::Unsigned8(0)).await.unwrap();
+        for (s, e) in [(1u8, 0x60C1_0120u32), (2, 0x607A_0020), (3, 0x6040_0010)] {
+            io.write(n, 0x1600, s, Value::Unsigned32(e)).await.unwrap();
+        }
+        assert_eq!(abort_of(io.write(n, 0x1600, 0, Value::Unsigned8(3)).await), AbortCode::PDO_TOO_LONG.0);
+        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6041_0010)).await), AbortCode::NOT_MAPPABLE.0);
+        assert_eq!(abort_of(io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205)).await), AbortCode::INVALID_VALUE.0);
+        assert_eq!(abort_of(io.write(n, 0x1400, 2, Value::Unsigned8(245)).await), AbortCode::INVALID_VALUE.0);
+        io.write(n, 0x1600, 0, Value::Unsigned8(2)).await.unwrap();
+        io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205)).await.unwrap();
+        // A segmented transfer works too: the device name (VISIBLE_STRING).
+        match io.read(n, 0x1008, 0, DataType::VisibleString).await.unwrap() {
+            Value::VisibleString(s) => assert!(s.len() > 4, "{s:?}"),
+            v => panic!("{v:?}"),
+        }
+    });
+}
+
+#[test]
+fn a_wrong_identity_fails_the_run_with_its_error() {
+    let _g = lock();
+    let dir = tempfile::tempdir().unwrap();
+    let dict = dir.path().join("other-revision.toml");
+    let text = canmotion::config::machine::DEMO_DRIVE.replace("0x00010000", "0x00010001");
+    std::fs::write(&dict, text).unwrap();
+    let _drives = simdrive(&[1, 2, 3], Some(&dict));
+    let out = Command::new(BIN)
+        .current_dir(ROOT)
+        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("axis X (node 1): revision 0x1018:3 is 0x00010001") && stderr.contains("expects 0x00010000"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_missing_node_fails_the_run_naming_it() {
+    let _g = lock();
+    let _drives = simdrive(&[1, 3], None);
+    let out = Command::new(BIN)
+        .current_dir(ROOT)
+        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("no boot-up from axis Y (node 2)") && stderr.contains("vcan0"), "{stderr}");
+}

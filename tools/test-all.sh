@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Every test of canmotion: formatting and lints, unit, property, golden and in-process
+# integration tests, then the vcan0 suite (Rust and python-canopen interop) on a real vcan0.
+# Installs what it needs (Debian packages, the Python venv) and fails loudly if it cannot.
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$root"
+
+need_apt=()
+command -v cargo >/dev/null || { echo "test-all: ERROR: cargo is not installed (install Rust with rustup)" >&2; exit 1; }
+command -v python3 >/dev/null || need_apt+=(python3 python3-venv)
+command -v ip >/dev/null || need_apt+=(iproute2)
+command -v gcc >/dev/null || need_apt+=(gcc)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "== installing ${need_apt[*]}"
+  apt-get update -qq && apt-get install -y -qq "${need_apt[@]}" \
+    || { echo "test-all: ERROR: apt-get install ${need_apt[*]} failed" >&2; exit 1; }
+fi
+rustup component list --installed 2>/dev/null | grep -q '^rustfmt' || rustup component add rustfmt clippy
+
+echo "== cargo fmt --check"
+cargo fmt --all -- --check
+echo "== cargo clippy --all-targets -- -D warnings"
+cargo clippy --quiet --all-targets --features vcan-tests -- -D warnings
+echo "== cargo test (unit, property, golden, in-process integration)"
+cargo test --quiet
+echo "== vcan0 suite"
+tools/vcan-suite.sh
+echo "== all tests passed"

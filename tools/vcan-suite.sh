@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# The vcan0 suite: the Rust tests of tests/vcan.rs (gateway and simulated drives as separate
+# processes) and the python-canopen interop tests of tests/interop/, all on a real vcan0.
+#
+# Builds everything on the host, then runs the suite once where vcan0 exists: directly when the
+# host has vcan, inside User-Mode Linux otherwise (tools/in-vcan.sh). The exit code is the
+# suite's; the whole run is bounded by VCAN_TIMEOUT (default 900 s).
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$root"
+
+echo "== vcan suite: building on the host"
+cargo build --quiet
+# The path of the vcan test binary, from cargo's own report.
+vcan_bin=$(cargo test --features vcan-tests --test vcan --no-run --message-format=json 2>/dev/null \
+  | python3 -c 'import json,sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == "vcan":
+        print(m["executable"])')
+if [ -z "$vcan_bin" ] || [ ! -x "$vcan_bin" ]; then
+  echo "vcan-suite: ERROR: could not build the vcan test binary" >&2
+  exit 1
+fi
+venv=$(tools/python-env.sh)
+
+export CANMOTION_BIN="$root/target/debug/canmotion"
+export VCAN_TIMEOUT="${VCAN_TIMEOUT:-900}"
+echo "== vcan suite: running on vcan0 ($vcan_bin, python-canopen from $venv)"
+exec tools/in-vcan.sh sh -c '
+  set -u
+  ip -details link show vcan0 | head -3
+  rc=0
+  echo "== Rust vcan0 tests (tests/vcan.rs)"
+  "$1" --test-threads=1 || rc=1
+  if [ -d tests/interop ]; then
+    echo "== python-canopen interop tests on vcan0 (tests/interop)"
+    "$2/bin/python" -m pytest -v -rA -p no:cacheprovider tests/interop || rc=1
+  else
+    echo "vcan-suite: ERROR: tests/interop is missing" >&2; rc=1
+  fi
+  exit $rc
+' vcan-suite "$vcan_bin" "$venv"
