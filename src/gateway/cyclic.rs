@@ -29,8 +29,9 @@ use crate::interp::{Interpolator, Status};
 const STATE_TIMEOUT_S: f64 = 2.0;
 /// How long the final position may take to settle within one count.
 const SETTLE_TIMEOUT_S: f64 = 3.0;
-/// Feedback older than this many cycles is an alarm.
-const STALE_CYCLES: u64 = 20;
+/// Feedback older than this many cycles is an alarm (a drive that stops answering SYNC is
+/// caught here long before its heartbeat times out).
+const STALE_CYCLES: u64 = 25;
 
 /// What the master needs to know of one axis, resolved from the machine file.
 #[derive(Debug, Clone)]

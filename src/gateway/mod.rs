@@ -432,11 +432,7 @@ fn cyclic_thread(
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
 ) -> CyclicResult {
-    let rt_setup = if std::env::var_os("CANMOTION_NO_RT").is_some() {
-        "normal scheduling (CANMOTION_NO_RT set)".to_string()
-    } else {
-        rt::make_realtime(80).to_string()
-    };
+    let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
     let mut ticker = Ticker::new(Duration::from_micros(u64::from(machine.cycle_us)));
     let mut out: Vec<Frame> = Vec::with_capacity(machine.axes.len() + 1);

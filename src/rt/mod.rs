@@ -54,14 +54,29 @@ impl std::fmt::Display for RtSetup {
     }
 }
 
-/// Try to make the calling thread real-time: SCHED_FIFO at `priority` and locked memory.
-/// Failures are reported, not fatal: the loop still runs, with more jitter.
+/// The SCHED_FIFO priority of the cyclic thread: `CANMOTION_RT_PRIORITY` (1–99), 0 for normal
+/// scheduling, default 80.
+///
+/// 0 is for User-Mode Linux (the vcan0 suite): its guest runs every process on one host thread,
+/// and a SCHED_FIFO thread inside it starves the simulated drives' process.
+pub fn priority_from_env() -> i32 {
+    std::env::var("CANMOTION_RT_PRIORITY")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|p| (0..=99).contains(p))
+        .unwrap_or(80)
+}
+
+/// Try to make the calling thread real-time: SCHED_FIFO at `priority` (none when 0) and locked
+/// memory. Failures are reported, not fatal: the loop still runs, with more jitter.
 pub fn make_realtime(priority: i32) -> RtSetup {
     let mut s = RtSetup::default();
     let param = libc::sched_param { sched_priority: priority };
     // SAFETY: sets the scheduling policy of the calling thread (pid 0).
-    let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
-    if r == 0 {
+    let r = if priority == 0 { 0 } else { unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } };
+    if priority == 0 {
+        s.notes.push("SCHED_FIFO off (CANMOTION_RT_PRIORITY=0)".into());
+    } else if r == 0 {
         s.fifo_priority = Some(priority);
     } else {
         s.notes.push(format!(

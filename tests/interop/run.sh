@@ -8,7 +8,8 @@
 # 3. pytest -v -rA tests/interop inside tools/in-vcan.sh, i.e. where vcan0 exists (a UML guest on
 #    machines without SocketCAN). The tests fail, not skip, when vcan0 is missing.
 #
-# Exit code: pytest's (0 all passed, 1 failures, ...); 124 when INTEROP_TIMEOUT expired.
+# Exit code: pytest's (0 all passed, 1 failures, ...); 124 when INTEROP_TIMEOUT expired;
+# cargo's or 2 when the build or the setup fails before pytest runs.
 #
 # Environment:
 #   INTEROP_TIMEOUT       seconds for the pytest run, guest boot included (default 300)

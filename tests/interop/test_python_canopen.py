@@ -205,7 +205,9 @@ class Frame:
 
 
 class Trace(can.Listener):
-    """Every frame the master's socket sees, in order (runs in python-can's notifier thread)."""
+    """Every frame the master's socket receives, in order, with the kernel's receive timestamps
+    (runs in python-can's notifier thread). The socket is filtered to node 1's COB-IDs and does
+    not receive the master's own frames (SYNC, NMT, RPDOs, SDO requests)."""
 
     def __init__(self):
         self.frames: list[Frame] = []
@@ -369,8 +371,11 @@ def drive(request, network, dictionary, tmp_path):
                 proc.wait(timeout=5)
         log.close()
         text = log_path.read_text(errors="replace")
-        if failed or text.strip():
-            print(f"[interop] simdrive log ({log_path}):\n{text}")
+        lines = text.splitlines()
+        shown = lines if failed else lines[-40:]
+        print(f"[interop] simdrive log ({log_path}, {len(lines)} lines"
+              f"{'' if len(shown) == len(lines) else f', last {len(shown)}'}):")
+        print("\n".join(shown))
         if d is not None and rc_before is not None:
             pytest.fail(f"simdrive died during the test (exit {rc_before}):\n{text}")
 
@@ -533,7 +538,7 @@ class SyncedRpdoPump:
 
 
 # ---------------------------------------------------------------------------------------------
-# Tests
+# Steps of the IP scenario
 # ---------------------------------------------------------------------------------------------
 
 
@@ -695,6 +700,11 @@ def stop_ip_and_disable(node, pump) -> None:
                "statusword bit 12 to clear after CW 0x0F", pump.status)
     node.state = "SWITCH ON DISABLED"
     assert node.state == "SWITCH ON DISABLED"
+
+
+# ---------------------------------------------------------------------------------------------
+# Tests
+# ---------------------------------------------------------------------------------------------
 
 
 def test_ip_stream_with_python_canopen_master(drive, dictionary):
