@@ -606,10 +606,14 @@ impl SimDrive {
         match (index, sub) {
             (0x6040, 0) => self.on_controlword(self.od.int(0x6040, 0) as u16, out),
             (0x6060, 0) => {
+                // Only a different value is a mode change: masters that carry 0x6060 in their
+                // cyclic RPDO (python-canopen's BaseNode402 does) rewrite the same mode every SYNC.
                 let m = self.od.int(0x6060, 0);
-                self.od.set_int(0x6061, 0, m);
-                self.ip_active = false;
-                self.interp = None;
+                if m != self.od.int(0x6061, 0) {
+                    self.od.set_int(0x6061, 0, m);
+                    self.ip_active = false;
+                    self.interp = None;
+                }
             }
             (0x605A, 0) => {
                 let _ = self.power.set_quick_stop_option(self.od.int(0x605A, 0) as i16);
