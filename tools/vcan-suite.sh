@@ -36,6 +36,10 @@ echo "== vcan suite: running on vcan0 ($vcan_bin, python-canopen from $venv)"
 exec tools/in-vcan.sh sh -c '
   set -u
   ip -details link show vcan0 | head -3
+  # Page the binaries in before anything runs on a deadline: inside User-Mode Linux the host
+  # file system is read lazily, and a first run otherwise stalls for hundreds of ms on page
+  # faults in the middle of its motion.
+  cat "$1" "$CANMOTION_BIN" > /dev/null
   rc=0
   echo "== Rust vcan0 tests (tests/vcan.rs)"
   "$1" --test-threads=1 || rc=1
