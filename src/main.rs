@@ -14,7 +14,11 @@ use canmotion::sim::{SimDrive, runner};
 const DEMO_PROGRAM: &str = include_str!("../examples/demo.ngc");
 
 #[derive(Parser)]
-#[command(name = "canmotion", version, about = "CAN-bus motion gateway: G-code to CiA 402 servo drives over CANopen")]
+#[command(
+    name = "canmotion",
+    version,
+    about = "CAN-bus motion gateway: G-code to CiA 402 servo drives over CANopen"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -69,17 +73,26 @@ fn main() -> ExitCode {
 
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     match Cli::parse().command {
-        Command::Run { program, machine, bus, log } => {
+        Command::Run {
+            program,
+            machine,
+            bus,
+            log,
+        } => {
             let machine = match machine {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
             };
             let (name, text) = match program {
                 Some(p) => {
-                    let text = std::fs::read_to_string(&p).map_err(|e| format!("{}: cannot read: {e}", p.display()))?;
+                    let text = std::fs::read_to_string(&p)
+                        .map_err(|e| format!("{}: cannot read: {e}", p.display()))?;
                     (p.display().to_string(), text)
                 }
-                None => ("examples/demo.ngc (embedded)".to_string(), DEMO_PROGRAM.to_string()),
+                None => (
+                    "examples/demo.ngc (embedded)".to_string(),
+                    DEMO_PROGRAM.to_string(),
+                ),
             };
             let bus_arg = bus.unwrap_or_else(|| machine.interface.clone());
             let bus = Bus::from_arg(&bus_arg);
@@ -91,7 +104,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 machine.axes.len(),
                 machine.cycle_us,
                 bus.name(),
-                if simulate { " with simulated drives" } else { "" }
+                if simulate {
+                    " with simulated drives"
+                } else {
+                    ""
+                }
             );
             let summary = gateway::run(
                 &machine,
@@ -109,7 +126,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             }
             Ok(())
         }
-        Command::Simdrive { bus, nodes, dictionary } => {
+        Command::Simdrive {
+            bus,
+            nodes,
+            dictionary,
+        } => {
             let dict = std::sync::Arc::new(match dictionary {
                 Some(p) => DriveDictionary::load(&p)?,
                 None => DriveDictionary::parse(
@@ -118,7 +139,10 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 )?,
             });
             let bus = Bus::from_arg(&bus);
-            let drives = nodes.iter().map(|&n| SimDrive::new(dict.clone(), n)).collect();
+            let drives = nodes
+                .iter()
+                .map(|&n| SimDrive::new(dict.clone(), n))
+                .collect();
             let handle = runner::spawn(&bus, drives)?;
             eprintln!(
                 "canmotion simdrive: nodes {:?} on {} ({}); Ctrl-C to stop",

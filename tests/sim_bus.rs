@@ -27,13 +27,25 @@ fn a_program_runs_end_to_end_and_lands_within_one_count() {
     let s = gateway::run(&m, &bus, &opts(PROGRAM, true, Some(log.clone()))).expect("run");
     for (i, want) in PROGRAM_END_COUNTS.iter().enumerate() {
         assert_eq!(s.target_counts[i], *want, "axis {} setpoint", s.axes[i]);
-        assert!((s.final_counts[i] - want).abs() <= 1, "axis {}: {} vs {want}", s.axes[i], s.final_counts[i]);
+        assert!(
+            (s.final_counts[i] - want).abs() <= 1,
+            "axis {}: {} vs {want}",
+            s.axes[i],
+            s.final_counts[i]
+        );
     }
     let bit12 = s.bit12_cycle.expect("bit 12 seen");
     let first = s.first_motion_cycle.expect("moved");
-    assert!(bit12 < first, "statusword bit 12 (cycle {bit12}) must come before the first moving setpoint (cycle {first})");
+    assert!(
+        bit12 < first,
+        "statusword bit 12 (cycle {bit12}) must come before the first moving setpoint (cycle {first})"
+    );
     for (i, f) in s.max_ferr_mm.iter().enumerate() {
-        assert!(*f < m.axes[i].following_error_mm, "axis {} following error {f}", s.axes[i]);
+        assert!(
+            *f < m.axes[i].following_error_mm,
+            "axis {} following error {f}",
+            s.axes[i]
+        );
     }
     // The CSV has the stated columns and one row per cycle.
     let text = std::fs::read_to_string(&log).unwrap();
@@ -42,11 +54,17 @@ fn a_program_runs_end_to_end_and_lands_within_one_count() {
         lines.next().unwrap(),
         "cycle,t_s,X_cmd_mm,Y_cmd_mm,Z_cmd_mm,X_act_mm,Y_act_mm,Z_act_mm,X_ferr_mm,Y_ferr_mm,Z_ferr_mm"
     );
-    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
     assert_eq!(rows.len() as u64 + s.log_dropped, s.cycles);
     assert!(rows.iter().all(|r| r.len() == 11));
     let last = rows.last().unwrap();
-    assert!((last[4] - (-3.25)).abs() < 1e-9, "Z_cmd_mm at the end: {}", last[4]);
+    assert!(
+        (last[4] - (-3.25)).abs() < 1e-9,
+        "Z_cmd_mm at the end: {}",
+        last[4]
+    );
 }
 
 #[test]
@@ -54,11 +72,18 @@ fn a_missing_node_is_named() {
     let m = machine(|t| t);
     let bus = InProcBus::new();
     let dict = drive_dict(|t| t);
-    let _drives = runner::spawn(&Bus::InProc(bus.clone()), vec![SimDrive::new(dict.clone(), 1), SimDrive::new(dict, 2)]).unwrap();
+    let _drives = runner::spawn(
+        &Bus::InProc(bus.clone()),
+        vec![SimDrive::new(dict.clone(), 1), SimDrive::new(dict, 2)],
+    )
+    .unwrap();
     let err = gateway::run(&m, &Bus::InProc(bus), &opts(PROGRAM, false, None)).unwrap_err();
     assert!(matches!(err, GatewayError::MissingNodes { .. }), "{err}");
     let msg = err.to_string();
-    assert!(msg.contains("axis Z (node 3)") && !msg.contains("node 1"), "{msg}");
+    assert!(
+        msg.contains("axis Z (node 3)") && !msg.contains("node 1"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -71,13 +96,23 @@ fn a_wrong_identity_is_refused_before_any_motion() {
     assert_eq!(other.identity.revision, 0x0002_0000);
     let _drives = runner::spawn(
         &Bus::InProc(bus.clone()),
-        vec![SimDrive::new(good.clone(), 1), SimDrive::new(other, 2), SimDrive::new(good, 3)],
+        vec![
+            SimDrive::new(good.clone(), 1),
+            SimDrive::new(other, 2),
+            SimDrive::new(good, 3),
+        ],
     )
     .unwrap();
     let err = gateway::run(&m, &Bus::InProc(bus), &opts(PROGRAM, false, None)).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, GatewayError::WrongIdentity { node: 2, .. }), "{msg}");
-    assert!(msg.contains("revision 0x1018:3 is 0x00020000") && msg.contains("expects 0x00010000"), "{msg}");
+    assert!(
+        matches!(err, GatewayError::WrongIdentity { node: 2, .. }),
+        "{msg}"
+    );
+    assert!(
+        msg.contains("revision 0x1018:3 is 0x00020000") && msg.contains("expects 0x00010000"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -97,7 +132,12 @@ fn a_program_that_does_not_parse_moves_nothing() {
     let m = machine(|t| t);
     let bus = Bus::InProc(InProcBus::new());
     // Line 3 is bad: no motion may start, so no drive is even touched.
-    let err = gateway::run(&m, &bus, &opts("G21 G90\nG1 X1 F100\nG1 X2 Y\n", true, None)).unwrap_err();
+    let err = gateway::run(
+        &m,
+        &bus,
+        &opts("G21 G90\nG1 X1 F100\nG1 X2 Y\n", true, None),
+    )
+    .unwrap_err();
     assert!(matches!(err, GatewayError::Program(_)), "{err}");
     assert!(err.to_string().starts_with("test.ngc:3:"), "{err}");
 }
@@ -106,7 +146,15 @@ fn a_program_that_does_not_parse_moves_nothing() {
 fn a_move_out_of_travel_is_refused_before_motion() {
     let m = machine(|t| t);
     let bus = Bus::InProc(InProcBus::new());
-    let err = gateway::run(&m, &bus, &opts("G21 G90\nG1 X10 F600\nG1 Z20\n", true, None)).unwrap_err();
+    let err = gateway::run(
+        &m,
+        &bus,
+        &opts("G21 G90\nG1 X10 F600\nG1 Z20\n", true, None),
+    )
+    .unwrap_err();
     let msg = err.to_string();
-    assert!(msg.starts_with("test.ngc:3: axis Z would move to 20.0000 mm, outside its travel"), "{msg}");
+    assert!(
+        msg.starts_with("test.ngc:3: axis Z would move to 20.0000 mm, outside its travel"),
+        "{msg}"
+    );
 }

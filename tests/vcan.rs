@@ -41,7 +41,11 @@ fn simdrive(nodes: &[u8], dictionary: Option<&std::path::Path>) -> SimDrives {
     if let Some(d) = dictionary {
         cmd.arg("--dictionary").arg(d);
     }
-    let mut child = cmd.stderr(Stdio::piped()).stdout(Stdio::null()).spawn().expect("start simdrive");
+    let mut child = cmd
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .expect("start simdrive");
     let stderr = child.stderr.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -68,7 +72,8 @@ fn lock() -> std::sync::MutexGuard<'static, ()> {
 #[test]
 fn vcan0_is_really_there() {
     // Not a skip: this suite only runs where vcan0 is provided, and must fail loudly otherwise.
-    let flags = std::fs::read_to_string(format!("/sys/class/net/{IFACE}/flags")).expect("vcan0 exists");
+    let flags =
+        std::fs::read_to_string(format!("/sys/class/net/{IFACE}/flags")).expect("vcan0 exists");
     let flags = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap();
     assert_ne!(flags & 1, 0, "vcan0 is up");
     let kind = std::fs::read_link(format!("/sys/class/net/{IFACE}/device")).ok();
@@ -83,7 +88,15 @@ fn two_processes_run_a_program_and_write_the_csv() {
     let csv = dir.path().join("out.csv");
     let out = Command::new(BIN)
         .current_dir(ROOT)
-        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc", "--log"])
+        .args([
+            "run",
+            "--bus",
+            IFACE,
+            "--machine",
+            "dictionaries/machines/demo-xyz.toml",
+            "tests/programs/square.ngc",
+            "--log",
+        ])
         .arg(&csv)
         .output()
         .expect("run canmotion");
@@ -91,18 +104,31 @@ fn two_processes_run_a_program_and_write_the_csv() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     eprintln!("{stdout}\n{stderr}");
     assert!(out.status.success(), "canmotion run failed: {stderr}");
-    assert!(stdout.contains("program time") && stdout.contains("max following error"), "{stdout}");
+    assert!(
+        stdout.contains("program time") && stdout.contains("max following error"),
+        "{stdout}"
+    );
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
         "cycle,t_s,X_cmd_mm,Y_cmd_mm,Z_cmd_mm,X_act_mm,Y_act_mm,Z_act_mm,X_ferr_mm,Y_ferr_mm,Z_ferr_mm"
     );
-    let last: Vec<f64> = lines.last().unwrap().split(',').map(|x| x.parse().unwrap()).collect();
+    let last: Vec<f64> = lines
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|x| x.parse().unwrap())
+        .collect();
     // Final setpoints are the program's end point; positions within one count (X, Y: 1000/mm,
     // Z: 2000/mm).
     assert_eq!(&last[2..5], &[15.0, 12.5, -0.5]);
-    assert!((last[5] - 15.0).abs() <= 0.001 && (last[6] - 12.5).abs() <= 0.001 && (last[7] + 0.5).abs() <= 0.0005, "{last:?}");
+    assert!(
+        (last[5] - 15.0).abs() <= 0.001
+            && (last[6] - 12.5).abs() <= 0.001
+            && (last[7] + 0.5).abs() <= 0.0005,
+        "{last:?}"
+    );
 }
 
 #[test]
@@ -121,7 +147,10 @@ fn bit12_before_the_first_setpoint_and_no_following_error_on_vcan0() {
         },
     )
     .expect("run over vcan0");
-    assert!(s.bit12_cycle.unwrap() < s.first_motion_cycle.unwrap(), "{s}");
+    assert!(
+        s.bit12_cycle.unwrap() < s.first_motion_cycle.unwrap(),
+        "{s}"
+    );
     for (i, want) in common::PROGRAM_END_COUNTS.iter().enumerate() {
         assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
         assert!(s.max_ferr_mm[i] < m.axes[i].following_error_mm, "{s}");
@@ -144,32 +173,84 @@ fn sdo_abort_paths_on_vcan0() {
         let io = NodeIo::start(&Bus::SocketCan(IFACE.into()), &[5]).unwrap();
         let n = 5;
         // Reads
-        assert_eq!(abort_of(io.read(n, 0x2345, 0, DataType::Unsigned8).await), AbortCode::NO_OBJECT.0);
-        assert_eq!(abort_of(io.read(n, 0x1018, 9, DataType::Unsigned32).await), AbortCode::NO_SUB.0);
-        assert_eq!(abort_of(io.read(n, 0x60C4, 6, DataType::Unsigned8).await), AbortCode::WRITE_ONLY.0);
+        assert_eq!(
+            abort_of(io.read(n, 0x2345, 0, DataType::Unsigned8).await),
+            AbortCode::NO_OBJECT.0
+        );
+        assert_eq!(
+            abort_of(io.read(n, 0x1018, 9, DataType::Unsigned32).await),
+            AbortCode::NO_SUB.0
+        );
+        assert_eq!(
+            abort_of(io.read(n, 0x60C4, 6, DataType::Unsigned8).await),
+            AbortCode::WRITE_ONLY.0
+        );
         // Writes
-        assert_eq!(abort_of(io.write(n, 0x6041, 0, Value::Unsigned16(1)).await), AbortCode::READ_ONLY.0);
-        assert_eq!(abort_of(io.write(n, 0x6040, 0, Value::Unsigned32(6)).await), AbortCode::LENGTH_MISMATCH.0);
-        assert_eq!(abort_of(io.write(n, 0x6060, 0, Value::Integer8(11)).await), AbortCode::VALUE_TOO_HIGH.0);
-        assert_eq!(abort_of(io.write(n, 0x60C2, 2, Value::Integer8(-7)).await), AbortCode::VALUE_TOO_LOW.0);
-        io.write(n, 0x1006, 0, Value::Unsigned32(2000)).await.unwrap();
-        assert_eq!(abort_of(io.write(n, 0x1019, 0, Value::Unsigned8(10)).await), AbortCode::DEVICE_STATE.0);
+        assert_eq!(
+            abort_of(io.write(n, 0x6041, 0, Value::Unsigned16(1)).await),
+            AbortCode::READ_ONLY.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x6040, 0, Value::Unsigned32(6)).await),
+            AbortCode::LENGTH_MISMATCH.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x6060, 0, Value::Integer8(11)).await),
+            AbortCode::VALUE_TOO_HIGH.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x60C2, 2, Value::Integer8(-7)).await),
+            AbortCode::VALUE_TOO_LOW.0
+        );
+        io.write(n, 0x1006, 0, Value::Unsigned32(2000))
+            .await
+            .unwrap();
+        assert_eq!(
+            abort_of(io.write(n, 0x1019, 0, Value::Unsigned8(10)).await),
+            AbortCode::DEVICE_STATE.0
+        );
         // PDO remap rules (CiA 301): mapping while the PDO is valid, too long, empty enable.
-        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await), AbortCode::UNSUPPORTED_ACCESS.0);
-        io.write(n, 0x1400, 1, Value::Unsigned32(0x8000_0205)).await.unwrap();
-        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await), AbortCode::UNSUPPORTED_ACCESS.0);
+        assert_eq!(
+            abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await),
+            AbortCode::UNSUPPORTED_ACCESS.0
+        );
+        io.write(n, 0x1400, 1, Value::Unsigned32(0x8000_0205))
+            .await
+            .unwrap();
+        assert_eq!(
+            abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6040_0010)).await),
+            AbortCode::UNSUPPORTED_ACCESS.0
+        );
         io.write(n, 0x1600, 0, Value::Unsigned8(0)).await.unwrap();
         for (s, e) in [(1u8, 0x60C1_0120u32), (2, 0x607A_0020), (3, 0x6040_0010)] {
             io.write(n, 0x1600, s, Value::Unsigned32(e)).await.unwrap();
         }
-        assert_eq!(abort_of(io.write(n, 0x1600, 0, Value::Unsigned8(3)).await), AbortCode::PDO_TOO_LONG.0);
-        assert_eq!(abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6041_0010)).await), AbortCode::NOT_MAPPABLE.0);
-        assert_eq!(abort_of(io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205)).await), AbortCode::INVALID_VALUE.0);
-        assert_eq!(abort_of(io.write(n, 0x1400, 2, Value::Unsigned8(245)).await), AbortCode::INVALID_VALUE.0);
+        assert_eq!(
+            abort_of(io.write(n, 0x1600, 0, Value::Unsigned8(3)).await),
+            AbortCode::PDO_TOO_LONG.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x1600, 1, Value::Unsigned32(0x6041_0010)).await),
+            AbortCode::NOT_MAPPABLE.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205)).await),
+            AbortCode::INVALID_VALUE.0
+        );
+        assert_eq!(
+            abort_of(io.write(n, 0x1400, 2, Value::Unsigned8(245)).await),
+            AbortCode::INVALID_VALUE.0
+        );
         io.write(n, 0x1600, 0, Value::Unsigned8(2)).await.unwrap();
-        io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205)).await.unwrap();
+        io.write(n, 0x1400, 1, Value::Unsigned32(0x0000_0205))
+            .await
+            .unwrap();
         // A segmented transfer works too: the device name (VISIBLE_STRING).
-        match io.read(n, 0x1008, 0, DataType::VisibleString).await.unwrap() {
+        match io
+            .read(n, 0x1008, 0, DataType::VisibleString)
+            .await
+            .unwrap()
+        {
             Value::VisibleString(s) => assert!(s.len() > 4, "{s:?}"),
             v => panic!("{v:?}"),
         }
@@ -186,13 +267,21 @@ fn a_wrong_identity_fails_the_run_with_its_error() {
     let _drives = simdrive(&[1, 2, 3], Some(&dict));
     let out = Command::new(BIN)
         .current_dir(ROOT)
-        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc"])
+        .args([
+            "run",
+            "--bus",
+            IFACE,
+            "--machine",
+            "dictionaries/machines/demo-xyz.toml",
+            "tests/programs/square.ngc",
+        ])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        stderr.contains("axis X (node 1): revision 0x1018:3 is 0x00010001") && stderr.contains("expects 0x00010000"),
+        stderr.contains("axis X (node 1): revision 0x1018:3 is 0x00010001")
+            && stderr.contains("expects 0x00010000"),
         "{stderr}"
     );
 }
@@ -203,10 +292,20 @@ fn a_missing_node_fails_the_run_naming_it() {
     let _drives = simdrive(&[1, 3], None);
     let out = Command::new(BIN)
         .current_dir(ROOT)
-        .args(["run", "--bus", IFACE, "--machine", "dictionaries/machines/demo-xyz.toml", "tests/programs/square.ngc"])
+        .args([
+            "run",
+            "--bus",
+            IFACE,
+            "--machine",
+            "dictionaries/machines/demo-xyz.toml",
+            "tests/programs/square.ngc",
+        ])
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(stderr.contains("no boot-up from axis Y (node 2)") && stderr.contains("vcan0"), "{stderr}");
+    assert!(
+        stderr.contains("no boot-up from axis Y (node 2)") && stderr.contains("vcan0"),
+        "{stderr}"
+    );
 }

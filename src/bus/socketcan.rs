@@ -144,7 +144,9 @@ impl SocketCanPort {
 impl Port for SocketCanPort {
     fn set_filters(&mut self, filters: &[Filter]) -> Result<(), BusError> {
         if filters.is_empty() {
-            self.sock.set_filter_accept_all().map_err(|e| io_error(&self.iface, e))
+            self.sock
+                .set_filter_accept_all()
+                .map_err(|e| io_error(&self.iface, e))
         } else {
             configure(&self.sock, &self.iface, filters)
         }
@@ -156,7 +158,10 @@ impl Port for SocketCanPort {
         loop {
             match self.sock.write_frame(&f) {
                 Ok(()) => return Ok(()),
-                Err(e) if e.raw_os_error() == Some(libc::ENOBUFS) || e.kind() == io::ErrorKind::WouldBlock => {
+                Err(e)
+                    if e.raw_os_error() == Some(libc::ENOBUFS)
+                        || e.kind() == io::ErrorKind::WouldBlock =>
+                {
                     let waited = start.elapsed();
                     if waited >= SEND_DEADLINE {
                         return Err(BusError::TxQueueFull {

@@ -429,10 +429,9 @@ fn build_sub(
     }
     if let DefaultValue::Fixed(v) = &default
         && let Some(x) = value_as_f64(v)
+        && (min.is_some_and(|lo| x < lo) || max.is_some_and(|hi| x > hi))
     {
-        if min.is_some_and(|lo| x < lo) || max.is_some_and(|hi| x > hi) {
-            return Err(ctx.err("default", format!("default {x} outside [min, max]")));
-        }
+        return Err(ctx.err("default", format!("default {x} outside [min, max]")));
     }
     if pdo && t.fixed_size().is_none() {
         return Err(ctx.err("pdo", "a variable-length type cannot be PDO-mapped"));

@@ -63,7 +63,9 @@ impl AxisIo {
     /// Resolve one axis.
     pub fn new(a: &AxisConfig) -> AxisIo {
         let (si, ss) = a.mode.setpoint_object();
-        let off = |p: &crate::config::PdoConfig, i, s| p.offset_of(i, s).map(|(o, _)| o).expect("validated");
+        let off = |p: &crate::config::PdoConfig, i, s| {
+            p.offset_of(i, s).map(|(o, _)| o).expect("validated")
+        };
         AxisIo {
             name: a.name.clone(),
             node: a.node,
@@ -89,7 +91,9 @@ impl AxisIo {
     }
 
     fn to_counts(&self, mm: f64) -> i32 {
-        (mm * self.counts_per_mm).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+        (mm * self.counts_per_mm)
+            .round()
+            .clamp(i32::MIN as f64, i32::MAX as f64) as i32
     }
 
     fn to_mm(&self, counts: i32) -> f64 {
@@ -235,12 +239,19 @@ impl CyclicMaster {
 
     /// Last position actual per axis (counts; 0 when none arrived).
     pub fn final_counts(&self) -> Vec<i32> {
-        self.fb.iter().map(|f| f.map_or(0, |f| f.position)).collect()
+        self.fb
+            .iter()
+            .map(|f| f.map_or(0, |f| f.position))
+            .collect()
     }
 
     /// Last setpoint per axis (counts).
     pub fn setpoint_counts(&self) -> Vec<i32> {
-        self.axes.iter().zip(&self.sp_mm).map(|(a, h)| a.to_counts(h[0])).collect()
+        self.axes
+            .iter()
+            .zip(&self.sp_mm)
+            .map(|(a, h)| a.to_counts(h[0]))
+            .collect()
     }
 
     /// Supply the motion once [`Phase::Armed`]: an interpolator planned from [`Self::armed_mm`].
@@ -338,34 +349,50 @@ impl CyclicMaster {
         // Alarms from the process data itself.
         for i in 0..n {
             match self.fb[i] {
-                Some(fb) if fb.statusword & swb::FAULT != 0 && self.phase != Phase::Done => {
-                    if !self.frozen[i] {
-                        self.frozen[i] = true;
-                        let a = &self.axes[i];
-                        let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
-                            "following error (statusword bit 13)"
-                        } else {
-                            "fault (statusword bit 3)"
-                        };
-                        let msg = format!("axis {} (node {}): drive reports {what}, statusword 0x{:04X}", a.name, a.node, fb.statusword);
-                        self.fail(msg);
-                    }
-                }
-                Some(fb) if self.cycle - fb.cycle > STALE_CYCLES && self.phase != Phase::Done => {
-                    if !self.frozen[i] {
-                        self.frozen[i] = true;
-                        let a = &self.axes[i];
-                        let msg = format!(
-                            "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
-                            a.name, a.node, a.tpdo_cob, self.cycle - fb.cycle
-                        );
-                        self.fail(msg);
-                    }
-                }
-                None if self.cycle > STALE_CYCLES && self.phase != Phase::Done && !self.frozen[i] => {
+                Some(fb)
+                    if fb.statusword & swb::FAULT != 0
+                        && self.phase != Phase::Done
+                        && !self.frozen[i] =>
+                {
                     self.frozen[i] = true;
                     let a = &self.axes[i];
-                    let msg = format!("axis {} (node {}): no process data (TPDO 0x{:03X}) since start", a.name, a.node, a.tpdo_cob);
+                    let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
+                        "following error (statusword bit 13)"
+                    } else {
+                        "fault (statusword bit 3)"
+                    };
+                    let msg = format!(
+                        "axis {} (node {}): drive reports {what}, statusword 0x{:04X}",
+                        a.name, a.node, fb.statusword
+                    );
+                    self.fail(msg);
+                }
+                Some(fb)
+                    if self.cycle - fb.cycle > STALE_CYCLES
+                        && self.phase != Phase::Done
+                        && !self.frozen[i] =>
+                {
+                    self.frozen[i] = true;
+                    let a = &self.axes[i];
+                    let msg = format!(
+                        "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
+                        a.name,
+                        a.node,
+                        a.tpdo_cob,
+                        self.cycle - fb.cycle
+                    );
+                    self.fail(msg);
+                }
+                None if self.cycle > STALE_CYCLES
+                    && self.phase != Phase::Done
+                    && !self.frozen[i] =>
+                {
+                    self.frozen[i] = true;
+                    let a = &self.axes[i];
+                    let msg = format!(
+                        "axis {} (node {}): no process data (TPDO 0x{:03X}) since start",
+                        a.name, a.node, a.tpdo_cob
+                    );
                     self.fail(msg);
                 }
                 _ => {}
@@ -376,8 +403,9 @@ impl CyclicMaster {
             .iter()
             .map(|f| f.and_then(|f| State::from_statusword(f.statusword)))
             .collect();
-        let actual_mm: Vec<Option<f64>> =
-            (0..n).map(|i| self.fb[i].map(|f| self.axes[i].to_mm(f.position))).collect();
+        let actual_mm: Vec<Option<f64>> = (0..n)
+            .map(|i| self.fb[i].map(|f| self.axes[i].to_mm(f.position)))
+            .collect();
 
         // Shift the setpoint history.
         for h in &mut self.sp_mm {
@@ -398,7 +426,10 @@ impl CyclicMaster {
                             Action::Next(_) => all = false,
                             Action::Fault => {
                                 let a = &self.axes[i];
-                                let msg = format!("axis {} (node {}): fault reset did not clear the fault", a.name, a.node);
+                                let msg = format!(
+                                    "axis {} (node {}): fault reset did not clear the fault",
+                                    a.name, a.node
+                                );
                                 self.fail(msg);
                                 all = false;
                             }
@@ -417,9 +448,19 @@ impl CyclicMaster {
                     } else if self.phase_time_s() > STATE_TIMEOUT_S {
                         let late: Vec<String> = (0..n)
                             .filter(|&i| states[i] != Some(State::OperationEnabled))
-                            .map(|i| format!("{} (node {}) in {}", self.axes[i].name, self.axes[i].node, states[i].map_or("no statusword", |s| s.name())))
+                            .map(|i| {
+                                format!(
+                                    "{} (node {}) in {}",
+                                    self.axes[i].name,
+                                    self.axes[i].node,
+                                    states[i].map_or("no statusword", |s| s.name())
+                                )
+                            })
                             .collect();
-                        self.fail(format!("drives did not reach Operation enabled within {STATE_TIMEOUT_S} s: {}", late.join(", ")));
+                        self.fail(format!(
+                            "drives did not reach Operation enabled within {STATE_TIMEOUT_S} s: {}",
+                            late.join(", ")
+                        ));
                     }
                 }
             }
@@ -444,7 +485,9 @@ impl CyclicMaster {
                     self.set_phase(Phase::Armed);
                 } else if self.phase_time_s() > STATE_TIMEOUT_S {
                     let late: Vec<String> = (0..n)
-                        .filter(|&i| self.fb[i].is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0))
+                        .filter(|&i| {
+                            self.fb[i].is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
+                        })
                         .map(|i| format!("{} (node {})", self.axes[i].name, self.axes[i].node))
                         .collect();
                     self.fail(format!(
@@ -453,10 +496,8 @@ impl CyclicMaster {
                     ));
                 }
             }
-            Phase::Armed => {
-                if self.motion.is_some() {
-                    self.set_phase(Phase::Streaming);
-                }
+            Phase::Armed if self.motion.is_some() => {
+                self.set_phase(Phase::Streaming);
             }
             _ => {}
         }
@@ -476,17 +517,25 @@ impl CyclicMaster {
                 let step = (target - prev).abs();
                 // Last line of defence; the plan is checked against these before motion starts.
                 if !(a.min_mm..=a.max_mm).contains(&target) {
-                    let msg = format!("axis {}: setpoint {target:.4} mm outside the travel limits [{}, {}] mm", a.name, a.min_mm, a.max_mm);
+                    let msg = format!(
+                        "axis {}: setpoint {target:.4} mm outside the travel limits [{}, {}] mm",
+                        a.name, a.min_mm, a.max_mm
+                    );
                     self.fail(msg);
                     break;
                 }
                 if step > a.max_vel_mm_s * self.period_s * 1.01 + 1e-9 {
-                    let msg = format!("axis {}: setpoint step {step:.4} mm exceeds max_vel × period", a.name);
+                    let msg = format!(
+                        "axis {}: setpoint step {step:.4} mm exceeds max_vel × period",
+                        a.name
+                    );
                     self.fail(msg);
                     break;
                 }
                 self.sp_mm[i][0] = target;
-                if self.first_motion_cycle.is_none() && self.axes[i].to_counts(target) != self.axes[i].to_counts(prev) {
+                if self.first_motion_cycle.is_none()
+                    && self.axes[i].to_counts(target) != self.axes[i].to_counts(prev)
+                {
                     self.first_motion_cycle = Some(self.cycle);
                 }
             }
@@ -506,7 +555,9 @@ impl CyclicMaster {
                 }
                 self.start_disabling();
             } else if self.phase_time_s() > SETTLE_TIMEOUT_S {
-                self.fail(format!("axes did not settle within one count of the end point in {SETTLE_TIMEOUT_S} s"));
+                self.fail(format!(
+                    "axes did not settle within one count of the end point in {SETTLE_TIMEOUT_S} s"
+                ));
             }
         } else if self.phase == Phase::Stopping {
             let mut moving = false;
@@ -518,7 +569,11 @@ impl CyclicMaster {
                 let v = self.stop_vel[i];
                 // Decelerate at the axis's limit, scaled so all axes stop together.
                 let dv = a.max_acc_mm_s2 * self.period_s;
-                let nv = if v > 0.0 { (v - dv).max(0.0) } else { (v + dv).min(0.0) };
+                let nv = if v > 0.0 {
+                    (v - dv).max(0.0)
+                } else {
+                    (v + dv).min(0.0)
+                };
                 self.stop_vel[i] = nv;
                 let next = (self.sp_mm[i][1] + nv * self.period_s).clamp(a.min_mm, a.max_mm);
                 self.sp_mm[i][0] = next;
@@ -529,11 +584,11 @@ impl CyclicMaster {
             }
         } else if self.phase == Phase::Disabling {
             let mut all = true;
-            for i in 0..n {
-                match states[i] {
+            for (e, st) in self.enablers.iter_mut().zip(&states) {
+                match st {
                     Some(State::Fault) | None => {}
                     Some(s) => {
-                        if self.enablers[i].update(s) != Action::Done {
+                        if e.update(*s) != Action::Done {
                             all = false;
                         }
                     }
@@ -555,9 +610,9 @@ impl CyclicMaster {
             act_mm: [0.0; 3],
             ferr_mm: [0.0; 3],
         };
-        for i in 0..n.min(3) {
+        for (i, act) in actual_mm.iter().enumerate().take(3) {
             rec.cmd_mm[i] = self.sp_mm[i][0];
-            if let Some(p) = actual_mm[i] {
+            if let Some(p) = *act {
                 rec.act_mm[i] = p;
                 let ferr = self.sp_mm[i][2] - p;
                 rec.ferr_mm[i] = ferr;
@@ -571,7 +626,11 @@ impl CyclicMaster {
             for i in 0..n {
                 let a = &self.axes[i];
                 let cw = self.enablers[i].controlword();
-                let cw = if a.mode == AxisMode::Csp { cw & !cwb::IP_ENABLE } else { cw };
+                let cw = if a.mode == AxisMode::Csp {
+                    cw & !cwb::IP_ENABLE
+                } else {
+                    cw
+                };
                 out.push(a.rpdo(cw, a.to_counts(self.sp_mm[i][0])));
             }
             out.push(Frame::new(sync_cob_id, &[]).expect("valid SYNC id"));

@@ -74,7 +74,9 @@ impl NodeIo {
                     if let (Some(t), Ok(d)) = (sdo_tx.get(&node), <[u8; 8]>::try_from(f.data())) {
                         let _ = t.send(d);
                     }
-                } else if (cob::HEARTBEAT + 1..=cob::HEARTBEAT + 127).contains(&id) && f.data().len() == 1 {
+                } else if (cob::HEARTBEAT + 1..=cob::HEARTBEAT + 127).contains(&id)
+                    && f.data().len() == 1
+                {
                     let node = (id - cob::HEARTBEAT) as u8;
                     if let Some(state) = NmtState::from_byte(f.data()[0]) {
                         let mut g = h.lock().unwrap();
@@ -115,7 +117,8 @@ impl NodeIo {
 
     /// Send an NMT command to `node` (0 = all).
     pub async fn nmt(&self, cs: u8, node: u8) -> Result<(), GatewayError> {
-        self.send(&Frame::new(cob::NMT, &[cs, node]).expect("NMT")).await
+        self.send(&Frame::new(cob::NMT, &[cs, node]).expect("NMT"))
+            .await
     }
 
     /// Forget boot-ups seen so far.
@@ -132,7 +135,11 @@ impl NodeIo {
             let notified = self.bootup_notify.notified();
             let missing: Vec<u8> = {
                 let g = self.health.lock().unwrap();
-                nodes.iter().copied().filter(|n| g.get(n).is_none_or(|h| h.bootups == 0)).collect()
+                nodes
+                    .iter()
+                    .copied()
+                    .filter(|n| g.get(n).is_none_or(|h| h.bootups == 0))
+                    .collect()
             };
             if missing.is_empty() {
                 return missing;
@@ -146,7 +153,11 @@ impl NodeIo {
     /// Start the gateway's own heartbeat: `0x700 + node` with state Operational, every `period`.
     pub fn start_heartbeat(&mut self, node: u8, period: Duration) {
         let tx = self.tx.clone();
-        let f = Frame::new(cob::HEARTBEAT + u16::from(node), &[NmtState::Operational.byte()]).expect("id");
+        let f = Frame::new(
+            cob::HEARTBEAT + u16::from(node),
+            &[NmtState::Operational.byte()],
+        )
+        .expect("id");
         self.tasks.push(tokio::spawn(async move {
             let mut tick = tokio::time::interval(period);
             tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -159,8 +170,18 @@ impl NodeIo {
         }));
     }
 
-    async fn transfer(&self, node: u8, index: u16, sub: u8, first: [u8; 8], client: &mut SdoClient) -> Result<Option<Value>, GatewayError> {
-        let rx = self.sdo_rx.get(&node).ok_or(GatewayError::UnknownNode { node })?;
+    async fn transfer(
+        &self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        first: [u8; 8],
+        client: &mut SdoClient,
+    ) -> Result<Option<Value>, GatewayError> {
+        let rx = self
+            .sdo_rx
+            .get(&node)
+            .ok_or(GatewayError::UnknownNode { node })?;
         let mut rx = rx.lock().await;
         while rx.try_recv().is_ok() {} // stale responses
         let req = cob::SDO_RX + u16::from(node);
@@ -194,8 +215,15 @@ impl NodeIo {
     }
 
     /// SDO upload of `index:sub` as `data_type`.
-    pub async fn read(&self, node: u8, index: u16, sub: u8, data_type: DataType) -> Result<Value, GatewayError> {
-        let mut c = SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
+    pub async fn read(
+        &self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        data_type: DataType,
+    ) -> Result<Value, GatewayError> {
+        let mut c =
+            SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
         let first = c.read(Address::new(index, sub), data_type);
         self.transfer(node, index, sub, first, &mut c)
             .await?
@@ -203,10 +231,19 @@ impl NodeIo {
     }
 
     /// SDO download of `value` to `index:sub`.
-    pub async fn write(&self, node: u8, index: u16, sub: u8, value: Value) -> Result<(), GatewayError> {
-        let mut c = SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
+    pub async fn write(
+        &self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        value: Value,
+    ) -> Result<(), GatewayError> {
+        let mut c =
+            SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
         let first = c.write(Address::new(index, sub), value);
-        self.transfer(node, index, sub, first, &mut c).await.map(|_| ())
+        self.transfer(node, index, sub, first, &mut c)
+            .await
+            .map(|_| ())
     }
 
     /// Read an integer entry.

@@ -39,7 +39,9 @@ pub enum GatewayError {
         source: PlanError,
     },
     /// A move leaves an axis's travel.
-    #[error("{file}:{line}: axis {axis} would move to {target_mm:.4} mm, outside its travel [{min_mm}, {max_mm}] mm")]
+    #[error(
+        "{file}:{line}: axis {axis} would move to {target_mm:.4} mm, outside its travel [{min_mm}, {max_mm}] mm"
+    )]
     OutOfTravel {
         /// Program file.
         file: String,
@@ -112,7 +114,9 @@ pub enum GatewayError {
         bus: String,
     },
     /// A node is not the configured device.
-    #[error("axis {axis} (node {node}): {object} is 0x{found:08X}, the dictionary {dictionary} expects 0x{expected:08X}: wrong drive or wrong dictionary")]
+    #[error(
+        "axis {axis} (node {node}): {object} is 0x{found:08X}, the dictionary {dictionary} expects 0x{expected:08X}: wrong drive or wrong dictionary"
+    )]
     WrongIdentity {
         /// Axis.
         axis: String,
@@ -142,7 +146,9 @@ pub enum GatewayError {
         found: String,
     },
     /// 0x6061 did not confirm the mode.
-    #[error("axis {axis} (node {node}): modes of operation display 0x6061 shows {found}, not mode {mode}, within 1 s")]
+    #[error(
+        "axis {axis} (node {node}): modes of operation display 0x6061 shows {found}, not mode {mode}, within 1 s"
+    )]
     ModeNotConfirmed {
         /// Axis.
         axis: String,
@@ -206,7 +212,11 @@ pub struct Summary {
 impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(f, "program time      {:.3} s", self.program_s)?;
-        writeln!(f, "cycles            {} streamed, {} in all ({} overruns)", self.streaming_cycles, self.cycles, self.timing.overruns)?;
+        writeln!(
+            f,
+            "cycles            {} streamed, {} in all ({} overruns)",
+            self.streaming_cycles, self.cycles, self.timing.overruns
+        )?;
         for (i, a) in self.axes.iter().enumerate() {
             writeln!(
                 f,
@@ -218,9 +228,18 @@ impl std::fmt::Display for Summary {
             writeln!(f, "warning           {w}")?;
         }
         if self.log_dropped > 0 {
-            writeln!(f, "warning           {} log rows dropped (the log writer fell behind)", self.log_dropped)?;
+            writeln!(
+                f,
+                "warning           {} log rows dropped (the log writer fell behind)",
+                self.log_dropped
+            )?;
         }
-        write!(f, "cyclic thread     {}, latest wake-up {} µs late", self.rt, self.timing.max_wake_late.as_micros())
+        write!(
+            f,
+            "cyclic thread     {}, latest wake-up {} µs late",
+            self.rt,
+            self.timing.max_wake_late.as_micros()
+        )
     }
 }
 
@@ -258,7 +277,12 @@ pub fn limits(machine: &Machine) -> Limits {
 
 /// Parse and plan a program from `start_mm`, checking every move against the machine's axes and
 /// travel. Nothing moves before this has succeeded for the whole program.
-pub fn plan_program(machine: &Machine, name: &str, text: &str, start_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
+pub fn plan_program(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+) -> Result<Plan, GatewayError> {
     let program = crate::gcode::parse_program(text, name, start_mm)?;
     let mut prev = start_mm;
     for m in &program.moves {
@@ -342,7 +366,11 @@ pub fn run(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, G
     runtime.block_on(run_async(machine, bus, opts))
 }
 
-async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, GatewayError> {
+async fn run_async(
+    machine: &Machine,
+    bus: &Bus,
+    opts: &RunOptions,
+) -> Result<Summary, GatewayError> {
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
     let start_counts = startup::start(machine, bus, &mut io).await?;
@@ -366,7 +394,11 @@ async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Su
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
     let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
     let m = machine.clone();
-    let tpdo_filters: Vec<Filter> = machine.axes.iter().map(|a| Filter::exact(a.feedback_pdo.cob_id)).collect();
+    let tpdo_filters: Vec<Filter> = machine
+        .axes
+        .iter()
+        .map(|a| Filter::exact(a.feedback_pdo.cob_id))
+        .collect();
     let mut port = bus.open(&tpdo_filters)?;
     let cyc = std::thread::Builder::new()
         .name("canmotion-cyclic".into())
@@ -377,7 +409,10 @@ async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Su
     let plan_result = match armed_rx.await {
         Ok(armed_mm) => {
             let r = plan_program(machine, &opts.program_name, &opts.program_text, armed_mm)
-                .and_then(|plan| Interpolator::new(plan, machine.cycle_s()).map_err(|e| GatewayError::Motion(e.to_string())));
+                .and_then(|plan| {
+                    Interpolator::new(plan, machine.cycle_s())
+                        .map_err(|e| GatewayError::Motion(e.to_string()))
+                });
             match r {
                 Ok(interp) => {
                     let _ = plan_tx.send(interp);
@@ -390,12 +425,16 @@ async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Su
     };
     drop(plan_tx);
     let (master, timing, rt_setup, port_err, dropped, warnings) =
-        tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked")).await.expect("join");
+        tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
+            .await
+            .expect("join");
     if let Some(t) = log_thread {
-        t.join().expect("log thread").map_err(|source| GatewayError::Log {
-            file: opts.log.clone().unwrap_or_default(),
-            source,
-        })?;
+        t.join()
+            .expect("log thread")
+            .map_err(|source| GatewayError::Log {
+                file: opts.log.clone().unwrap_or_default(),
+                source,
+            })?;
     }
     plan_result?;
     if let Some(e) = port_err {
@@ -422,7 +461,14 @@ async fn run_async(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Su
     })
 }
 
-type CyclicResult = (CyclicMaster, Timing, String, Option<BusError>, u64, Vec<String>);
+type CyclicResult = (
+    CyclicMaster,
+    Timing,
+    String,
+    Option<BusError>,
+    u64,
+    Vec<String>,
+);
 
 fn cyclic_thread(
     machine: &Machine,
@@ -441,7 +487,11 @@ fn cyclic_thread(
     let mut seen_emcys = vec![0usize; machine.axes.len()];
     let mut bootups_at_start: Vec<u32> = {
         let g = health.lock().unwrap();
-        machine.axes.iter().map(|a| g.get(&a.node).map_or(0, |h| h.bootups)).collect()
+        machine
+            .axes
+            .iter()
+            .map(|a| g.get(&a.node).map_or(0, |h| h.bootups))
+            .collect()
     };
     let consumer = Duration::from_millis(u64::from(machine.heartbeat.gateway_consumer_ms));
     let mut port_err = None;
@@ -468,22 +518,49 @@ fn cyclic_thread(
                 let Some(h) = g.get(&a.node) else { continue };
                 for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
                     if emcy::is_warning(e.code) {
-                        warnings.push(format!("axis {} (node {}): EMCY 0x{:04X} {} at cycle {}", a.name, a.node, e.code, emcy::meaning(e.code), ticker.timing.cycles));
+                        warnings.push(format!(
+                            "axis {} (node {}): EMCY 0x{:04X} {} at cycle {}",
+                            a.name,
+                            a.node,
+                            e.code,
+                            emcy::meaning(e.code),
+                            ticker.timing.cycles
+                        ));
                     } else {
-                        master.alarm(a.node, format!("axis {} (node {}): EMCY 0x{:04X} {}", a.name, a.node, e.code, emcy::meaning(e.code)));
+                        master.alarm(
+                            a.node,
+                            format!(
+                                "axis {} (node {}): EMCY 0x{:04X} {}",
+                                a.name,
+                                a.node,
+                                e.code,
+                                emcy::meaning(e.code)
+                            ),
+                        );
                     }
                 }
                 seen_emcys[i] = h.emcys.len();
                 if h.bootups > bootups_at_start[i] {
                     bootups_at_start[i] = h.bootups;
-                    master.alarm(a.node, format!("axis {} (node {}): boot-up during the run: the drive reset", a.name, a.node));
+                    master.alarm(
+                        a.node,
+                        format!(
+                            "axis {} (node {}): boot-up during the run: the drive reset",
+                            a.name, a.node
+                        ),
+                    );
                 }
                 if let Some((_, at)) = h.last_heartbeat
                     && at.elapsed() > consumer
                 {
                     master.alarm(
                         a.node,
-                        format!("axis {} (node {}): heartbeat lost (none for {} ms)", a.name, a.node, at.elapsed().as_millis()),
+                        format!(
+                            "axis {} (node {}): heartbeat lost (none for {} ms)",
+                            a.name,
+                            a.node,
+                            at.elapsed().as_millis()
+                        ),
                     );
                 }
             }
@@ -519,7 +596,11 @@ fn cyclic_thread(
     // Orderly end: Pre-operational right after the last SYNC, so no drive waits for a SYNC that
     // will not come.
     for a in &machine.axes {
-        let f = Frame::new(crate::canopen::cob::NMT, &[crate::canopen::nmt::PRE_OPERATIONAL, a.node]).expect("NMT");
+        let f = Frame::new(
+            crate::canopen::cob::NMT,
+            &[crate::canopen::nmt::PRE_OPERATIONAL, a.node],
+        )
+        .expect("NMT");
         if let Err(e) = port.send(&f) {
             port_err.get_or_insert(e);
         }
@@ -530,7 +611,10 @@ fn cyclic_thread(
 
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;
 
-fn spawn_logger(path: &Path, machine: &Machine) -> Result<(mpsc::SyncSender<CycleRecord>, LogThread), GatewayError> {
+fn spawn_logger(
+    path: &Path,
+    machine: &Machine,
+) -> Result<(mpsc::SyncSender<CycleRecord>, LogThread), GatewayError> {
     let file = std::fs::File::create(path).map_err(|source| GatewayError::Log {
         file: path.to_path_buf(),
         source,

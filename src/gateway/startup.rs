@@ -20,7 +20,13 @@ async fn write(io: &NodeIo, node: u8, index: u16, sub: u8, v: Value) -> Result<(
     io.write(node, index, sub, v).await
 }
 
-async fn write_checked(io: &NodeIo, node: u8, index: u16, sub: u8, v: Value) -> Result<(), GatewayError> {
+async fn write_checked(
+    io: &NodeIo,
+    node: u8,
+    index: u16,
+    sub: u8,
+    v: Value,
+) -> Result<(), GatewayError> {
     io.write(node, index, sub, v).await?;
     let back = io.read(node, index, sub, v.data_type()).await?;
     if back != v {
@@ -37,7 +43,13 @@ async fn write_checked(io: &NodeIo, node: u8, index: u16, sub: u8, v: Value) -> 
 
 /// CiA 301 §7.5.2.35–38: COB-ID invalid, mapping count 0, entries, count, COB-ID valid; then
 /// read everything back.
-async fn remap(io: &NodeIo, node: u8, comm: u16, map: u16, pdo: &PdoConfig) -> Result<(), GatewayError> {
+async fn remap(
+    io: &NodeIo,
+    node: u8,
+    comm: u16,
+    map: u16,
+    pdo: &PdoConfig,
+) -> Result<(), GatewayError> {
     let cob = u32::from(pdo.cob_id);
     write(io, node, comm, 1, Value::Unsigned32(cob | 0x8000_0000)).await?;
     write(io, node, map, 0, Value::Unsigned8(0)).await?;
@@ -119,8 +131,22 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     }
     // Limits in the drive's units.
     let counts = |mm: f64| a.mm_to_counts(mm);
-    write_checked(io, n, 0x6065, 0, Value::Unsigned32(counts(a.following_error_mm).unsigned_abs())).await?;
-    write_checked(io, n, 0x6066, 0, Value::Unsigned16(a.following_error_timeout_ms)).await?;
+    write_checked(
+        io,
+        n,
+        0x6065,
+        0,
+        Value::Unsigned32(counts(a.following_error_mm).unsigned_abs()),
+    )
+    .await?;
+    write_checked(
+        io,
+        n,
+        0x6066,
+        0,
+        Value::Unsigned16(a.following_error_timeout_ms),
+    )
+    .await?;
     write_checked(io, n, 0x607D, 1, Value::Integer32(counts(a.min_mm))).await?;
     write_checked(io, n, 0x607D, 2, Value::Integer32(counts(a.max_mm))).await?;
     // The drive's own velocity limit, with head-room for its position loop to catch up.
@@ -137,10 +163,31 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
             disable_pdo(io, n, 0x1800 + u16::from(k - 1)).await?;
         }
     }
-    remap(io, n, 0x1400 + u16::from(rx - 1), 0x1600 + u16::from(rx - 1), &a.setpoint_pdo).await?;
-    remap(io, n, 0x1800 + u16::from(tx - 1), 0x1A00 + u16::from(tx - 1), &a.feedback_pdo).await?;
+    remap(
+        io,
+        n,
+        0x1400 + u16::from(rx - 1),
+        0x1600 + u16::from(rx - 1),
+        &a.setpoint_pdo,
+    )
+    .await?;
+    remap(
+        io,
+        n,
+        0x1800 + u16::from(tx - 1),
+        0x1A00 + u16::from(tx - 1),
+        &a.feedback_pdo,
+    )
+    .await?;
     // SYNC consumer settings (the gateway produces SYNC).
-    write_checked(io, n, 0x1005, 0, Value::Unsigned32(u32::from(m.sync_cob_id))).await?;
+    write_checked(
+        io,
+        n,
+        0x1005,
+        0,
+        Value::Unsigned32(u32::from(m.sync_cob_id)),
+    )
+    .await?;
     write_checked(io, n, 0x1006, 0, Value::Unsigned32(m.cycle_us)).await?;
     write_checked(io, n, 0x1007, 0, Value::Unsigned32(m.sync_window_us)).await?;
     // Interpolation: linear sub-mode, period = SYNC period.
@@ -204,10 +251,12 @@ pub async fn start(m: &Machine, bus: &Bus, io: &mut NodeIo) -> Result<Vec<i32>, 
     }
     let mut pos = Vec::new();
     for a in &m.axes {
-        pos.push(match io.read(a.node, 0x6064, 0, DataType::Integer32).await? {
-            Value::Integer32(v) => v,
-            _ => 0,
-        });
+        pos.push(
+            match io.read(a.node, 0x6064, 0, DataType::Integer32).await? {
+                Value::Integer32(v) => v,
+                _ => 0,
+            },
+        );
     }
     for &n in &nodes {
         io.nmt(nmt::START, n).await?;

@@ -6,7 +6,10 @@ use std::time::Duration;
 
 /// A monotonic timestamp in nanoseconds (CLOCK_MONOTONIC).
 pub fn now_ns() -> u64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
     // SAFETY: clock_gettime writes into the timespec we own.
     unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
@@ -21,7 +24,12 @@ pub fn sleep_until_ns(deadline_ns: u64) {
     loop {
         // SAFETY: a plain syscall with a timespec we own; no remaining-time output with ABSTIME.
         let r = unsafe {
-            libc::clock_nanosleep(libc::CLOCK_MONOTONIC, libc::TIMER_ABSTIME, &ts, std::ptr::null_mut())
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
         };
         if r != libc::EINTR {
             return;
@@ -46,7 +54,15 @@ impl std::fmt::Display for RtSetup {
             Some(p) => write!(f, "SCHED_FIFO priority {p}")?,
             None => write!(f, "normal scheduling")?,
         }
-        write!(f, ", memory {}", if self.memory_locked { "locked" } else { "not locked" })?;
+        write!(
+            f,
+            ", memory {}",
+            if self.memory_locked {
+                "locked"
+            } else {
+                "not locked"
+            }
+        )?;
         for n in &self.notes {
             write!(f, "; {n}")?;
         }
@@ -71,11 +87,18 @@ pub fn priority_from_env() -> i32 {
 /// memory. Failures are reported, not fatal: the loop still runs, with more jitter.
 pub fn make_realtime(priority: i32) -> RtSetup {
     let mut s = RtSetup::default();
-    let param = libc::sched_param { sched_priority: priority };
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
     // SAFETY: sets the scheduling policy of the calling thread (pid 0).
-    let r = if priority == 0 { 0 } else { unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } };
+    let r = if priority == 0 {
+        0
+    } else {
+        unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) }
+    };
     if priority == 0 {
-        s.notes.push("SCHED_FIFO off (CANMOTION_RT_PRIORITY=0)".into());
+        s.notes
+            .push("SCHED_FIFO off (CANMOTION_RT_PRIORITY=0)".into());
     } else if r == 0 {
         s.fifo_priority = Some(priority);
     } else {
@@ -89,7 +112,10 @@ pub fn make_realtime(priority: i32) -> RtSetup {
     if r == 0 {
         s.memory_locked = true;
     } else {
-        s.notes.push(format!("mlockall failed ({})", std::io::Error::last_os_error()));
+        s.notes.push(format!(
+            "mlockall failed ({})",
+            std::io::Error::last_os_error()
+        ));
     }
     s
 }

@@ -218,7 +218,10 @@ impl SimDrive {
             Filter::exact(cob::NMT),
             Filter::exact((self.od.int(0x1005, 0) as u32 & 0x7FF) as u16),
             Filter::exact(cob::SDO_RX + u16::from(self.node)),
-            Filter { id: cob::HEARTBEAT, mask: 0x780 },
+            Filter {
+                id: cob::HEARTBEAT,
+                mask: 0x780,
+            },
         ];
         for n in 0..4 {
             let c = self.od.int(rpdo_base(n), 1) as u32;
@@ -235,8 +238,11 @@ impl SimDrive {
         if let Some(h) = self.next_heartbeat {
             t = t.min(h);
         }
-        if let (Some(last), Some(p), false) = (self.last_sync, self.sync_period(), self.sync_missing_reported)
-            && self.nmt == NmtState::Operational
+        if let (Some(last), Some(p), false) = (
+            self.last_sync,
+            self.sync_period(),
+            self.sync_missing_reported,
+        ) && self.nmt == NmtState::Operational
         {
             t = t.min(last + p * 3 / 2 + Duration::from_micros(1));
         }
@@ -262,7 +268,9 @@ impl SimDrive {
         if let Some(h) = self.next_heartbeat
             && now >= h
         {
-            out.push(Frame::new(cob::HEARTBEAT + u16::from(self.node), &[self.nmt.byte()]).expect("id"));
+            out.push(
+                Frame::new(cob::HEARTBEAT + u16::from(self.node), &[self.nmt.byte()]).expect("id"),
+            );
             let ms = self.od.int(0x1017, 0) as u64;
             // Keep the beat on its grid; if we fell far behind, restart from now.
             let mut next = h + Duration::from_millis(ms.max(1));
@@ -315,7 +323,13 @@ impl SimDrive {
         self.refresh();
     }
 
-    fn raise_fault(&mut self, cause: FaultCause, _now: Duration, out: &mut Vec<Frame>, send_emcy: bool) {
+    fn raise_fault(
+        &mut self,
+        cause: FaultCause,
+        _now: Duration,
+        out: &mut Vec<Frame>,
+        send_emcy: bool,
+    ) {
         if self.power.fault().is_some() {
             self.fault_cause = Some(cause);
             let code = match cause {
@@ -333,7 +347,11 @@ impl SimDrive {
 
     /// Send an EMCY (if 0x1014 is valid), set the error register and the error history.
     fn emcy(&mut self, code: u16, register_bits: u8, out: &mut Vec<Frame>) {
-        let reg = if code == 0 { 0 } else { (self.od.int(0x1001, 0) as u8) | 0x01 | register_bits };
+        let reg = if code == 0 {
+            0
+        } else {
+            (self.od.int(0x1001, 0) as u8) | 0x01 | register_bits
+        };
         self.od.set_int(0x1001, 0, i64::from(reg));
         if code != 0 {
             for s in (2..=8u8).rev() {
@@ -377,7 +395,10 @@ impl SimDrive {
             let c = self.od.int(rpdo_base(n), 1) as u32;
             c & 0x8000_0000 == 0 && (c & 0x7FF) as u16 == id
         });
-        let mine = id == cob::NMT || id == sync_id || id == cob::SDO_RX + u16::from(self.node) || rpdo.is_some();
+        let mine = id == cob::NMT
+            || id == sync_id
+            || id == cob::SDO_RX + u16::from(self.node)
+            || rpdo.is_some();
         if !mine {
             return;
         }
@@ -616,7 +637,9 @@ impl SimDrive {
                 }
             }
             (0x605A, 0) => {
-                let _ = self.power.set_quick_stop_option(self.od.int(0x605A, 0) as i16);
+                let _ = self
+                    .power
+                    .set_quick_stop_option(self.od.int(0x605A, 0) as i16);
             }
             (0x1017, 0) => {
                 let now = self.last_physics.unwrap_or_default();
@@ -700,7 +723,10 @@ impl SimDrive {
             State::OperationEnabled => {
                 let mut v_ff = 0.0;
                 if let Some(ip) = self.interp {
-                    let period = self.ip_period().or(self.sync_period()).unwrap_or(Duration::from_millis(1));
+                    let period = self
+                        .ip_period()
+                        .or(self.sync_period())
+                        .unwrap_or(Duration::from_millis(1));
                     let p = period.as_secs_f64();
                     let frac = ((t.saturating_sub(ip.at)).as_secs_f64() / p).min(1.0);
                     self.demand = ip.from + (ip.to - ip.from) * frac;
@@ -777,7 +803,8 @@ impl SimDrive {
         self.od.set_int(0x6064, 0, self.pos.round() as i64);
         self.od.set_int(0x6062, 0, self.demand.round() as i64);
         self.od.set_int(0x606C, 0, self.vel.round() as i64);
-        self.od.set_int(0x60F4, 0, (self.demand - self.pos).round() as i64);
+        self.od
+            .set_int(0x60F4, 0, (self.demand - self.pos).round() as i64);
     }
 
     /// The PDO number (0-based) and whether it is receive, for a communication or mapping index.
@@ -809,7 +836,11 @@ impl SimDrive {
                 AbortCode::NO_OBJECT
             });
         };
-        let ok_access = if rx { def.access.writable() } else { def.access.readable() };
+        let ok_access = if rx {
+            def.access.writable()
+        } else {
+            def.access.readable()
+        };
         if !def.pdo || !ok_access || usize::from(e.bits) != def.data_type.size() * 8 {
             return Err(AbortCode::NOT_MAPPABLE);
         }
@@ -865,10 +896,8 @@ impl SimDrive {
                             }
                         }
                     }
-                    2 => {
-                        if (241..=251).contains(&x) || (rx && (252..=253).contains(&x)) {
-                            return Err(AbortCode::INVALID_VALUE);
-                        }
+                    2 if ((241..=251).contains(&x) || (rx && (252..=253).contains(&x))) => {
+                        return Err(AbortCode::INVALID_VALUE);
                     }
                     _ => {}
                 }
@@ -881,10 +910,13 @@ impl SimDrive {
             (0x1003, 0) if x != 0 => Err(AbortCode::INVALID_VALUE),
             (0x6060, 0) => {
                 let supported = self.od.int(0x6502, 0);
-                if x != 0 && (x < 1 || x > 32 || supported & (1 << (x - 1)) == 0) {
+                if x != 0 && (!(1..=32).contains(&x) || supported & (1 << (x - 1)) == 0) {
                     return Err(AbortCode::INVALID_VALUE);
                 }
-                if self.power.is_operation_enabled() && (self.ip_active || self.mode() == 8) && x as i8 != self.mode() {
+                if self.power.is_operation_enabled()
+                    && (self.ip_active || self.mode() == 8)
+                    && x as i8 != self.mode()
+                {
                     return Err(AbortCode::DEVICE_STATE);
                 }
                 Ok(())
@@ -900,7 +932,12 @@ impl SdoTarget for SimDrive {
         self.od.sdo_read(index, sub)
     }
 
-    fn sdo_check_write(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+    fn sdo_check_write(
+        &mut self,
+        index: u16,
+        sub: u8,
+        size: Option<usize>,
+    ) -> Result<(), AbortCode> {
         self.od.sdo_check_write(index, sub, size)
     }
 

@@ -86,7 +86,12 @@ fn filters_of(drives: &[SimDrive]) -> Vec<crate::bus::Filter> {
     f
 }
 
-fn run(mut drives: Vec<SimDrive>, mut port: Box<dyn Port>, epoch: Instant, stop: &AtomicBool) -> Result<(), BusError> {
+fn run(
+    mut drives: Vec<SimDrive>,
+    mut port: Box<dyn Port>,
+    epoch: Instant,
+    stop: &AtomicBool,
+) -> Result<(), BusError> {
     let mut out = Vec::new();
     for d in &mut drives {
         d.boot(epoch.elapsed(), &mut out);
