@@ -957,3 +957,6 @@ impl SdoTarget for SimDrive {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests;

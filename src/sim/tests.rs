@@ -1,0 +1,1 @@
+//! Checklist tests of the simulated drive, sans-I/O (in progress).
