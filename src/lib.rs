@@ -1,4 +1,49 @@
-//! canmotion (in progress)
+//! # canmotion: a CAN-bus motion gateway
+//!
+//! canmotion reads a G-code program, plans its motion, interpolates one position per axis every
+//! cycle and streams those setpoints to CiA 402 servo drives as CANopen PDOs on SYNC, while it
+//! watches every drive's state, position and faults.
+//!
+//! ## One move, from a G-code line to a CAN frame
+//!
+//! Take `G1 X50 F1200` on line 5 of a program, on the demo machine (X on node 1, 1000 counts/mm,
+//! interpolated position mode, 4 ms cycle).
+//!
+//! 1. [`gcode`] parses the whole program before anything moves
+//!    ([`gcode::parse_program`]); the line becomes a [`gcode::Move`] with an absolute target in
+//!    millimetres and a feed of 20 mm/s. A syntax error names `file:line:col`.
+//! 2. `compensation` (tool radius and length) comes with the full G-code front end; this
+//!    foundation has none, so the move passes through unchanged.
+//! 3. [`gateway::plan_program`] checks the target against the axes' travel, then
+//!    [`planner::plan`] turns the move into a [`planner::Segment`]: a trapezoid (or triangle)
+//!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
+//!    projected on the move's direction.
+//! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
+//!    allocation, no blocking; the last sample is the end point, exactly.
+//! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
+//!    SCHED_FIFO where permitted), converts the sample to counts (50 mm → 50000), checks it
+//!    against the travel and the largest step a cycle allows, and packs it with the controlword
+//!    into the axis's RPDO as the machine file maps it (`0x60400010, 0x60C10120`):
+//!    [`bus::Frame`] `201#1F0050C30000`, then the SYNC frame `080#`.
+//! 6. [`bus`] sends both on the bus: SocketCAN (`vcan0`, `can0`) or the in-process bus. The
+//!    drive ([`sim`] in tests and the demo, a real servo otherwise) latches the setpoint at SYNC,
+//!    interpolates towards it over the period and answers with its TPDO `181#3716` followed by the position
+//!    (statusword, position actual), which the next cycle reads back for the following error.
+//!
+//! Before the first cycle, [`gateway::startup`] has used SDO ([`canopen`]: the codecs and the
+//! client of canopen-rs, with our server and abort tables) to check each drive's identity,
+//! write the machine file's settings, remap the PDOs, set 0x60C2 to the SYNC period and the
+//! mode; [`cia402`] then walks each drive to Operation enabled through the RPDO's controlword,
+//! and IP mode starts only once statusword bit 12 answers controlword bit 4 (bumpless: the
+//! first setpoint is position actual).
+//!
+//! ## Layers
+//!
+//! Data flows one way: `gcode → (compensation) → planner → interp → gateway::cyclic →
+//! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
+//! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
+//! takes time as an argument.
+
 pub mod bus;
 pub mod canopen;
 pub mod cia402;

@@ -1,6 +1,6 @@
 //! The bus: one narrow interface over CAN frames, with two implementations.
 //!
-//! - [`socketcan`](self::socketcan): a Linux SocketCAN interface (`vcan0`, `can0`) through the
+//! - [`socketcan`]: a Linux SocketCAN interface (`vcan0`, `can0`) through the
 //!   `socketcan` crate, blocking for the cyclic thread and tokio-driven for the non-cyclic traffic.
 //! - [`inproc`]: an in-process bus with vcan semantics: every port sees every frame sent by every
 //!   *other* port, in send order. It carries the embedded default (simulated drives in the same
