@@ -206,7 +206,40 @@ pub struct Summary {
     /// Log rows dropped because the writer fell behind.
     pub log_dropped: u64,
     /// Warnings the drives reported (EMCYs after which they kept running).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
+}
+
+/// An EMCY after which the drive kept running (see [`emcy::is_warning`]), counted.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Warning {
+    /// Axis letter.
+    pub axis: String,
+    /// Node.
+    pub node: u8,
+    /// EMCY code.
+    pub code: u16,
+    /// How many times.
+    pub count: u32,
+    /// Cycle of the first.
+    pub first_cycle: u64,
+    /// Cycle of the last.
+    pub last_cycle: u64,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "axis {} (node {}): EMCY 0x{:04X} {} ×{} (cycles {}–{})",
+            self.axis,
+            self.node,
+            self.code,
+            emcy::meaning(self.code),
+            self.count,
+            self.first_cycle,
+            self.last_cycle
+        )
+    }
 }
 
 impl std::fmt::Display for Summary {
@@ -467,7 +500,7 @@ type CyclicResult = (
     String,
     Option<BusError>,
     u64,
-    Vec<String>,
+    Vec<Warning>,
 );
 
 fn cyclic_thread(
@@ -495,7 +528,7 @@ fn cyclic_thread(
     };
     let consumer = Duration::from_millis(u64::from(machine.heartbeat.gateway_consumer_ms));
     let mut port_err = None;
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<Warning> = Vec::new();
     loop {
         ticker.wait();
         // Feedback received since the last cycle.
@@ -518,14 +551,24 @@ fn cyclic_thread(
                 let Some(h) = g.get(&a.node) else { continue };
                 for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
                     if emcy::is_warning(e.code) {
-                        warnings.push(format!(
-                            "axis {} (node {}): EMCY 0x{:04X} {} at cycle {}",
-                            a.name,
-                            a.node,
-                            e.code,
-                            emcy::meaning(e.code),
-                            ticker.timing.cycles
-                        ));
+                        let cycle = ticker.timing.cycles;
+                        match warnings
+                            .iter_mut()
+                            .find(|w: &&mut Warning| w.node == a.node && w.code == e.code)
+                        {
+                            Some(w) => {
+                                w.count += 1;
+                                w.last_cycle = cycle;
+                            }
+                            None => warnings.push(Warning {
+                                axis: a.name.clone(),
+                                node: a.node,
+                                code: e.code,
+                                count: 1,
+                                first_cycle: cycle,
+                                last_cycle: cycle,
+                            }),
+                        }
                     } else {
                         master.alarm(
                             a.node,
