@@ -173,6 +173,7 @@ pub struct CyclicMaster {
     line: Option<usize>,
     armed_mm: Option<Vector3<f64>>,
     stop_vel: Vec<f64>,
+    stop_acc: Vec<f64>,
     frozen: Vec<bool>,
     failure: Option<String>,
     /// First cycle in which every IP axis reported statusword bit 12.
@@ -202,6 +203,7 @@ impl CyclicMaster {
             line: None,
             armed_mm: None,
             stop_vel: vec![0.0; n],
+            stop_acc: vec![0.0; n],
             frozen: vec![false; n],
             failure: None,
             bit12_cycle: None,
@@ -311,11 +313,11 @@ impl CyclicMaster {
                     })
                     .fold(0.0, f64::max);
                 for i in 0..self.axes.len() {
-                    self.stop_vel[i] = if self.frozen[i] || t_stop == 0.0 {
-                        0.0
-                    } else {
-                        (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s
-                    };
+                    let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
+                    let stopped = self.frozen[i] || t_stop == 0.0;
+                    self.stop_vel[i] = if stopped { 0.0 } else { v };
+                    // v(t) = v0 (1 − t / t_stop) on every axis: the direction of motion holds.
+                    self.stop_acc[i] = if stopped { 0.0 } else { v.abs() / t_stop };
                 }
                 self.set_phase(Phase::Stopping);
             }
@@ -567,8 +569,8 @@ impl CyclicMaster {
                 }
                 let a = &self.axes[i];
                 let v = self.stop_vel[i];
-                // Decelerate at the axis's limit, scaled so all axes stop together.
-                let dv = a.max_acc_mm_s2 * self.period_s;
+                // Decelerate so that all axes stop together, each within its limit.
+                let dv = self.stop_acc[i].min(a.max_acc_mm_s2) * self.period_s;
                 let nv = if v > 0.0 {
                     (v - dv).max(0.0)
                 } else {
@@ -624,6 +626,11 @@ impl CyclicMaster {
 
         if self.phase != Phase::Done {
             for i in 0..n {
+                // No setpoint before the drive has told us where it is: a drive still enabled
+                // from an earlier session (CSP) would take any other value as a target.
+                if self.fb[i].is_none() {
+                    continue;
+                }
                 let a = &self.axes[i];
                 let cw = self.enablers[i].controlword();
                 let cw = if a.mode == AxisMode::Csp {
@@ -636,5 +643,242 @@ impl CyclicMaster {
             out.push(Frame::new(sync_cob_id, &[]).expect("valid SYNC id"));
         }
         rec
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cia402::PowerStateMachine;
+    use crate::planner;
+
+    /// A drive reduced to what the master sees: the power state machine, IP bit 12 answering
+    /// bit 4, and a position that follows the setpoint latched at SYNC one cycle later.
+    struct FakeDrive {
+        psm: PowerStateMachine,
+        cw: u16,
+        latched: i32,
+        pos: i32,
+        fault: bool,
+        silent: bool,
+    }
+
+    impl FakeDrive {
+        fn new(pos: i32) -> FakeDrive {
+            let mut psm = PowerStateMachine::new();
+            psm.boot();
+            FakeDrive {
+                psm,
+                cw: 0,
+                latched: pos,
+                pos,
+                fault: false,
+                silent: false,
+            }
+        }
+        fn statusword(&self) -> u16 {
+            let mut sw = self.psm.statusword();
+            if self.psm.is_operation_enabled() && self.cw & cwb::IP_ENABLE != 0 {
+                sw |= swb::OP_MODE_SPECIFIC_12;
+            }
+            sw
+        }
+    }
+
+    struct Rig {
+        master: CyclicMaster,
+        drives: Vec<FakeDrive>,
+        frames: Vec<Frame>,
+        records: Vec<CycleRecord>,
+    }
+
+    impl Rig {
+        fn new() -> Rig {
+            let m = Machine::demo();
+            let master = CyclicMaster::new(&m);
+            let drives = vec![
+                FakeDrive::new(1000),
+                FakeDrive::new(-2000),
+                FakeDrive::new(0),
+            ];
+            Rig {
+                master,
+                drives,
+                frames: Vec::new(),
+                records: Vec::new(),
+            }
+        }
+
+        /// One cycle: master decides, drives latch at SYNC and answer with their TPDOs.
+        fn step(&mut self) {
+            self.frames.clear();
+            let rec = self.master.cycle(0x80, &mut self.frames);
+            self.records.push(rec);
+            for f in &self.frames {
+                if let Some(i) = self.master.axes.iter().position(|a| a.rpdo_cob == f.id()) {
+                    let d = f.data();
+                    let a = &self.master.axes[i];
+                    let dr = &mut self.drives[i];
+                    dr.cw = u16::from_le_bytes([d[a.cw_off], d[a.cw_off + 1]]);
+                    dr.psm.on_controlword(dr.cw);
+                    if dr.statusword() & swb::OP_MODE_SPECIFIC_12 != 0 {
+                        dr.pos = dr.latched;
+                        dr.latched =
+                            i32::from_le_bytes(d[a.sp_off..a.sp_off + 4].try_into().unwrap());
+                    } else {
+                        dr.latched = dr.pos;
+                    }
+                }
+            }
+            for (i, dr) in self.drives.iter_mut().enumerate() {
+                if dr.silent {
+                    continue;
+                }
+                if dr.fault {
+                    dr.psm.fault();
+                    dr.psm.fault_reaction_done();
+                }
+                let a = &self.master.axes[i];
+                let mut d = [0u8; 6];
+                d[a.sw_off..a.sw_off + 2].copy_from_slice(&dr.statusword().to_le_bytes());
+                d[a.pos_off..a.pos_off + 4].copy_from_slice(&dr.pos.to_le_bytes());
+                let f = Frame::new(a.tpdo_cob, &d).unwrap();
+                self.master.on_frame(&f);
+            }
+        }
+
+        fn run_until(&mut self, phase: Phase, max_cycles: usize) {
+            for _ in 0..max_cycles {
+                if self.master.phase() == phase {
+                    return;
+                }
+                self.step();
+            }
+            panic!(
+                "phase {phase:?} not reached; now {:?}, failure {:?}",
+                self.master.phase(),
+                self.master.failure()
+            );
+        }
+    }
+
+    fn motion(from: Vector3<f64>, text: &str) -> Interpolator {
+        let m = Machine::demo();
+        let prog = crate::gcode::parse_program(text, "t.ngc", from).unwrap();
+        let plan = planner::plan(&prog, &crate::gateway::limits(&m)).unwrap();
+        Interpolator::new(plan, m.cycle_s()).unwrap()
+    }
+
+    #[test]
+    fn enables_arms_only_after_bit12_streams_settles_and_disables() {
+        let mut r = Rig::new();
+        r.run_until(Phase::Arming, 20);
+        // Bumpless: while enabling, the setpoint is position actual.
+        assert_eq!(r.master.setpoint_counts(), vec![1000, -2000, 0]);
+        r.run_until(Phase::Armed, 10);
+        let armed = r.master.armed_mm().unwrap();
+        assert_eq!(armed, Vector3::new(1.0, -2.0, 0.0));
+        assert!(
+            r.drives
+                .iter()
+                .all(|d| d.statusword() & swb::OP_MODE_SPECIFIC_12 != 0)
+        );
+        // Holding until the motion arrives.
+        for _ in 0..5 {
+            r.step();
+        }
+        assert_eq!(r.master.phase(), Phase::Armed);
+        r.master
+            .supply_motion(motion(armed, "G1 X10 Y5 Z-1 F3000\n"));
+        r.run_until(Phase::Done, 5000);
+        assert_eq!(r.master.failure(), None);
+        assert_eq!(r.master.setpoint_counts(), vec![10_000, 5_000, -2_000]);
+        assert!(r.master.bit12_cycle.unwrap() < r.master.first_motion_cycle.unwrap());
+        // Every step of every axis within max velocity × period.
+        let m = Machine::demo();
+        let moving: Vec<&CycleRecord> = r
+            .records
+            .iter()
+            .skip_while(|r| r.phase == Phase::Enabling)
+            .collect();
+        for w in moving.windows(2) {
+            for (i, a) in m.axes.iter().enumerate() {
+                let step = (w[1].cmd_mm[i] - w[0].cmd_mm[i]).abs();
+                assert!(
+                    step <= a.max_vel_mm_s * m.cycle_s() * 1.0001,
+                    "axis {} step {step}",
+                    a.name
+                );
+            }
+        }
+        // Disabled at the end.
+        assert!(
+            r.drives
+                .iter()
+                .all(|d| d.psm.state() == State::SwitchOnDisabled)
+        );
+    }
+
+    #[test]
+    fn a_drive_fault_stops_the_others_within_their_acceleration_and_names_the_axis() {
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 40);
+        let armed = r.master.armed_mm().unwrap();
+        r.master
+            .supply_motion(motion(armed, "G1 X200 Y150 F12000\n"));
+        // Stream until moving at speed.
+        for _ in 0..150 {
+            r.step();
+        }
+        assert_eq!(r.master.phase(), Phase::Streaming);
+        r.drives[2].fault = true; // Z faults
+        r.run_until(Phase::Done, 2000);
+        let f = r.master.failure().unwrap();
+        assert!(f.contains("axis Z (node 3)") && f.contains("fault"), "{f}");
+        assert!(f.contains("last program line 1"), "{f}");
+        // The stop: no axis's velocity change per cycle beyond its acceleration limit.
+        let m = Machine::demo();
+        let t = m.cycle_s();
+        // From the start of the motion on (before it, the setpoint is position actual).
+        let cmds: Vec<[f64; 3]> = r
+            .records
+            .iter()
+            .skip_while(|r| r.phase != Phase::Streaming)
+            .map(|r| r.cmd_mm)
+            .collect();
+        for w in cmds.windows(3) {
+            for (i, a) in m.axes.iter().enumerate().take(2) {
+                let acc = (w[2][i] - 2.0 * w[1][i] + w[0][i]) / (t * t);
+                assert!(
+                    acc.abs() <= a.max_acc_mm_s2 * 1.0001,
+                    "axis {} accel {acc}",
+                    a.name
+                );
+            }
+        }
+        // Along the path: X/Y stay on the line of the move (150/200 of X).
+        for c in &cmds {
+            let (dx, dy) = (c[0] - armed[0], c[1] - armed[1]);
+            assert!(
+                (dy - dx * (150.0 - armed[1]) / (200.0 - armed[0])).abs() < 1e-6,
+                "{c:?} left the path"
+            );
+        }
+        // X and Y came to rest short of the target.
+        let last = cmds.last().unwrap();
+        assert!(last[0] < 200.0 && last[1] < 150.0);
+    }
+
+    #[test]
+    fn silence_from_a_drive_is_an_alarm() {
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 40);
+        // Node 2 stops answering SYNC.
+        r.drives[1].silent = true;
+        for _ in 0..(STALE_CYCLES as usize + 5) {
+            r.step();
+        }
+        let f = r.master.failure().unwrap();
+        assert!(f.contains("axis Y (node 2): no process data"), "{f}");
     }
 }
