@@ -309,3 +309,31 @@ fn a_missing_node_fails_the_run_naming_it() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_down_interface_says_how_to_bring_it_up() {
+    let _g = lock();
+    let ok = Command::new("ip")
+        .args(["link", "add", "dev", "vcan9", "type", "vcan"])
+        .status()
+        .unwrap();
+    assert!(
+        ok.success(),
+        "ip link add vcan9 (the suite runs as root where vcan exists)"
+    );
+    let r = Bus::SocketCan("vcan9".into()).open(&[]);
+    let _ = Command::new("ip")
+        .args(["link", "del", "dev", "vcan9"])
+        .status();
+    let msg = r.err().expect("a down interface must not open").to_string();
+    assert!(
+        msg.contains("'vcan9' is down") && msg.contains("ip link set up vcan9"),
+        "{msg}"
+    );
+    let msg = Bus::SocketCan("vcan8".into())
+        .open(&[])
+        .err()
+        .expect("no vcan8")
+        .to_string();
+    assert!(msg.contains("ip link add dev vcan8 type vcan"), "{msg}");
+}

@@ -344,7 +344,7 @@ impl CyclicMaster {
     }
 
     /// One cycle: read the feedback received since the last call, decide, and append the frames
-    /// to send (RPDOs, then SYNC with `sync_cob_id`) to `out`. Returns the cycle's record.
+    /// to send (SYNC with `sync_cob_id`, then the RPDOs) to `out`. Returns the cycle's record.
     pub fn cycle(&mut self, sync_cob_id: u16, out: &mut Vec<Frame>) -> CycleRecord {
         self.cycle += 1;
         let n = self.axes.len();
@@ -625,6 +625,9 @@ impl CyclicMaster {
         }
 
         if self.phase != Phase::Done {
+            // SYNC first, then the RPDOs inside its synchronous window (0x1007): each drive
+            // latches them at the next SYNC (CiA 301 §7.2.2.2).
+            out.push(Frame::new(sync_cob_id, &[]).expect("valid SYNC id"));
             for i in 0..n {
                 // No setpoint before the drive has told us where it is: a drive still enabled
                 // from an earlier session (CSP) would take any other value as a target.
@@ -640,7 +643,6 @@ impl CyclicMaster {
                 };
                 out.push(a.rpdo(cw, a.to_counts(self.sp_mm[i][0])));
             }
-            out.push(Frame::new(sync_cob_id, &[]).expect("valid SYNC id"));
         }
         rec
     }

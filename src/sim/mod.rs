@@ -90,6 +90,8 @@ pub struct SimDrive {
     last_physics: Option<Duration>,
     /// Frames produced inside an SDO write, sent after its response.
     deferred: Vec<Frame>,
+    /// Synchronous RPDOs discarded for arriving outside the synchronous window.
+    rpdo_outside_window: u64,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -134,6 +136,7 @@ impl SimDrive {
             fault_cause: None,
             last_physics: None,
             deferred: Vec::new(),
+            rpdo_outside_window: 0,
         }
     }
 
@@ -164,6 +167,10 @@ impl SimDrive {
     /// Statusword (0x6041).
     pub fn statusword(&self) -> u16 {
         self.od.int(0x6041, 0) as u16
+    }
+    /// Synchronous RPDOs discarded because they came outside the synchronous window (0x1007).
+    pub fn rpdos_outside_window(&self) -> u64 {
+        self.rpdo_outside_window
     }
     /// Why the drive faulted last, if it did.
     pub fn fault_cause(&self) -> Option<FaultCause> {
@@ -431,7 +438,7 @@ impl SimDrive {
             return;
         }
         if let Some(n) = rpdo {
-            self.on_rpdo(n, data, out);
+            self.on_rpdo(n, now, data, out);
         }
     }
 
@@ -480,7 +487,7 @@ impl SimDrive {
         self.interp = None;
     }
 
-    fn on_rpdo(&mut self, n: usize, data: &[u8], out: &mut Vec<Frame>) {
+    fn on_rpdo(&mut self, n: usize, now: Duration, data: &[u8], out: &mut Vec<Frame>) {
         let map = self.mapping(rpdo_map(n));
         let len: usize = map.iter().map(|e| usize::from(e.bits / 8)).sum();
         if data.len() < len {
@@ -494,6 +501,15 @@ impl SimDrive {
         buf[..data.len()].copy_from_slice(data);
         let tt = self.od.int(rpdo_base(n), 2);
         if tt <= 240 {
+            // CiA 301: synchronous PDOs outside the synchronous window (0x1007) are discarded.
+            let window = Duration::from_micros(self.od.int(0x1007, 0) as u64);
+            if let Some(sync) = self.last_sync
+                && !window.is_zero()
+                && now > sync + window
+            {
+                self.rpdo_outside_window += 1;
+                return;
+            }
             self.pending_rpdo[n] = Some((buf, len));
         } else {
             self.apply_rpdo(n, &buf[..len], out);
@@ -615,9 +631,15 @@ impl SimDrive {
                 return;
             }
         } as f64;
+        // Software position limits (0x607D) bound the target itself, so neither the demand nor
+        // the velocity feed-forward derived from it can carry the motor past them.
+        let lo = self.od.int(0x607D, 1) as f64;
+        let hi = self.od.int(0x607D, 2) as f64;
+        let (lo, hi) = (lo.min(hi), hi.max(lo));
+        self.limit_flag = !(lo..=hi).contains(&target);
         self.interp = Some(Interp {
-            from: self.demand,
-            to: target,
+            from: self.demand.clamp(lo, hi),
+            to: target.clamp(lo, hi),
             at: now,
         });
     }
@@ -734,11 +756,15 @@ impl SimDrive {
                         v_ff = (ip.to - ip.from) / p;
                     }
                 }
-                // Software position limits (0x607D) bound the demand.
+                // Software position limits (0x607D) bound the demand (the target was clamped
+                // when latched; a limit written since applies here).
                 let lo = self.od.int(0x607D, 1) as f64;
                 let hi = self.od.int(0x607D, 2) as f64;
-                self.limit_flag = self.demand < lo || self.demand > hi;
-                self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
+                if !(lo.min(hi)..=hi.max(lo)).contains(&self.demand) {
+                    self.limit_flag = true;
+                    self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
+                    v_ff = 0.0;
+                }
                 let v_cmd = (K_FF * v_ff + KP_PER_S * (self.demand - self.pos)).clamp(-vmax, vmax);
                 let dv = (v_cmd - self.vel).clamp(-amax * dt, amax * dt);
                 self.vel += dv;

@@ -90,11 +90,7 @@ impl Bench {
     /// Advance the clock to `end`, polling the drive whenever it asks to be ([`SimDrive::poll_at`]).
     fn run_until(&mut self, end: Duration) {
         while self.now < end {
-            let next = self
-                .drive
-                .poll_at(self.now)
-                .max(self.now + us(1))
-                .min(end);
+            let next = self.drive.poll_at(self.now).max(self.now + us(1)).min(end);
             self.now = next;
             let mut out = Vec::new();
             self.drive.poll(self.now, &mut out);
@@ -261,7 +257,11 @@ impl Bench {
 
     fn state(&self) -> State {
         let s = self.drive.state();
-        assert_eq!(State::from_statusword(self.sw()), Some(s), "statusword coding");
+        assert_eq!(
+            State::from_statusword(self.sw()),
+            Some(s),
+            "statusword coding"
+        );
         s
     }
 
@@ -336,7 +336,11 @@ fn boot_up_is_0x700_plus_id_with_0x00_then_pre_operational() {
     let mut drive = SimDrive::new(dict(), NODE);
     let mut out = Vec::new();
     // Before boot the node is silent and deaf.
-    drive.handle(ms(0), &Frame::new(cob::NMT, &[nmt::START, 0]).unwrap(), &mut out);
+    drive.handle(
+        ms(0),
+        &Frame::new(cob::NMT, &[nmt::START, 0]).unwrap(),
+        &mut out,
+    );
     drive.poll(ms(5), &mut out);
     assert!(out.is_empty());
     drive.boot(ms(10), &mut out);
@@ -344,7 +348,7 @@ fn boot_up_is_0x700_plus_id_with_0x00_then_pre_operational() {
     assert_eq!(drive.nmt_state(), NmtState::PreOperational);
     assert_eq!(drive.state(), State::SwitchOnDisabled);
     // Device type low word = profile 402, identity as configured.
-    let mut b = Bench::with(drive);
+    let mut b = Bench::new();
     assert_eq!(b.get(0x1000, 0) & 0xFFFF, 0x0192);
     assert_eq!(b.get(0x1018, 1), 0x0CA7);
     assert_eq!(b.get(0x1018, 2), 0x0402);
@@ -390,7 +394,10 @@ fn nmt_addressed_to_another_node_is_ignored_and_node_0_means_all() {
     assert_eq!(b.drive.nmt_state(), NmtState::PreOperational);
     b.nmt(nmt::RESET_NODE, NODE + 1);
     b.nmt(nmt::RESET_COMMUNICATION, NODE + 1);
-    assert!(b.heartbeats().is_empty(), "no boot-up for another node's reset");
+    assert!(
+        b.heartbeats().is_empty(),
+        "no boot-up for another node's reset"
+    );
     b.nmt(nmt::START, 0);
     assert_eq!(b.drive.nmt_state(), NmtState::Operational);
     b.nmt(nmt::STOP, 0);
@@ -670,7 +677,7 @@ fn sdo_segmented_download_is_reassembled() {
     let r = b.sdo_exchange([0x21, 0x65, 0x60, 0x00, 4, 0, 0, 0]);
     assert_eq!(r, [0x60, 0x65, 0x60, 0x00, 0, 0, 0, 0]);
     // One segment, toggle 0, 4 bytes (n = 3 unused), last.
-    let seg = [0x00 | (3 << 1) | 0x01, 0x34, 0x12, 0, 0, 0, 0, 0];
+    let seg = [(3 << 1) | 0x01, 0x34, 0x12, 0, 0, 0, 0, 0];
     let r = b.sdo_exchange(seg);
     assert_eq!(r[0], 0x20);
     assert_eq!(b.get(0x6065, 0), 0x1234);
@@ -967,27 +974,44 @@ fn consumer_bench(time_ms: u16) -> Bench {
 }
 
 #[test]
-fn heartbeat_consumer_timeout_raises_emcy_0x8130_and_faults_the_drive() {
-    let mut b = consumer_bench(100);
-    b.advance(ms(10));
-    // Beats every 50 ms keep it alive.
+fn heartbeat_consumer_timeout_raises_emcy_0x8130_and_stops_the_motor_in_fault() {
+    // The drive consumes node 3 (the master) with 100 ms, and is moving in IP.
+    let mut b = Bench::ip_running(0);
+    b.set(0x1016, 1, (3 << 16) | 100);
+    b.clear();
+    let mut sp = 0;
     let mut last = b.now;
-    for _ in 0..5 {
-        b.send(0x703, &[0x05]);
-        last = b.now;
-        b.advance(ms(50));
+    // Beats every 50 ms keep it alive.
+    for k in 0..200 {
+        sp += 20;
+        b.ip_cycle(0x1F, sp);
+        if k % 50 == 0 {
+            b.send(0x703, &[0x05]);
+            last = b.now;
+        }
     }
     assert!(b.emcys().is_empty());
-    b.run_until(last + ms(100));
+    // Silence from node 3 while the setpoints keep coming: nothing up to the consumer time.
+    while b.now + ms(1) <= last + ms(100) {
+        sp += 20;
+        b.ip_cycle(0x1F, sp);
+    }
+    assert_eq!(b.now, last + ms(100));
     assert!(b.emcys().is_empty(), "not before the consumer time");
     assert_eq!(b.state(), State::OperationEnabled);
+    assert!(b.get(0x606C, 0) > 10_000, "moving");
+    // Just past it: EMCY 0x8130, and 0x6007 = 1 takes the drive to Fault.
     b.run_until(last + ms(100) + us(1));
     assert_eq!(b.emcys(), vec![(last + ms(100) + us(1), emcy::HEARTBEAT)]);
-    assert_ne!(b.state(), State::OperationEnabled, "0x6007 = 1: fault");
+    assert_ne!(b.state(), State::OperationEnabled);
     b.advance(ms(50));
     assert_eq!(b.state(), State::Fault);
     assert_eq!(b.drive.fault_cause(), Some(FaultCause::HeartbeatLost));
     assert_eq!(b.get(0x603F, 0), i64::from(emcy::HEARTBEAT));
+    assert_eq!(b.get(0x606C, 0), 0, "stopped");
+    let p = b.drive.position_counts();
+    b.advance(ms(20));
+    assert_eq!(b.drive.position_counts(), p);
     assert_eq!(b.emcy_count(emcy::HEARTBEAT), 1, "reported once");
 }
 
@@ -1163,15 +1187,15 @@ fn ip_follows_setpoints_latched_each_sync_with_lag() {
 }
 
 /// IP running, then a setpoint jump far beyond 0x6065, held until the drive reports the
-/// following error. Returns the bench and the time of the jump.
-fn following_error(b: &mut Bench) -> Duration {
+/// following error (the fault reaction is then under way).
+fn following_error(b: &mut Bench) {
     b.ip_cycle(0x1F, 100_000);
     let jump = b.now;
     while b.emcy_count(emcy::FOLLOWING_ERROR) == 0 {
         assert!(b.now < jump + ms(50), "no following error");
         b.ip_cycle(0x1F, 100_000);
     }
-    jump
+    assert_eq!(b.state(), State::FaultReactionActive);
 }
 
 #[test]
@@ -1231,10 +1255,10 @@ fn fault_reset_needs_the_rising_edge_of_cw_bit_7() {
     assert_eq!(b.state(), State::SwitchOnDisabled);
     assert_eq!(b.emcy_count(emcy::RESET), 1);
     let reset = b
-        .log
-        .iter()
-        .find(|(_, f)| f.id() == cob::EMCY + u16::from(NODE))
-        .map(|(_, f)| f.data().to_vec());
+        .sent(cob::EMCY + u16::from(NODE))
+        .into_iter()
+        .find(|(_, d)| d[..2] == [0, 0])
+        .map(|(_, d)| d);
     assert_eq!(reset, Some(vec![0; 8]), "EMCY 0x0000, error register 0");
     assert_eq!(b.sw() & sw::OP_MODE_SPECIFIC_13, 0);
     assert_eq!(b.get(0x603F, 0), 0);
@@ -1251,7 +1275,11 @@ fn csp_follows_0x607a_with_bit_12_set_in_operation_enabled() {
     b.nmt(nmt::START, NODE);
     b.cw(0x06);
     b.cw(0x07);
-    assert_eq!(b.sw() & sw::OP_MODE_SPECIFIC_12, 0, "only in Operation enabled");
+    assert_eq!(
+        b.sw() & sw::OP_MODE_SPECIFIC_12,
+        0,
+        "only in Operation enabled"
+    );
     b.cw(0x0F);
     assert_ne!(b.sw() & sw::OP_MODE_SPECIFIC_12, 0);
     b.clear();
@@ -1291,12 +1319,17 @@ fn software_position_limits_0x607d_clamp_the_demand_and_set_bit_11() {
     }
     for _ in 0..100 {
         b.csp_cycle(0x0F, 3000);
+        max_pos = max_pos.max(b.drive.position_counts());
     }
     assert_ne!(b.sw() & sw::INTERNAL_LIMIT, 0);
+    // CiA 402-2 (0x607D) bounds the position demand value *and* the position actual value:
+    // the motor must not run past the limit while setpoints beyond it keep coming.
+    assert!(
+        max_pos <= 1502,
+        "position actual reached {max_pos} with 0x607D:2 = 1500 (now {})",
+        b.drive.position_counts()
+    );
     assert!((b.drive.position_counts() - 1500).abs() <= 2);
-    // CiA 402 0x607D bounds the position actual value too: the motor must not run past it
-    // while setpoints beyond it keep coming.
-    assert!(max_pos <= 1502, "position actual reached {max_pos}");
     // Back inside: the flag clears.
     for _ in 0..50 {
         b.csp_cycle(0x0F, 1000);
@@ -1321,7 +1354,7 @@ fn rewriting_0x6060_with_the_mode_in_force_does_not_stop_ip() {
     b.set(0x6060, 0, 7);
     assert_ne!(b.sw() & sw::OP_MODE_SPECIFIC_12, 0);
     // ... and every cycle in the RPDO.
-    for k in 1..=100 {
+    for k in 1..=100i32 {
         b.advance(ms(1));
         let mut d = 0x1Fu16.to_le_bytes().to_vec();
         d.push(7);
