@@ -65,6 +65,22 @@ fn simdrive(nodes: &[u8], dictionary: Option<&std::path::Path>) -> SimDrives {
     }
 }
 
+/// `canmotion run` of the square program on the demo machine over vcan0.
+fn run_square() -> std::process::Output {
+    Command::new(BIN)
+        .current_dir(ROOT)
+        .args([
+            "run",
+            "--bus",
+            IFACE,
+            "--machine",
+            "dictionaries/machines/demo-xyz.toml",
+            "tests/programs/square.ngc",
+        ])
+        .output()
+        .expect("run canmotion")
+}
+
 fn lock() -> std::sync::MutexGuard<'static, ()> {
     BUS.lock().unwrap_or_else(|e| e.into_inner())
 }
@@ -265,18 +281,7 @@ fn a_wrong_identity_fails_the_run_with_its_error() {
     let text = canmotion::config::machine::DEMO_DRIVE.replace("0x00010000", "0x00010001");
     std::fs::write(&dict, text).unwrap();
     let _drives = simdrive(&[1, 2, 3], Some(&dict));
-    let out = Command::new(BIN)
-        .current_dir(ROOT)
-        .args([
-            "run",
-            "--bus",
-            IFACE,
-            "--machine",
-            "dictionaries/machines/demo-xyz.toml",
-            "tests/programs/square.ngc",
-        ])
-        .output()
-        .unwrap();
+    let out = run_square();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
@@ -290,18 +295,7 @@ fn a_wrong_identity_fails_the_run_with_its_error() {
 fn a_missing_node_fails_the_run_naming_it() {
     let _g = lock();
     let _drives = simdrive(&[1, 3], None);
-    let out = Command::new(BIN)
-        .current_dir(ROOT)
-        .args([
-            "run",
-            "--bus",
-            IFACE,
-            "--machine",
-            "dictionaries/machines/demo-xyz.toml",
-            "tests/programs/square.ngc",
-        ])
-        .output()
-        .unwrap();
+    let out = run_square();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
