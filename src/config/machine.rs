@@ -13,6 +13,12 @@ use serde::Deserialize;
 use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use super::{ConfigError, parse_toml};
 
+/// The most axes a machine may have.
+pub const MAX_AXES: usize = 8;
+
+/// Axis letters a machine file may use (RS274: linear X Y Z, rotary A B C, secondary linear U V W).
+pub const AXIS_LETTERS: [&str; 9] = ["X", "Y", "Z", "A", "B", "C", "U", "V", "W"];
+
 /// The demo machine file, embedded so that `canmotion run` works with no files at all.
 pub const DEMO_MACHINE: &str = include_str!("../../dictionaries/machines/demo-xyz.toml");
 /// The drive dictionary the demo machine names.
@@ -42,6 +48,43 @@ struct RawBus {
     interface: String,
     bitrate: u32,
     cycle_us: u32,
+    #[serde(default = "default_max_load")]
+    max_load_percent: f64,
+}
+
+fn default_max_load() -> f64 {
+    70.0
+}
+
+/// Worst-case length in bits of a classic CAN data frame with an 11-bit identifier and `n` data
+/// bytes, stuff bits and the 3-bit intermission included (Davis et al. 2007):
+/// `C(n) = 8n + 47 + ⌊(34 + 8n − 1)/4⌋`, so C(0) = 55, C(6) = 115, C(8) = 135.
+pub fn frame_bits(n: usize) -> u32 {
+    let n = n as u32;
+    8 * n + 47 + (34 + 8 * n - 1) / 4
+}
+
+/// The bus time one cycle's process data needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BusLoad {
+    /// SYNC frame, bits.
+    pub sync_bits: u32,
+    /// Every axis's RPDO and TPDO, bits.
+    pub pdo_bits: u32,
+    /// Bits available in one cycle (bit rate × period).
+    pub cycle_bits: f64,
+    /// `(sync_bits + pdo_bits) / cycle_bits`, percent.
+    pub percent: f64,
+    /// Time to carry SYNC and all PDOs, µs: the shortest synchronous window (0x1007) that holds them.
+    pub carry_us: f64,
+}
+
+/// How many axes fit in a cycle at `load_percent`, each with an RPDO and a TPDO of `pdo_bytes`:
+/// `N = ⌊(U·R·T − C_sync)/(C_rpdo + C_tpdo)⌋`.
+pub fn max_axes(bitrate: u32, cycle_us: u32, pdo_bytes: usize, load_percent: f64) -> u32 {
+    let avail = load_percent / 100.0 * f64::from(bitrate) * f64::from(cycle_us) * 1e-6;
+    let n = (avail - f64::from(frame_bits(0))) / f64::from(2 * frame_bits(pdo_bytes));
+    n.max(0.0).floor() as u32
 }
 
 #[derive(Debug, Deserialize)]
@@ -230,6 +273,17 @@ pub struct AxisConfig {
 }
 
 impl AxisConfig {
+    /// Index of the axis in the X, Y, Z position vector the motion front end produces; `None`
+    /// for the other letters, which hold their position until the front end commands them.
+    pub fn xyz(&self) -> Option<usize> {
+        match self.name.as_str() {
+            "X" => Some(0),
+            "Y" => Some(1),
+            "Z" => Some(2),
+            _ => None,
+        }
+    }
+
     /// Millimetres to counts (rounded to the nearest count).
     pub fn mm_to_counts(&self, mm: f64) -> i32 {
         (mm * self.counts_per_mm)
@@ -278,6 +332,8 @@ pub struct Machine {
     pub heartbeat: Heartbeat,
     /// Axes in machine order.
     pub axes: Vec<AxisConfig>,
+    /// The bus load limit the machine was admitted under.
+    pub max_load_percent: f64,
 }
 
 struct Ctx<'a> {
@@ -414,8 +470,12 @@ impl Machine {
                 ),
             ));
         }
-        if raw.axis.is_empty() {
-            return Err(ctx.err("axis", "axis", "a machine needs at least one [[axis]]"));
+        if raw.axis.is_empty() || raw.axis.len() > MAX_AXES {
+            return Err(ctx.err(
+                "axis",
+                "axis",
+                format!("a machine has 1 to {MAX_AXES} [[axis]] tables"),
+            ));
         }
         let mut names = BTreeSet::new();
         let mut nodes = BTreeSet::new();
@@ -423,11 +483,15 @@ impl Machine {
         let mut dicts: Vec<(PathBuf, Arc<DriveDictionary>)> = Vec::new();
         for a in &raw.axis {
             let table = format!("axis {}", a.name);
-            if !matches!(a.name.as_str(), "X" | "Y" | "Z") {
+            if !AXIS_LETTERS.contains(&a.name.as_str()) {
                 return Err(ctx.err(
                     table,
                     "name",
-                    format!("{:?}: the axis letter must be X, Y or Z", a.name),
+                    format!(
+                        "{:?}: the axis letter must be one of {}",
+                        a.name,
+                        AXIS_LETTERS.join(" ")
+                    ),
                 ));
             }
             if !names.insert(a.name.clone()) {
@@ -622,7 +686,7 @@ impl Machine {
                 sdo,
             });
         }
-        Ok(Machine {
+        let machine = Machine {
             file: path.to_path_buf(),
             name: raw.machine.name,
             interface: raw.bus.interface,
@@ -638,7 +702,75 @@ impl Machine {
                 gateway_consumer_ms: hb.gateway_consumer_ms,
             },
             axes,
-        })
+            max_load_percent: raw.bus.max_load_percent,
+        };
+        machine.admit(&ctx)?;
+        Ok(machine)
+    }
+
+    /// Worst-case bus load of one cycle's process data (checklist, "Bus bandwidth").
+    pub fn bus_load(&self) -> BusLoad {
+        let sync_bits = frame_bits(0);
+        let pdo_bits: u32 = self
+            .axes
+            .iter()
+            .map(|a| {
+                frame_bits(a.setpoint_pdo.len_bytes()) + frame_bits(a.feedback_pdo.len_bytes())
+            })
+            .sum();
+        let cycle_bits = f64::from(self.bitrate) * f64::from(self.cycle_us) * 1e-6;
+        let total = f64::from(sync_bits + pdo_bits);
+        BusLoad {
+            sync_bits,
+            pdo_bits,
+            cycle_bits,
+            percent: 100.0 * total / cycle_bits,
+            carry_us: total / f64::from(self.bitrate) * 1e6,
+        }
+    }
+
+    /// Refuse what the bus cannot carry: a load above `max_load_percent`, or a synchronous window
+    /// shorter than the time the cycle's frames take.
+    fn admit(&self, ctx: &Ctx) -> Result<(), ConfigError> {
+        let l = self.bus_load();
+        let n = self.axes.len();
+        let formula = format!(
+            "SYNC {} bits + {} axes' PDOs {} bits = {} bits per {} µs cycle at {} bit/s, with C(n) = 8n + 47 + ⌊(34 + 8n − 1)/4⌋",
+            l.sync_bits,
+            n,
+            l.pdo_bits,
+            l.sync_bits + l.pdo_bits,
+            self.cycle_us,
+            self.bitrate
+        );
+        if !(1.0..=100.0).contains(&self.max_load_percent) {
+            return Err(ctx.err(
+                "bus",
+                "max_load_percent",
+                format!("{} outside 1..=100", self.max_load_percent),
+            ));
+        }
+        if l.percent > self.max_load_percent {
+            return Err(ctx.err(
+                "bus",
+                "cycle_us",
+                format!(
+                    "the process data needs {:.1} % of the bus, above max_load_percent = {} ({formula}); lengthen the cycle, raise the bit rate or drive fewer axes",
+                    l.percent, self.max_load_percent
+                ),
+            ));
+        }
+        if self.sync_window_us != 0 && f64::from(self.sync_window_us) < l.carry_us {
+            return Err(ctx.err(
+                "sync",
+                "window_us",
+                format!(
+                    "{} µs is shorter than the {:.0} µs the cycle's frames take on the bus ({formula})",
+                    self.sync_window_us, l.carry_us
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// The cycle period in seconds.
@@ -814,5 +946,86 @@ mod tests {
         assert!(e.starts_with("m.toml: [bus] cycle_us: 1234"), "{e}");
         let e = demo_with("[machine]", "[machine]\nspeed = 3");
         assert!(e.contains("speed"), "{e}");
+    }
+
+    #[test]
+    fn frame_lengths_and_the_checklist_table() {
+        assert_eq!(
+            (frame_bits(0), frame_bits(6), frame_bits(8)),
+            (55, 115, 135)
+        );
+        // (bit rate, PDO bytes, [(1 ms, 2 ms, 4 ms) at 100 %], [same at 70 %]), checklist table.
+        let table = [
+            (1_000_000, 6, [4, 8, 17], [2, 5, 11]),
+            (1_000_000, 8, [3, 7, 14], [2, 4, 10]),
+            (500_000, 6, [1, 4, 8], [1, 2, 5]),
+            (500_000, 8, [1, 3, 7], [1, 2, 4]),
+        ];
+        for (rate, bytes, full, seventy) in table {
+            for (k, cycle_us) in [1000, 2000, 4000].into_iter().enumerate() {
+                assert_eq!(
+                    max_axes(rate, cycle_us, bytes, 100.0),
+                    full[k],
+                    "{rate} {bytes} B {cycle_us} µs 100 %"
+                );
+                assert_eq!(
+                    max_axes(rate, cycle_us, bytes, 70.0),
+                    seventy[k],
+                    "{rate} {bytes} B {cycle_us} µs 70 %"
+                );
+            }
+        }
+    }
+
+    /// The demo machine with three more axes (A, B, C on nodes 4, 5, 6) and `cycle_us`.
+    fn six_axes(cycle_us: u32) -> String {
+        let z = &DEMO_MACHINE[DEMO_MACHINE.rfind("[[axis]]").unwrap()..];
+        let mut text =
+            DEMO_MACHINE.replacen("cycle_us = 4000", &format!("cycle_us = {cycle_us}"), 1);
+        text = text.replacen("window_us = 2000", "window_us = 0", 1);
+        for (name, node) in [("A", 4), ("B", 5), ("C", 6)] {
+            text.push('\n');
+            text.push_str(
+                &z.replacen("name = \"Z\"", &format!("name = \"{name}\""), 1)
+                    .replacen("node = 3", &format!("node = {node}"), 1),
+            );
+        }
+        text
+    }
+
+    fn parse(text: &str) -> Result<Machine, ConfigError> {
+        Machine::parse(Path::new("six.toml"), text, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), DEMO_DRIVE)
+        })
+    }
+
+    #[test]
+    fn six_axes_at_1_mbit_are_refused_at_1_ms_and_accepted_at_4_ms() {
+        let e = parse(&six_axes(1000)).unwrap_err().to_string();
+        // SYNC 55 + 6 × (115 + 115) = 1435 bits in a 1000-bit cycle: 143.5 %.
+        assert!(e.starts_with("six.toml: [bus] cycle_us: the process data needs 143.5 % of the bus, above max_load_percent = 70"), "{e}");
+        assert!(e.contains("1435 bits per 1000 µs cycle"), "{e}");
+        let m = parse(&six_axes(4000)).unwrap();
+        assert_eq!(m.axes.len(), 6);
+        assert!((m.bus_load().percent - 35.875).abs() < 1e-9);
+        // 2 ms: 71.75 % — just above the default limit, accepted when the limit is raised.
+        assert!(parse(&six_axes(2000)).is_err());
+        let raised = six_axes(2000).replacen(
+            "cycle_us = 2000",
+            "cycle_us = 2000\nmax_load_percent = 75",
+            1,
+        );
+        assert!(parse(&raised).is_ok());
+    }
+
+    #[test]
+    fn a_sync_window_too_short_for_the_frames_is_refused() {
+        let text = DEMO_MACHINE.replacen("window_us = 2000", "window_us = 500", 1);
+        let e = parse(&text).unwrap_err().to_string();
+        // SYNC 55 + 3 × 230 = 745 bits = 745 µs at 1 Mbit/s.
+        assert!(
+            e.starts_with("six.toml: [sync] window_us: 500 µs is shorter than the 745 µs"),
+            "{e}"
+        );
     }
 }

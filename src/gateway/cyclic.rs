@@ -22,6 +22,7 @@ use nalgebra::Vector3;
 
 use crate::bus::Frame;
 use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
+use crate::config::machine::MAX_AXES;
 use crate::config::{AxisConfig, AxisMode, Machine};
 use crate::interp::{Interpolator, Status};
 
@@ -40,8 +41,9 @@ pub struct AxisIo {
     pub name: String,
     /// Node id.
     pub node: u8,
-    /// X = 0, Y = 1, Z = 2.
-    pub xyz: usize,
+    /// X = 0, Y = 1, Z = 2; `None` for an axis the motion front end does not command yet
+    /// (A, B, C, U, V, W): it holds its position.
+    pub xyz: Option<usize>,
     /// Mode.
     pub mode: AxisMode,
     rpdo_cob: u16,
@@ -69,11 +71,7 @@ impl AxisIo {
         AxisIo {
             name: a.name.clone(),
             node: a.node,
-            xyz: match a.name.as_str() {
-                "X" => 0,
-                "Y" => 1,
-                _ => 2,
-            },
+            xyz: a.xyz(),
             mode: a.mode,
             rpdo_cob: a.setpoint_pdo.cob_id,
             rpdo_len: a.setpoint_pdo.len_bytes(),
@@ -150,11 +148,11 @@ pub struct CycleRecord {
     /// Program line in execution (while streaming).
     pub line: Option<usize>,
     /// Setpoint sent, per axis in machine order (mm); up to 3 axes.
-    pub cmd_mm: [f64; 3],
+    pub cmd_mm: [f64; MAX_AXES],
     /// Position actual, per axis (mm).
-    pub act_mm: [f64; 3],
+    pub act_mm: [f64; MAX_AXES],
     /// Following error, per axis (mm): setpoint in force at the drive minus position actual.
-    pub ferr_mm: [f64; 3],
+    pub ferr_mm: [f64; MAX_AXES],
 }
 
 /// The cyclic master.
@@ -481,7 +479,9 @@ impl CyclicMaster {
                     self.bit12_cycle = Some(self.cycle);
                     let mut p = Vector3::zeros();
                     for (i, a) in self.axes.iter().enumerate() {
-                        p[a.xyz] = self.sp_mm[i][0];
+                        if let Some(k) = a.xyz {
+                            p[k] = self.sp_mm[i][0];
+                        }
                     }
                     self.armed_mm = Some(p);
                     self.set_phase(Phase::Armed);
@@ -514,7 +514,10 @@ impl CyclicMaster {
             };
             for i in 0..n {
                 let a = &self.axes[i];
-                let target = p[a.xyz];
+                let target = match a.xyz {
+                    Some(k) => p[k],
+                    None => self.sp_mm[i][1],
+                };
                 let prev = self.sp_mm[i][1];
                 let step = (target - prev).abs();
                 // Last line of defence; the plan is checked against these before motion starts.
@@ -608,11 +611,11 @@ impl CyclicMaster {
             cycle: self.cycle,
             phase: self.phase,
             line: self.line,
-            cmd_mm: [0.0; 3],
-            act_mm: [0.0; 3],
-            ferr_mm: [0.0; 3],
+            cmd_mm: [0.0; MAX_AXES],
+            act_mm: [0.0; MAX_AXES],
+            ferr_mm: [0.0; MAX_AXES],
         };
-        for (i, act) in actual_mm.iter().enumerate().take(3) {
+        for (i, act) in actual_mm.iter().enumerate().take(MAX_AXES) {
             rec.cmd_mm[i] = self.sp_mm[i][0];
             if let Some(p) = *act {
                 rec.act_mm[i] = p;
@@ -842,7 +845,7 @@ mod tests {
         let m = Machine::demo();
         let t = m.cycle_s();
         // From the start of the motion on (before it, the setpoint is position actual).
-        let cmds: Vec<[f64; 3]> = r
+        let cmds: Vec<[f64; MAX_AXES]> = r
             .records
             .iter()
             .skip_while(|r| r.phase != Phase::Streaming)
