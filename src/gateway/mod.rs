@@ -296,10 +296,11 @@ pub fn limits(machine: &Machine) -> Limits {
     let mut a = Vector3::repeat(1.0);
     let mut feed: f64 = 0.0;
     for ax in &machine.axes {
-        let i = cyclic::AxisIo::new(ax).xyz;
-        v[i] = ax.max_vel_mm_s;
-        a[i] = ax.max_acc_mm_s2;
-        feed = feed.max(ax.max_vel_mm_s);
+        if let Some(i) = ax.xyz() {
+            v[i] = ax.max_vel_mm_s;
+            a[i] = ax.max_acc_mm_s2;
+            feed = feed.max(ax.max_vel_mm_s);
+        }
     }
     Limits {
         max_vel_mm_s: v,
@@ -409,7 +410,9 @@ async fn run_async(
     let start_counts = startup::start(machine, bus, &mut io).await?;
     let mut start_mm = Vector3::zeros();
     for (a, c) in machine.axes.iter().zip(&start_counts) {
-        start_mm[cyclic::AxisIo::new(a).xyz] = a.counts_to_mm(*c);
+        if let Some(i) = a.xyz() {
+            start_mm[i] = a.counts_to_mm(*c);
+        }
     }
     // Check the program against the travel from where the machine is, before any motion.
     plan_program(machine, &opts.program_name, &opts.program_text, start_mm)?;
