@@ -20,7 +20,21 @@ fn opts(program: &str, simulate: bool, log: Option<std::path::PathBuf>) -> RunOp
 
 #[test]
 fn a_program_runs_end_to_end_and_lands_within_one_count() {
-    let m = machine(|t| t);
+    end_to_end(machine(|t| t));
+}
+
+#[test]
+fn a_program_runs_end_to_end_in_csp_too() {
+    let m = machine(csp);
+    assert!(
+        m.axes
+            .iter()
+            .all(|a| a.mode == canmotion::config::AxisMode::Csp)
+    );
+    end_to_end(m);
+}
+
+fn end_to_end(m: canmotion::config::Machine) {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("out.csv");
     let bus = Bus::InProc(InProcBus::new());
@@ -117,8 +131,20 @@ fn a_wrong_identity_is_refused_before_any_motion() {
 
 #[test]
 fn a_following_error_fault_stops_the_group_and_names_the_axis() {
+    following_error_fault(machine(|t| {
+        t.replacen("following_error_mm = 2.0", "following_error_mm = 0.001", 1)
+    }));
+}
+
+#[test]
+fn a_following_error_fault_in_csp_too() {
+    following_error_fault(machine(|t| {
+        csp(t).replacen("following_error_mm = 2.0", "following_error_mm = 0.001", 1)
+    }));
+}
+
+fn following_error_fault(m: canmotion::config::Machine) {
     // A window of 1 count cannot be held while moving: the drive must fault with EMCY 0x8611.
-    let m = machine(|t| t.replacen("following_error_mm = 2.0", "following_error_mm = 0.001", 1));
     let bus = Bus::InProc(InProcBus::new());
     let err = gateway::run(&m, &bus, &opts(PROGRAM, true, None)).unwrap_err();
     let msg = err.to_string();

@@ -149,9 +149,17 @@ fn two_processes_run_a_program_and_write_the_csv() {
 
 #[test]
 fn bit12_before_the_first_setpoint_and_no_following_error_on_vcan0() {
+    streams_on_vcan0(common::machine(|t| t));
+}
+
+#[test]
+fn csp_streams_on_vcan0_too() {
+    streams_on_vcan0(common::machine(common::csp));
+}
+
+fn streams_on_vcan0(m: canmotion::config::Machine) {
     let _g = lock();
     let _drives = simdrive(&[1, 2, 3], None);
-    let m = common::machine(|t| t);
     let s = gateway::run(
         &m,
         &Bus::SocketCan(IFACE.into()),

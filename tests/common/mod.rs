@@ -34,3 +34,9 @@ pub const PROGRAM: &str =
 
 /// The program's final point in counts for the demo machine (X, Y at 1000/mm, Z at 2000/mm).
 pub const PROGRAM_END_COUNTS: [i32; 3] = [1000, 1000, -6500];
+
+/// The demo machine in cyclic synchronous position mode (8): setpoint 0x607A instead of 0x60C1:01.
+pub fn csp(text: String) -> String {
+    text.replace("mode = \"ip\"", "mode = \"csp\"")
+        .replace("0x60C10120", "0x607A0020")
+}
