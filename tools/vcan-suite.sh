@@ -10,7 +10,17 @@ root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$root"
 
 echo "== vcan suite: building on the host"
-cargo build --quiet
+# The binary's path from cargo's own report (CARGO_TARGET_DIR may move it).
+bin=$(cargo build --message-format=json 2>/dev/null \
+  | python3 -c 'import json,sys
+for line in sys.stdin:
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["name"] == "canmotion":
+        print(m["executable"])')
+if [ -z "$bin" ] || [ ! -x "$bin" ]; then
+  echo "vcan-suite: ERROR: could not build the canmotion binary" >&2
+  exit 1
+fi
 # The path of the vcan test binary, from cargo's own report.
 vcan_bin=$(cargo test --features vcan-tests --test vcan --no-run --message-format=json 2>/dev/null \
   | python3 -c 'import json,sys
@@ -24,7 +34,7 @@ if [ -z "$vcan_bin" ] || [ ! -x "$vcan_bin" ]; then
 fi
 venv=$(tools/python-env.sh)
 
-export CANMOTION_BIN="$root/target/debug/canmotion"
+export CANMOTION_BIN="$bin"
 # Inside User-Mode Linux the whole guest runs on one host thread: a SCHED_FIFO cyclic thread
 # there starves the simulated drives' process (measured: heartbeats 150 ms late). Normal
 # scheduling in the guest; on a host with vcan the default (FIFO 80) applies.
