@@ -28,7 +28,7 @@ struct Cli {
 enum Command {
     /// Run a G-code program on the machine's drives.
     Run {
-        /// The program (the embedded demo when omitted).
+        /// The program (`-` for standard input; the embedded demo when omitted).
         program: Option<PathBuf>,
         /// Machine file (the embedded demo machine, dictionaries/machines/demo-xyz.toml, when omitted).
         #[arg(long)]
@@ -52,6 +52,11 @@ enum Command {
         /// Drive dictionary (default: the embedded dictionaries/drives/cia402-servo.toml).
         #[arg(long)]
         dictionary: Option<PathBuf>,
+        /// Misbehave, for fault tests: following-error@T, silent@T, reboot@T (T after the drive
+        /// starts following setpoints, e.g. 1.5s or 200ms) or drop-rpdo=P%; `NODE:` first aims
+        /// it at one node. Repeatable.
+        #[arg(long = "inject", value_name = "SPEC")]
+        injects: Vec<canmotion::sim::Targeted>,
     },
 }
 
@@ -84,6 +89,12 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 None => Machine::demo(),
             };
             let (name, text) = match program {
+                Some(p) if p.as_os_str() == "-" => {
+                    let mut text = String::new();
+                    std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+                        .map_err(|e| format!("<stdin>: cannot read: {e}"))?;
+                    ("<stdin>".to_string(), text)
+                }
                 Some(p) => {
                     let text = std::fs::read_to_string(&p)
                         .map_err(|e| format!("{}: cannot read: {e}", p.display()))?;
@@ -130,6 +141,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             bus,
             nodes,
             dictionary,
+            injects,
         } => {
             let dict = std::sync::Arc::new(match dictionary {
                 Some(p) => DriveDictionary::load(&p)?,
@@ -141,7 +153,14 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let bus = Bus::from_arg(&bus);
             let drives = nodes
                 .iter()
-                .map(|&n| SimDrive::new(dict.clone(), n))
+                .map(|&n| {
+                    injects
+                        .iter()
+                        .filter(|t| t.node.is_none_or(|m| m == n))
+                        .fold(SimDrive::new(dict.clone(), n), |d, t| {
+                            d.with_inject(t.inject)
+                        })
+                })
                 .collect();
             let handle = runner::spawn(&bus, drives)?;
             eprintln!(

@@ -174,6 +174,8 @@ pub struct CyclicMaster {
     stop_acc: Vec<f64>,
     frozen: Vec<bool>,
     failure: Option<String>,
+    /// The cycle in which the failure was detected.
+    pub failure_cycle: Option<u64>,
     /// First cycle in which every IP axis reported statusword bit 12.
     pub bit12_cycle: Option<u64>,
     /// First cycle whose setpoint differed from the armed position.
@@ -204,6 +206,7 @@ impl CyclicMaster {
             stop_acc: vec![0.0; n],
             frozen: vec![false; n],
             failure: None,
+            failure_cycle: None,
             bit12_cycle: None,
             first_motion_cycle: None,
             max_ferr_mm: vec![0.0; n],
@@ -215,6 +218,10 @@ impl CyclicMaster {
     /// The axes.
     pub fn axes(&self) -> &[AxisIo] {
         &self.axes
+    }
+    /// The cycle period, s.
+    pub fn period_s(&self) -> f64 {
+        self.period_s
     }
     /// The phase.
     pub fn phase(&self) -> Phase {
@@ -296,6 +303,7 @@ impl CyclicMaster {
                 None => String::new(),
             };
             self.failure = Some(format!("{message}{at}"));
+            self.failure_cycle = Some(self.cycle);
         }
         match self.phase {
             Phase::Streaming | Phase::Settling | Phase::Armed | Phase::Arming => {
@@ -349,11 +357,24 @@ impl CyclicMaster {
         // Alarms from the process data itself.
         for i in 0..n {
             match self.fb[i] {
+                // A fault, or a following error the drive flags without faulting (CiA 402
+                // leaves the reaction to the drive): either way the axis is not where it
+                // should be.
                 Some(fb)
-                    if fb.statusword & swb::FAULT != 0
-                        && self.phase != Phase::Done
-                        && !self.frozen[i] =>
+                    if fb.statusword & (swb::FAULT | swb::OP_MODE_SPECIFIC_13) != 0
+                        && matches!(
+                            self.phase,
+                            Phase::Arming
+                                | Phase::Armed
+                                | Phase::Streaming
+                                | Phase::Settling
+                                | Phase::Stopping
+                        )
+                        || fb.statusword & swb::FAULT != 0 && self.phase == Phase::Enabling =>
                 {
+                    if self.frozen[i] {
+                        continue;
+                    }
                     self.frozen[i] = true;
                     let a = &self.axes[i];
                     let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {

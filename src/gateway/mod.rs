@@ -167,7 +167,7 @@ pub enum GatewayError {
     },
     /// The motion stopped because of a fault.
     #[error("motion stopped: {0}")]
-    Motion(String),
+    Motion(Box<MotionFailure>),
     /// Writing the log failed.
     #[error("{file}: {source}")]
     Log {
@@ -176,6 +176,43 @@ pub enum GatewayError {
         /// Why.
         source: std::io::Error,
     },
+}
+
+/// Why and when the motion stopped.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MotionFailure {
+    /// What happened, to which axis, at which program line.
+    pub message: String,
+    /// The cycle in which it was detected.
+    pub detected_cycle: Option<u64>,
+    /// The cycle in which every drive reported statusword bit 12.
+    pub bit12_cycle: Option<u64>,
+    /// The first cycle with a moving setpoint.
+    pub first_motion_cycle: Option<u64>,
+    /// The cycle period, s.
+    pub period_s: f64,
+    /// Wall-clock time from the cycle that saw statusword bit 12 on every drive to the one that
+    /// detected the failure, s.
+    pub bit12_to_failure_s: Option<f64>,
+}
+
+impl MotionFailure {
+    fn plain(message: String, period_s: f64) -> Box<MotionFailure> {
+        Box::new(MotionFailure {
+            message,
+            detected_cycle: None,
+            bit12_cycle: None,
+            first_motion_cycle: None,
+            period_s,
+            bit12_to_failure_s: None,
+        })
+    }
+}
+
+impl std::fmt::Display for MotionFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
 }
 
 /// What a run did.
@@ -446,8 +483,9 @@ async fn run_async(
         Ok(armed_mm) => {
             let r = plan_program(machine, &opts.program_name, &opts.program_text, armed_mm)
                 .and_then(|plan| {
-                    Interpolator::new(plan, machine.cycle_s())
-                        .map_err(|e| GatewayError::Motion(e.to_string()))
+                    Interpolator::new(plan, machine.cycle_s()).map_err(|e| {
+                        GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
+                    })
                 });
             match r {
                 Ok(interp) => {
@@ -460,7 +498,7 @@ async fn run_async(
         Err(_) => Ok(()), // the cyclic thread ended before arming: its result says why
     };
     drop(plan_tx);
-    let (master, timing, rt_setup, port_err, dropped, warnings) =
+    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s) =
         tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
             .await
             .expect("join");
@@ -477,7 +515,14 @@ async fn run_async(
         return Err(GatewayError::Bus(e));
     }
     if let Some(f) = master.failure() {
-        return Err(GatewayError::Motion(f.to_string()));
+        return Err(GatewayError::Motion(Box::new(MotionFailure {
+            message: f.to_string(),
+            detected_cycle: master.failure_cycle,
+            bit12_cycle: master.bit12_cycle,
+            first_motion_cycle: master.first_motion_cycle,
+            period_s: master.period_s(),
+            bit12_to_failure_s,
+        })));
     }
     let final_counts = master.final_counts();
     Ok(Summary {
@@ -504,6 +549,7 @@ type CyclicResult = (
     Option<BusError>,
     u64,
     Vec<Warning>,
+    Option<f64>,
 );
 
 fn cyclic_thread(
@@ -532,6 +578,7 @@ fn cyclic_thread(
     let consumer = Duration::from_millis(u64::from(machine.heartbeat.gateway_consumer_ms));
     let mut port_err = None;
     let mut warnings: Vec<Warning> = Vec::new();
+    let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
     loop {
         ticker.wait();
         // Feedback received since the last cycle.
@@ -616,13 +663,26 @@ fn cyclic_thread(
         {
             let _ = tx.send(master.armed_mm().expect("armed"));
         }
-        if master.phase() == Phase::Armed
-            && let Ok(m) = plan_rx.try_recv()
-        {
-            master.supply_motion(m);
+        if master.phase() == Phase::Armed {
+            match plan_rx.try_recv() {
+                Ok(m) => master.supply_motion(m),
+                Err(mpsc::TryRecvError::Empty) => {}
+                // Planning failed on the other side (its error is reported there): disable.
+                Err(mpsc::TryRecvError::Disconnected) => {
+                    master.alarm(0, "no motion to run: planning failed".into())
+                }
+            }
         }
         out.clear();
         let rec = master.cycle(machine.sync_cob_id, &mut out);
+        // Wall-clock instants of arming and of a failure: cycle counts do not see the periods
+        // an overrun skipped.
+        if master.bit12_cycle.is_some() && bit12_ns.is_none() {
+            bit12_ns = Some(rt::now_ns());
+        }
+        if master.failure_cycle.is_some() && fail_ns.is_none() {
+            fail_ns = Some(rt::now_ns());
+        }
         for f in &out {
             if let Err(e) = port.send(f) {
                 master.alarm(0, format!("bus error: {e}"));
@@ -652,7 +712,19 @@ fn cyclic_thread(
         }
     }
     drop(armed_tx);
-    (master, ticker.timing, rt_setup, port_err, dropped, warnings)
+    let bit12_to_failure_s = match (bit12_ns, fail_ns) {
+        (Some(a), Some(b)) => Some((b as f64 - a as f64) * 1e-9),
+        _ => None,
+    };
+    (
+        master,
+        ticker.timing,
+        rt_setup,
+        port_err,
+        dropped,
+        warnings,
+        bit12_to_failure_s,
+    )
 }
 
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;

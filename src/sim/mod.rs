@@ -12,6 +12,7 @@
 //!
 //! Units of the motion model are the drive's: counts, counts/s, counts/s².
 
+pub mod inject;
 pub mod runner;
 
 use std::sync::Arc;
@@ -27,6 +28,7 @@ use crate::canopen::{AbortCode, NmtState, cob, nmt};
 use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
 use crate::config::DriveDictionary;
 use crate::config::machine::MapEntry;
+pub use inject::{Inject, Targeted};
 
 /// Position loop gain (1/s): the actual position approaches the demand with a ~5 ms time constant.
 const KP_PER_S: f64 = 200.0;
@@ -92,6 +94,14 @@ pub struct SimDrive {
     deferred: Vec<Frame>,
     /// Synchronous RPDOs discarded for arriving outside the synchronous window.
     rpdo_outside_window: u64,
+    /// Injected misbehaviours, and whether each has fired.
+    injects: Vec<(Inject, bool)>,
+    /// When the drive first followed setpoints (statusword bit 12), the origin of injections.
+    motion_since: Option<Duration>,
+    jammed: bool,
+    silent: bool,
+    rng: u64,
+    rpdo_dropped: u64,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -137,6 +147,12 @@ impl SimDrive {
             last_physics: None,
             deferred: Vec::new(),
             rpdo_outside_window: 0,
+            injects: Vec::new(),
+            motion_since: None,
+            jammed: false,
+            silent: false,
+            rng: 0x9E37_79B9_7F4A_7C15 ^ u64::from(node),
+            rpdo_dropped: 0,
         }
     }
 
@@ -146,6 +162,83 @@ impl SimDrive {
         self.demand = self.pos;
         self.refresh();
         self
+    }
+
+    /// Add a misbehaviour to show (see [`inject`]).
+    pub fn with_inject(mut self, inject: Inject) -> SimDrive {
+        self.injects.push((inject, false));
+        self
+    }
+
+    /// RPDOs lost to an injected drop rate.
+    pub fn rpdos_dropped(&self) -> u64 {
+        self.rpdo_dropped
+    }
+
+    /// Fire the injections that are due.
+    fn check_injects(&mut self, now: Duration, out: &mut Vec<Frame>) {
+        let Some(since) = self.motion_since else {
+            return;
+        };
+        for k in 0..self.injects.len() {
+            let (inj, fired) = self.injects[k];
+            if fired {
+                continue;
+            }
+            let after = match inj {
+                Inject::FollowingError { after }
+                | Inject::Silent { after }
+                | Inject::Reboot { after } => after,
+                Inject::DropRpdo { .. } => continue,
+            };
+            if now < since + after {
+                continue;
+            }
+            self.injects[k].1 = true;
+            match inj {
+                Inject::FollowingError { .. } => self.jammed = true,
+                Inject::Silent { .. } => self.silent = true,
+                Inject::Reboot { .. } => {
+                    let (pos, injects) = (self.pos, std::mem::take(&mut self.injects));
+                    *self = SimDrive::new(self.od.dictionary().clone(), self.node);
+                    self.pos = pos;
+                    self.demand = pos;
+                    self.injects = injects;
+                    self.boot(now, out);
+                    return;
+                }
+                Inject::DropRpdo { .. } => {}
+            }
+        }
+    }
+
+    fn next_inject_at(&self) -> Option<Duration> {
+        let since = self.motion_since?;
+        self.injects
+            .iter()
+            .filter(|(_, fired)| !fired)
+            .filter_map(|(i, _)| match i {
+                Inject::FollowingError { after }
+                | Inject::Silent { after }
+                | Inject::Reboot { after } => Some(since + *after),
+                Inject::DropRpdo { .. } => None,
+            })
+            .min()
+    }
+
+    /// Whether to lose this RPDO (xorshift64*, deterministic per node).
+    fn drop_rpdo(&mut self) -> bool {
+        let Some(p) = self.injects.iter().find_map(|(i, _)| match i {
+            Inject::DropRpdo { percent } => Some(*percent),
+            _ => None,
+        }) else {
+            return false;
+        };
+        self.rng ^= self.rng >> 12;
+        self.rng ^= self.rng << 25;
+        self.rng ^= self.rng >> 27;
+        let r = (self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64;
+        r * 100.0 < p
     }
 
     /// Node id.
@@ -263,15 +356,22 @@ impl SimDrive {
         if self.vel != 0.0 || self.interp.is_some() || self.power.power_enabled() {
             t = t.min(now + Duration::from_millis(1));
         }
+        if let Some(i) = self.next_inject_at() {
+            t = t.min(i.max(now));
+        }
         t
     }
 
     /// Advance time: the motor, the heartbeat producer, the SYNC and heartbeat consumers.
     pub fn poll(&mut self, now: Duration, out: &mut Vec<Frame>) {
-        if self.nmt == NmtState::BootUp {
+        if self.nmt == NmtState::BootUp || self.silent {
             return;
         }
         self.physics(now, out);
+        self.check_injects(now, out);
+        if self.silent {
+            return;
+        }
         if let Some(h) = self.next_heartbeat
             && now >= h
         {
@@ -385,7 +485,7 @@ impl SimDrive {
 
     /// Handle one received frame.
     pub fn handle(&mut self, now: Duration, frame: &Frame, out: &mut Vec<Frame>) {
-        if self.nmt == NmtState::BootUp {
+        if self.nmt == NmtState::BootUp || self.silent {
             return;
         }
         let id = frame.id();
@@ -488,6 +588,10 @@ impl SimDrive {
     }
 
     fn on_rpdo(&mut self, n: usize, now: Duration, data: &[u8], out: &mut Vec<Frame>) {
+        if self.drop_rpdo() {
+            self.rpdo_dropped += 1;
+            return;
+        }
         let map = self.mapping(rpdo_map(n));
         let len: usize = map.iter().map(|e| usize::from(e.bits / 8)).sum();
         if data.len() < len {
@@ -765,7 +869,13 @@ impl SimDrive {
                     self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
                     v_ff = 0.0;
                 }
-                let v_cmd = (K_FF * v_ff + KP_PER_S * (self.demand - self.pos)).clamp(-vmax, vmax);
+                // A jammed motor (injected) does not move whatever it is told.
+                let v_cmd = if self.jammed {
+                    self.vel = 0.0;
+                    0.0
+                } else {
+                    (K_FF * v_ff + KP_PER_S * (self.demand - self.pos)).clamp(-vmax, vmax)
+                };
                 let dv = (v_cmd - self.vel).clamp(-amax * dt, amax * dt);
                 self.vel += dv;
                 self.pos += self.vel * dt;
@@ -820,6 +930,9 @@ impl SimDrive {
             7 if enabled && self.ip_active => s |= sw::OP_MODE_SPECIFIC_12,
             8 if enabled => s |= sw::OP_MODE_SPECIFIC_12,
             _ => {}
+        }
+        if s & sw::OP_MODE_SPECIFIC_12 != 0 && self.motion_since.is_none() {
+            self.motion_since = self.last_physics;
         }
         let window = self.od.int(0x6067, 0) as f64;
         if (self.demand - self.pos).abs() <= window && self.vel.abs() < 1.0 {

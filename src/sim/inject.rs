@@ -1,0 +1,159 @@
+//! Misbehaviours a simulated drive can be told to show, for fault-reaction tests:
+//! `--inject following-error@2.0s`, `--inject silent@1.5s`, `--inject reboot@1.0s`,
+//! `--inject drop-rpdo=5%`, optionally for one node: `--inject 2:silent@1.5s`.
+//!
+//! Times count from the moment the drive starts following setpoints (statusword bit 12 first
+//! set), so a test can place a fault in the middle of a motion whatever the start-up took.
+
+use std::str::FromStr;
+use std::time::Duration;
+
+/// One injected misbehaviour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Inject {
+    /// The motor jams (stops following): the following error grows until the drive faults
+    /// (0x6065/0x6066, EMCY 0x8611).
+    FollowingError {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// The drive falls silent: it sends nothing more and ignores every frame (a dead transceiver
+    /// or a crashed communication stack). The motor holds.
+    Silent {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// The drive resets (a watchdog, a power glitch): boot-up message, Pre-operational, power
+    /// stage off.
+    Reboot {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// This fraction of received RPDOs is lost (deterministic pseudo-random choice).
+    DropRpdo {
+        /// 0–100.
+        percent: f64,
+    },
+}
+
+/// An injection aimed at one node, or at every node of the process.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Targeted {
+    /// `None` = every simulated node.
+    pub node: Option<u8>,
+    /// What to inject.
+    pub inject: Inject,
+}
+
+fn parse_secs(s: &str, spec: &str) -> Result<Duration, String> {
+    let n = s
+        .strip_suffix("ms")
+        .map(|v| (v, 1e-3))
+        .or_else(|| s.strip_suffix('s').map(|v| (v, 1.0)));
+    let (v, scale) =
+        n.ok_or_else(|| format!("{spec:?}: a time needs a unit, e.g. 1.5s or 200ms"))?;
+    let x: f64 = v
+        .parse()
+        .map_err(|_| format!("{spec:?}: {v:?} is not a number"))?;
+    if !(x.is_finite() && x >= 0.0) {
+        return Err(format!("{spec:?}: the time must be ≥ 0"));
+    }
+    Ok(Duration::from_secs_f64(x * scale))
+}
+
+impl FromStr for Targeted {
+    type Err = String;
+
+    fn from_str(spec: &str) -> Result<Targeted, String> {
+        let (node, rest) = match spec.split_once(':') {
+            Some((n, r)) => {
+                let n: u8 = n
+                    .parse()
+                    .map_err(|_| format!("{spec:?}: {n:?} is not a node id"))?;
+                if !(1..=127).contains(&n) {
+                    return Err(format!("{spec:?}: node {n} outside 1..=127"));
+                }
+                (Some(n), r)
+            }
+            None => (None, spec),
+        };
+        let inject = if let Some((what, t)) = rest.split_once('@') {
+            let after = parse_secs(t, spec)?;
+            match what {
+                "following-error" => Inject::FollowingError { after },
+                "silent" => Inject::Silent { after },
+                "reboot" => Inject::Reboot { after },
+                _ => {
+                    return Err(format!(
+                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, drop-rpdo)"
+                    ));
+                }
+            }
+        } else if let Some(p) = rest.strip_prefix("drop-rpdo=") {
+            let v = p
+                .strip_suffix('%')
+                .ok_or_else(|| format!("{spec:?}: a percentage, e.g. drop-rpdo=5%"))?;
+            let percent: f64 = v
+                .parse()
+                .map_err(|_| format!("{spec:?}: {v:?} is not a number"))?;
+            if !(0.0..=100.0).contains(&percent) {
+                return Err(format!("{spec:?}: {percent} % outside 0..=100"));
+            }
+            Inject::DropRpdo { percent }
+        } else {
+            return Err(format!(
+                "{spec:?}: expected following-error@T, silent@T, reboot@T or drop-rpdo=P% (optionally NODE: first)"
+            ));
+        };
+        Ok(Targeted { node, inject })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specs_parse() {
+        let ms = Duration::from_millis;
+        assert_eq!(
+            "following-error@2.0s".parse(),
+            Ok(Targeted {
+                node: None,
+                inject: Inject::FollowingError { after: ms(2000) }
+            })
+        );
+        assert_eq!(
+            "2:silent@150ms".parse(),
+            Ok(Targeted {
+                node: Some(2),
+                inject: Inject::Silent { after: ms(150) }
+            })
+        );
+        assert_eq!(
+            "reboot@1s".parse(),
+            Ok(Targeted {
+                node: None,
+                inject: Inject::Reboot { after: ms(1000) }
+            })
+        );
+        assert_eq!(
+            "drop-rpdo=5%".parse(),
+            Ok(Targeted {
+                node: None,
+                inject: Inject::DropRpdo { percent: 5.0 }
+            })
+        );
+        for bad in [
+            "silent@",
+            "silent@2",
+            "jam@1s",
+            "drop-rpdo=5",
+            "drop-rpdo=150%",
+            "0:silent@1s",
+            "x:silent@1s",
+        ] {
+            assert!(bad.parse::<Targeted>().is_err(), "{bad}");
+        }
+    }
+}

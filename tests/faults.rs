@@ -1,0 +1,137 @@
+//! Fault reactions on the in-process bus: simulated drives told to misbehave mid-motion. Each
+//! test checks the reported message, the detection time, and that no healthy axis's setpoint
+//! broke its velocity or acceleration limit while the group stopped. The same scenarios run on
+//! vcan0 in tests/vcan.rs.
+
+mod common;
+
+use std::path::PathBuf;
+
+use canmotion::bus::Bus;
+use canmotion::bus::inproc::InProcBus;
+use canmotion::config::Machine;
+use canmotion::gateway::{self, RunOptions};
+use canmotion::sim::{Inject, SimDrive, runner};
+use common::*;
+
+fn run(machine: Machine, inject: &[(u8, Inject)], program: &str) -> Outcome {
+    let bus = InProcBus::new();
+    let dict = drive_dict(|t| t);
+    let drives = machine
+        .axes
+        .iter()
+        .map(|a| {
+            inject
+                .iter()
+                .filter(|(n, _)| *n == a.node)
+                .fold(SimDrive::new(dict.clone(), a.node), |d, (_, i)| {
+                    d.with_inject(*i)
+                })
+        })
+        .collect();
+    let _sims = runner::spawn(&Bus::InProc(bus.clone()), drives).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let log: PathBuf = dir.path().join("log.csv");
+    let result = gateway::run(
+        &machine,
+        &Bus::InProc(bus),
+        &RunOptions {
+            program_name: "fault.ngc".into(),
+            program_text: program.into(),
+            log: Some(log.clone()),
+            simulate: false,
+        },
+    );
+    let text = std::fs::read_to_string(&log).unwrap();
+    let rows = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    Outcome {
+        result,
+        rows,
+        machine,
+    }
+}
+
+#[test]
+fn a_following_error_fault_freezes_the_axis_and_stops_the_group() {
+    let o = run(
+        machine(|t| t),
+        &[(2, Inject::FollowingError { after: ms(400) })],
+        LONG,
+    );
+    let f = failure(&o);
+    assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
+    assert!(
+        f.message.contains("following error") || f.message.contains("0x8611"),
+        "{f}"
+    );
+    assert!(f.message.ends_with("(last program line 2)"), "{f}");
+    // The window is 2 mm at 100 mm/s: 20 ms, plus the 10 ms time-out, plus the PDO round trip.
+    let d = detection_s(f, 0.4);
+    assert!((0.0..0.080).contains(&d), "detected {d} s after the jam");
+    frozen_after(&o, 1, f);
+    limits_held(&o, &[0, 2]);
+}
+
+#[test]
+fn a_silent_drive_is_detected_within_its_heartbeat_time_and_the_group_stops() {
+    let o = run(
+        machine(|t| t),
+        &[(3, Inject::Silent { after: ms(300) })],
+        LONG,
+    );
+    let f = failure(&o);
+    assert!(f.message.starts_with("axis Z (node 3): "), "{f}");
+    assert!(
+        f.message.contains("no process data") || f.message.contains("heartbeat lost"),
+        "{f}"
+    );
+    // Within the consumer time (300 ms) plus one cycle; the missing TPDOs give it away sooner.
+    let d = detection_s(f, 0.3);
+    let bound = f64::from(o.machine.heartbeat.gateway_consumer_ms) * 1e-3 + o.machine.cycle_s();
+    assert!(
+        (0.0..=bound).contains(&d),
+        "detected {d} s after the drive fell silent"
+    );
+    frozen_after(&o, 2, f);
+    limits_held(&o, &[0, 1]);
+}
+
+#[test]
+fn a_drive_that_reboots_mid_motion_is_detected_by_its_boot_up() {
+    let o = run(
+        machine(|t| t),
+        &[(1, Inject::Reboot { after: ms(300) })],
+        LONG,
+    );
+    let f = failure(&o);
+    assert!(
+        f.message
+            .starts_with("axis X (node 1): boot-up during the run"),
+        "{f}"
+    );
+    let d = detection_s(f, 0.3);
+    assert!((0.0..0.050).contains(&d), "detected {d} s after the reboot");
+    frozen_after(&o, 0, f);
+    limits_held(&o, &[1, 2]);
+}
+
+#[test]
+fn lost_rpdos_do_not_stop_a_run() {
+    // 5 % of setpoints lost: the drive holds its last one for that cycle and catches up.
+    let o = run(
+        machine(|t| t),
+        &[
+            (1, Inject::DropRpdo { percent: 5.0 }),
+            (2, Inject::DropRpdo { percent: 5.0 }),
+        ],
+        PROGRAM,
+    );
+    let s = o.result.as_ref().expect("the run completes");
+    for (i, want) in PROGRAM_END_COUNTS.iter().enumerate() {
+        assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
+    }
+}
