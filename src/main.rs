@@ -58,6 +58,106 @@ enum Command {
         #[arg(long = "inject", value_name = "SPEC")]
         injects: Vec<canmotion::sim::Targeted>,
     },
+    /// Decode the bus's traffic per CiA 301/402, one line per frame (candump, decoded).
+    Monitor {
+        /// SocketCAN interface (vcan0, can0); not with --replay.
+        #[arg(long, required_unless_present = "replay")]
+        bus: Option<String>,
+        /// Machine file: decode its PDO mappings (controlword, statusword, positions in mm).
+        #[arg(long)]
+        machine: Option<PathBuf>,
+        /// Also write every frame to FILE in candump's log format (candump -L, canplayer).
+        #[arg(long, value_name = "FILE")]
+        log: Option<PathBuf>,
+        /// Decode a recorded candump log instead of a live bus.
+        #[arg(long, value_name = "FILE", conflicts_with = "bus")]
+        replay: Option<PathBuf>,
+        /// Stop after N frames.
+        #[arg(long, value_name = "N")]
+        count: Option<u64>,
+    },
+    /// Read or write one object of a node over SDO.
+    Sdo {
+        #[command(subcommand)]
+        op: SdoOp,
+    },
+    /// Send an NMT command (start, stop, preop, reset, reset-comm) to a node or to all.
+    Nmt {
+        /// SocketCAN interface (vcan0, can0).
+        iface: String,
+        /// start | stop | preop | reset | reset-comm.
+        #[arg(value_name = "COMMAND")]
+        command: canmotion::tools::NmtCommand,
+        /// Node id 1-127, or `all`.
+        #[arg(value_name = "NODE|all")]
+        target: canmotion::tools::NmtTarget,
+    },
+    /// List the CANopen nodes on a bus: node id, NMT state, device type, identity, name.
+    Scan {
+        /// SocketCAN interface (vcan0, can0).
+        iface: String,
+        /// How long each node has to answer one SDO request.
+        #[arg(long, value_name = "N", default_value_t = 100)]
+        timeout_ms: u64,
+    },
+    /// Drive dictionaries: import a vendor's EDS/DCF.
+    Dict {
+        #[command(subcommand)]
+        command: DictCommand,
+    },
+}
+
+/// `canmotion dict` operations.
+#[derive(Subcommand)]
+enum DictCommand {
+    /// Convert an EDS or DCF (CiA 306) into a drive dictionary (TOML); notes on every conversion
+    /// are comments in the output, and the output is checked to load.
+    Import {
+        /// The EDS or DCF file.
+        file: PathBuf,
+        /// The dictionary to write, e.g. dictionaries/drives/NAME.toml.
+        #[arg(short = 'o', long)]
+        output: PathBuf,
+        /// Resolve $NODEID for this node (default: a DCF's [DeviceComissioning] NodeID, else the
+        /// values stay "$NODEID+..." and follow the node the dictionary is used for).
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=127))]
+        node: Option<u8>,
+    },
+}
+
+/// `canmotion sdo` operations. INDEX and SUB are hexadecimal (`0x6040:00`, `1018:4`); NODE and
+/// VALUE decimal or `0x` hex; TYPE one of u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
+#[derive(Subcommand)]
+enum SdoOp {
+    /// Upload an object and print its value (and hex); raw bytes without TYPE.
+    Read {
+        /// SocketCAN interface (vcan0, can0).
+        iface: String,
+        /// Node id 1-127.
+        node: canmotion::tools::Node,
+        /// Object, hex: 0x6040:00, 1018:4.
+        #[arg(value_name = "INDEX[:SUB]")]
+        address: canmotion::tools::ObjectAddress,
+        /// u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
+        #[arg(value_name = "TYPE")]
+        data_type: Option<canmotion::tools::SdoType>,
+    },
+    /// Download a value to an object.
+    Write {
+        /// SocketCAN interface (vcan0, can0).
+        iface: String,
+        /// Node id 1-127.
+        node: canmotion::tools::Node,
+        /// Object, hex: 0x6040:00, 1018:4.
+        #[arg(value_name = "INDEX[:SUB]")]
+        address: canmotion::tools::ObjectAddress,
+        /// u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
+        #[arg(value_name = "TYPE")]
+        data_type: canmotion::tools::SdoType,
+        /// The value (decimal, 0x hex, negative for signed types; text for string).
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+    },
 }
 
 fn main() -> ExitCode {
@@ -170,6 +270,93 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 dict.name
             );
             handle.wait()?;
+            Ok(())
+        }
+        Command::Monitor {
+            bus,
+            machine,
+            log,
+            replay,
+            count,
+        } => {
+            use canmotion::tools::{DecodeContext, monitor};
+            let ctx = match machine {
+                Some(p) => DecodeContext::from_machine(&Machine::load(&p)?),
+                None => DecodeContext::new(),
+            };
+            let opts = monitor::MonitorOptions {
+                log,
+                count,
+                duration: None,
+            };
+            let mut out = std::io::stdout().lock();
+            match (replay, bus) {
+                (Some(file), _) => monitor::replay(&file, &ctx, &opts, &mut out)?,
+                (None, Some(b)) => monitor::monitor(&Bus::from_arg(&b), &ctx, &opts, &mut out)?,
+                (None, None) => unreachable!("clap requires --bus or --replay"),
+            };
+            Ok(())
+        }
+        Command::Sdo {
+            op:
+                SdoOp::Read {
+                    iface,
+                    node,
+                    address,
+                    data_type,
+                },
+        } => {
+            let v = canmotion::tools::sdo::read(&Bus::from_arg(&iface), node, address, data_type)?;
+            println!("{v}");
+            Ok(())
+        }
+        Command::Sdo {
+            op:
+                SdoOp::Write {
+                    iface,
+                    node,
+                    address,
+                    data_type,
+                    value,
+                },
+        } => {
+            let bus = Bus::from_arg(&iface);
+            let v = canmotion::tools::sdo::write_text(&bus, node, address, data_type, &value)?;
+            let v = canmotion::tools::args::format_value(&v);
+            println!("node {node}: {address} = {v} written");
+            Ok(())
+        }
+        Command::Nmt {
+            iface,
+            command,
+            target,
+        } => {
+            let f = canmotion::tools::nmt::send(&Bus::from_arg(&iface), command, target)?;
+            println!("NMT {command}: {target} ({f})");
+            Ok(())
+        }
+        Command::Scan { iface, timeout_ms } => {
+            use canmotion::tools::scan;
+            let bus = Bus::from_arg(&iface);
+            let opts = scan::ScanOptions {
+                timeout: std::time::Duration::from_millis(timeout_ms),
+                ..scan::ScanOptions::default()
+            };
+            let nodes = scan::scan(&bus, &opts)?;
+            print!("{}", scan::format_table(&nodes));
+            println!("{} node(s) on {}", nodes.len(), bus.name());
+            Ok(())
+        }
+        Command::Dict {
+            command: DictCommand::Import { file, output, node },
+        } => {
+            let opts = canmotion::eds::ImportOptions {
+                node,
+                ..Default::default()
+            };
+            let imported = canmotion::eds::import_to_file(&file, &output, &opts)?;
+            println!("{}", imported.summary());
+            println!("wrote             {}", output.display());
             Ok(())
         }
     }

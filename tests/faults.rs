@@ -114,7 +114,10 @@ fn a_drive_that_reboots_mid_motion_is_detected_by_its_boot_up() {
         "{f}"
     );
     let d = detection_s(f, 0.3);
-    assert!((-0.002..0.100).contains(&d), "detected {d} s after the reboot");
+    assert!(
+        (-0.002..0.100).contains(&d),
+        "detected {d} s after the reboot"
+    );
     frozen_after(&o, 0, f);
     limits_held(&o, &[1, 2]);
 }

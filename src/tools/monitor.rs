@@ -1,0 +1,295 @@
+//! `canmotion monitor`: every frame on the bus, decoded, one line each, optionally logged in
+//! candump's format; or a recorded candump log decoded the same way.
+//!
+//! A line is the candump log record of the frame, then what it means:
+//!
+//! ```text
+//! (1700000000.123456) vcan0 201#1F0050C30000     RPDO1 node 1 (axis X): controlword 0x001F Enable operation, enable IP (bit 4); IP setpoint 50000 counts (50.000 mm)
+//! (1700000000.123501) vcan0 080#                 SYNC
+//! ```
+
+use std::fs::File;
+use std::io::{BufReader, LineWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use super::ToolError;
+use super::candump::{LogReader, LogRecord, Timestamp, frame_text};
+use super::decode::{DecodeContext, decode};
+use crate::bus::Bus;
+
+/// When to stop, and where to log.
+#[derive(Debug, Clone, Default)]
+pub struct MonitorOptions {
+    /// Write every frame to this file in candump's log format (`candump -L`, `canplayer`).
+    pub log: Option<PathBuf>,
+    /// Stop after this many frames.
+    pub count: Option<u64>,
+    /// Stop after this long (live monitoring only).
+    pub duration: Option<Duration>,
+}
+
+/// The interface name a log records for `bus` (`sim` for the in-process bus).
+pub fn iface_name(bus: &Bus) -> &str {
+    match bus {
+        Bus::InProc(_) => "sim",
+        Bus::SocketCan(name) => name,
+    }
+}
+
+/// The monitor's line for a record: the candump log record, padded, then the decoded text.
+pub fn format_line(rec: &LogRecord, ctx: &DecodeContext) -> String {
+    format!(
+        "({}) {} {:<20} {}",
+        rec.ts,
+        rec.iface,
+        frame_text(&rec.frame),
+        decode(&rec.frame, ctx)
+    )
+}
+
+struct Sink<'a> {
+    out: &'a mut dyn Write,
+    log: Option<(PathBuf, LineWriter<File>)>,
+}
+
+impl Sink<'_> {
+    fn open<'a>(out: &'a mut dyn Write, log: Option<&Path>) -> Result<Sink<'a>, ToolError> {
+        let log = match log {
+            Some(p) => {
+                let f = File::create(p).map_err(|source| ToolError::Io {
+                    file: p.to_path_buf(),
+                    source,
+                })?;
+                Some((p.to_path_buf(), LineWriter::new(f)))
+            }
+            None => None,
+        };
+        Ok(Sink { out, log })
+    }
+
+    /// Log and print one record; `Ok(false)` when the output was closed (a pipe's reader left).
+    fn put(&mut self, rec: &LogRecord, ctx: &DecodeContext) -> Result<bool, ToolError> {
+        if let Some((path, w)) = &mut self.log {
+            writeln!(w, "{rec}").map_err(|source| ToolError::Io {
+                file: path.clone(),
+                source,
+            })?;
+        }
+        match writeln!(self.out, "{}", format_line(rec, ctx)) {
+            Ok(()) => Ok(true),
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
+            Err(source) => Err(ToolError::Io {
+                file: PathBuf::from("stdout"),
+                source,
+            }),
+        }
+    }
+
+    fn finish(&mut self) -> Result<(), ToolError> {
+        if let Some((path, w)) = &mut self.log {
+            w.flush().map_err(|source| ToolError::Io {
+                file: path.clone(),
+                source,
+            })?;
+        }
+        match self.out.flush() {
+            Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(ToolError::Io {
+                file: PathBuf::from("stdout"),
+                source: e,
+            }),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Monitor `bus` live: print every frame to `out` (and log it) until `opts.count` frames or
+/// `opts.duration` (forever when neither is given). Returns the number of frames seen.
+pub fn monitor(
+    bus: &Bus,
+    ctx: &DecodeContext,
+    opts: &MonitorOptions,
+    out: &mut dyn Write,
+) -> Result<u64, ToolError> {
+    let mut port = bus.open(&[])?;
+    let iface = iface_name(bus).to_string();
+    let mut sink = Sink::open(out, opts.log.as_deref())?;
+    let deadline = opts.duration.map(|d| Instant::now() + d);
+    let mut n = 0u64;
+    while opts.count.is_none_or(|c| n < c) {
+        let wait = match deadline {
+            Some(d) => {
+                let now = Instant::now();
+                if now >= d {
+                    break;
+                }
+                (d - now).min(Duration::from_millis(200))
+            }
+            None => Duration::from_millis(200),
+        };
+        let Some(frame) = port.recv_timeout(wait)? else {
+            continue;
+        };
+        let rec = LogRecord {
+            ts: Timestamp::now(),
+            iface: iface.clone(),
+            frame,
+        };
+        n += 1;
+        if !sink.put(&rec, ctx)? {
+            break;
+        }
+    }
+    sink.finish()?;
+    Ok(n)
+}
+
+/// Decode a recorded candump log from `input` (named `name` in errors) to `out`, logging it
+/// again to `opts.log` if given, up to `opts.count` frames. A malformed line stops with
+/// `name:line: why`, after the lines before it were printed. Returns the number of frames.
+pub fn replay_reader(
+    name: &str,
+    input: impl std::io::BufRead,
+    ctx: &DecodeContext,
+    opts: &MonitorOptions,
+    out: &mut dyn Write,
+) -> Result<u64, ToolError> {
+    let mut sink = Sink::open(out, opts.log.as_deref())?;
+    let mut n = 0u64;
+    for rec in LogReader::new(name, input) {
+        if opts.count.is_some_and(|c| n >= c) {
+            break;
+        }
+        let rec = rec?;
+        n += 1;
+        if !sink.put(&rec, ctx)? {
+            break;
+        }
+    }
+    sink.finish()?;
+    Ok(n)
+}
+
+/// [`replay_reader`] on a file.
+pub fn replay(
+    path: &Path,
+    ctx: &DecodeContext,
+    opts: &MonitorOptions,
+    out: &mut dyn Write,
+) -> Result<u64, ToolError> {
+    let f = File::open(path).map_err(|source| ToolError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    replay_reader(
+        &path.display().to_string(),
+        BufReader::new(f),
+        ctx,
+        opts,
+        out,
+    )
+}
+
+/// The monitor's lines for a log given as text (tests and tools).
+pub fn decode_log(name: &str, text: &str, ctx: &DecodeContext) -> Result<Vec<String>, ToolError> {
+    let mut out = Vec::new();
+    replay_reader(
+        name,
+        text.as_bytes(),
+        ctx,
+        &MonitorOptions::default(),
+        &mut out,
+    )?;
+    Ok(String::from_utf8_lossy(&out)
+        .lines()
+        .map(str::to_string)
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::inproc::InProcBus;
+    use crate::bus::{Filter, Frame};
+
+    #[test]
+    fn lines_start_with_the_log_record() {
+        let rec = LogRecord {
+            ts: Timestamp {
+                secs: 1_700_000_000,
+                micros: 42,
+            },
+            iface: "vcan0".into(),
+            frame: Frame::new(0x080, &[]).unwrap(),
+        };
+        assert_eq!(
+            format_line(&rec, &DecodeContext::new()),
+            "(1700000000.000042) vcan0 080#                 SYNC"
+        );
+    }
+
+    #[test]
+    fn live_monitor_prints_and_logs_what_others_send() {
+        let bus = InProcBus::new();
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("bus.log");
+        let b = Bus::InProc(bus.clone());
+        let sender = std::thread::spawn(move || {
+            let mut p = bus.port(&[Filter::exact(0x7FF)]);
+            std::thread::sleep(Duration::from_millis(50));
+            for f in [
+                Frame::new(0x000, &[1, 0]).unwrap(),
+                Frame::new(0x080, &[]).unwrap(),
+                Frame::new(0x705, &[5]).unwrap(),
+            ] {
+                crate::bus::Port::send(&mut p, &f).unwrap();
+            }
+        });
+        let mut out = Vec::new();
+        let opts = MonitorOptions {
+            log: Some(log.clone()),
+            count: Some(3),
+            duration: Some(Duration::from_secs(5)),
+        };
+        let n = monitor(&b, &DecodeContext::new(), &opts, &mut out).unwrap();
+        sender.join().unwrap();
+        assert_eq!(n, 3);
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(
+            lines[0].ends_with("sim 000#0100             NMT start: all nodes"),
+            "{text}"
+        );
+        assert!(
+            lines[2].ends_with("heartbeat node 5: operational"),
+            "{text}"
+        );
+        let logged = std::fs::read_to_string(&log).unwrap();
+        let recs = crate::tools::candump::parse_log("bus.log", &logged).unwrap();
+        assert_eq!(
+            recs.iter().map(|r| r.frame).collect::<Vec<_>>(),
+            vec![
+                Frame::new(0x000, &[1, 0]).unwrap(),
+                Frame::new(0x080, &[]).unwrap(),
+                Frame::new(0x705, &[5]).unwrap()
+            ]
+        );
+        assert!(recs.iter().all(|r| r.iface == "sim"));
+    }
+
+    #[test]
+    fn replay_stops_at_a_malformed_line_with_its_number() {
+        let mut out = Vec::new();
+        let e = replay_reader(
+            "rec.log",
+            "(1.000000) vcan0 080#\n(2.000000) vcan0 080#XYZ\n".as_bytes(),
+            &DecodeContext::new(),
+            &MonitorOptions::default(),
+            &mut out,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("rec.log:2: frame"), "{e}");
+        assert_eq!(String::from_utf8(out).unwrap().lines().count(), 1);
+    }
+}
