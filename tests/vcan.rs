@@ -385,10 +385,7 @@ fn vcan0_following_error_fault_stops_the_group() {
         "{f}"
     );
     let d = common::detection_s(f, 0.4);
-    assert!(
-        (-0.0041..0.080 + UML_MARGIN_S).contains(&d),
-        "detected {d} s after the jam"
-    );
+    assert!(d < 0.080 + UML_MARGIN_S, "detected {d} s after the jam");
     common::frozen_after(&o, 1, f);
     common::limits_held(&o, &[0, 2]);
 }
@@ -401,10 +398,7 @@ fn vcan0_silent_drive_is_detected_within_the_consumer_time_plus_one_cycle() {
     assert!(f.message.starts_with("axis Z (node 3): "), "{f}");
     let d = common::detection_s(f, 0.3);
     let bound = f64::from(o.machine.heartbeat.gateway_consumer_ms) * 1e-3 + o.machine.cycle_s();
-    assert!(
-        (-0.0041..=bound).contains(&d),
-        "detected {d} s after the drive fell silent"
-    );
+    assert!(d <= bound, "detected {d} s after the drive fell silent");
     common::frozen_after(&o, 2, f);
     common::limits_held(&o, &[0, 1]);
 }
@@ -420,10 +414,7 @@ fn vcan0_reboot_mid_motion_is_detected_by_the_boot_up() {
         "{f}"
     );
     let d = common::detection_s(f, 0.3);
-    assert!(
-        (-0.0041..0.050 + UML_MARGIN_S).contains(&d),
-        "detected {d} s after the reboot"
-    );
+    assert!(d < 0.050 + UML_MARGIN_S, "detected {d} s after the reboot");
     common::frozen_after(&o, 0, f);
     common::limits_held(&o, &[1, 2]);
 }

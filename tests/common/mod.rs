@@ -61,6 +61,9 @@ pub fn failure(o: &Outcome) -> &MotionFailure {
 /// Seconds from the injected fault to the gateway's detection. Injection times count from the
 /// drive's motion start (its statusword bit 12), which the gateway reads one cycle later, in
 /// `bit12_cycle`.
+///
+/// Only an upper bound is meaningful: a cycle that ran late when the gateway first saw bit 12
+/// moves the origin later, so a fast detection can come out slightly negative.
 pub fn detection_s(f: &MotionFailure, after_s: f64) -> f64 {
     // Measured on the gateway's monotonic clock; the drive's origin is one cycle earlier.
     f.bit12_to_failure_s
