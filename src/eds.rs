@@ -2038,6 +2038,7 @@ impl Cx<'_> {
                             "0x1018:{sub} ({sub_name}) has no default and [DeviceInfo] no {key}: 0"
                         ),
                     );
+                    s.default = Val::Int(0);
                     0
                 }
                 (false, _) => obj_val,
