@@ -9,13 +9,14 @@
 //! Take `G1 X50 F1200` on line 5 of a program, on the demo machine (X on node 1, 1000 counts/mm,
 //! interpolated position mode, 4 ms cycle).
 //!
-//! 1. [`gcode`] parses the whole program before anything moves
-//!    ([`gcode::parse_program`]); the line becomes a [`gcode::Move`] with an absolute target in
-//!    millimetres and a feed of 20 mm/s. A syntax error names `file:line:col`.
+//! 1. [`gcode`] reads the program line by line ([`gcode::Interpreter`], bounded memory) and
+//!    the whole of it is interpreted before anything moves; the line becomes a
+//!    [`gcode::Element`], a straight move with absolute start and end points in machine
+//!    millimetres and a feed of 20 mm/s. An error names `file:line:col`.
 //! 2. `compensation` (tool radius and length) comes with the full G-code front end; this
 //!    foundation has none, so the move passes through unchanged.
 //! 3. [`gateway::plan_program`] checks the target against the axes' travel, then
-//!    [`planner::plan`] turns the move into a [`planner::Segment`]: a trapezoid (or triangle)
+//!    [`planner::plan`] turns the element into a [`planner::Segment`]: a trapezoid (or triangle)
 //!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
 //!    projected on the move's direction.
 //! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no

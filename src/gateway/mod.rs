@@ -354,26 +354,58 @@ pub fn plan_program(
     text: &str,
     start_mm: Vector3<f64>,
 ) -> Result<Plan, GatewayError> {
+    use crate::gcode::{Error as GcodeError, ErrorKind as GcodeErrorKind, Item};
     let program = crate::gcode::parse_program(text, name, start_mm)?;
-    let mut prev = start_mm;
-    for m in &program.moves {
+    for item in &program.items {
+        let element = match item {
+            Item::Motion(e) => e,
+            // The cyclic loop cannot wait for an operator yet: refuse rather than run through
+            // a stop the programmer asked for.
+            Item::Stop(stop) => {
+                return Err(GatewayError::Program(GcodeError {
+                    file: name.to_string(),
+                    line: stop.line,
+                    col: stop.col,
+                    kind: GcodeErrorKind::Unsupported {
+                        what: if stop.optional { "M1" } else { "M0" }.to_string(),
+                        reason: "the gateway cannot pause a running program yet",
+                    },
+                }));
+            }
+            _ => continue,
+        };
+        // A line is checked at its end (its start was checked as the previous end); an arc can
+        // leave the box of its end points, so its whole extent is checked.
+        let (lo_mm, hi_mm) = match element.kind {
+            crate::gcode::ElementKind::Line => (element.end_mm, element.end_mm),
+            crate::gcode::ElementKind::Arc { .. } => element.bounds_mm(),
+        };
         for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
             let axis = machine.axes.iter().find(|a| a.name.starts_with(letter));
+            let moves = element.end_mm[i] != element.start_mm[i] || hi_mm[i] > lo_mm[i];
             match axis {
-                None if (m.target_mm[i] - prev[i]).abs() > 0.0 => {
+                None if moves => {
                     return Err(GatewayError::NoSuchAxis {
                         file: name.to_string(),
-                        line: m.line,
+                        line: element.line,
                         axis: letter,
                         machine: machine.name.clone(),
                     });
                 }
-                Some(a) if !(a.min_mm..=a.max_mm).contains(&m.target_mm[i]) => {
+                Some(a)
+                    if !(a.min_mm..=a.max_mm).contains(&lo_mm[i])
+                        || !(a.min_mm..=a.max_mm).contains(&hi_mm[i]) =>
+                {
+                    let target_mm = if lo_mm[i] < a.min_mm || lo_mm[i].is_nan() {
+                        lo_mm[i]
+                    } else {
+                        hi_mm[i]
+                    };
                     return Err(GatewayError::OutOfTravel {
                         file: name.to_string(),
-                        line: m.line,
+                        line: element.line,
                         axis: a.name.clone(),
-                        target_mm: m.target_mm[i],
+                        target_mm,
                         min_mm: a.min_mm,
                         max_mm: a.max_mm,
                     });
@@ -381,7 +413,6 @@ pub fn plan_program(
                 _ => {}
             }
         }
-        prev = m.target_mm;
     }
     crate::planner::plan(&program, &limits(machine)).map_err(|source| GatewayError::Plan {
         file: name.to_string(),

@@ -1,220 +1,500 @@
-//! Line scanner: one text line into words (`letter` + number), comments and markers stripped.
+//! Line scanner: one text line into words (`letter` + value), parameter assignments and O-word
+//! control, comments and markers stripped.
 //!
-//! The scanner knows the lexical rules only (comments, numbers, which letters this front end
-//! reads at all); what the words *mean* is decided by the block interpreter in `mod.rs`.
+//! The scanner knows the lexical rules (comments, numbers, markers, which letters exist) and
+//! evaluates values (numbers, parameters, expressions: see [`super::expr`]) with the parameters
+//! as they were before the line; what the words *mean* is decided by [`super::block`] and the
+//! interpreter. It keeps its buffers from line to line, so scanning allocates little once they
+//! have grown to the longest line.
 
 use super::ErrorKind;
+use super::expr::{ParamRef, Params, param_ref, real_value};
 
-/// Largest magnitude accepted for any number in a program. It keeps every later product
-/// (squares of lengths, inch scaling, G91 accumulation) far away from overflow; 1e9 mm is 1000 km.
+/// Largest magnitude accepted for any word's value. It keeps every later product (squares of
+/// lengths, inch scaling, G91 accumulation) far away from overflow; 1e9 mm is 1000 km.
 pub const MAX_ABS_VALUE: f64 = 1.0e9;
 
 /// One word of a block: an upper-case letter and its value.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Word {
     /// Upper-case letter.
     pub letter: char,
-    /// Parsed value.
+    /// Value (evaluated).
     pub value: f64,
-    /// The number as written (sign and digits), for messages.
-    pub text: String,
     /// 1-based column (in characters) of the letter.
     pub col: usize,
 }
 
-impl Word {
-    /// The word as a person wrote it, upper-cased: `X-1.5`, `G61.1`.
-    pub fn display(&self) -> String {
-        format!("{}{}", self.letter, self.text)
+/// What a scanned line holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum LineKind {
+    /// Nothing but blanks and comments.
+    Blank,
+    /// A `%` program marker (comments allowed beside it).
+    Percent,
+    /// A program number `O1234` (or `O<name>`) alone: a marker, no action.
+    ProgramNumber,
+    /// A `/` block, skipped because block delete is on.
+    Skipped,
+    /// Words (in [`Scanner::words`]) or parameter assignments, or both.
+    Words,
+    /// An O-word control line (in [`Scanner::control`]).
+    Control,
+}
+
+/// The label of an O-word: a number or a `<name>`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub(super) enum Label {
+    /// `o101`.
+    Number(u32),
+    /// `o<name>`, lower-cased.
+    Name(String),
+}
+
+impl std::fmt::Display for Label {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Label::Number(n) => write!(f, "o{n}"),
+            Label::Name(n) => write!(f, "o<{n}>"),
+        }
     }
 }
 
-/// A scanned line.
-#[derive(Debug, Default, Clone, PartialEq)]
-pub(super) struct Scanned {
-    /// The words, in line order.
-    pub words: Vec<Word>,
-    /// The line is a `%` program marker (nothing but comments beside it).
-    pub percent: bool,
+/// The keyword of an O-word control line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Keyword {
+    Sub,
+    EndSub,
+    Call,
+    Return,
+    If,
+    ElseIf,
+    Else,
+    EndIf,
+    While,
+    EndWhile,
+    Do,
+    Repeat,
+    EndRepeat,
+    Break,
+    Continue,
+}
+
+impl Keyword {
+    fn parse(word: &str) -> Option<Keyword> {
+        Some(match word.to_ascii_lowercase().as_str() {
+            "sub" => Keyword::Sub,
+            "endsub" => Keyword::EndSub,
+            "call" => Keyword::Call,
+            "return" => Keyword::Return,
+            "if" => Keyword::If,
+            "elseif" => Keyword::ElseIf,
+            "else" => Keyword::Else,
+            "endif" => Keyword::EndIf,
+            "while" => Keyword::While,
+            "endwhile" => Keyword::EndWhile,
+            "do" => Keyword::Do,
+            "repeat" => Keyword::Repeat,
+            "endrepeat" => Keyword::EndRepeat,
+            "break" => Keyword::Break,
+            "continue" => Keyword::Continue,
+            _ => return None,
+        })
+    }
+
+    /// The keyword as written in programs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Keyword::Sub => "sub",
+            Keyword::EndSub => "endsub",
+            Keyword::Call => "call",
+            Keyword::Return => "return",
+            Keyword::If => "if",
+            Keyword::ElseIf => "elseif",
+            Keyword::Else => "else",
+            Keyword::EndIf => "endif",
+            Keyword::While => "while",
+            Keyword::EndWhile => "endwhile",
+            Keyword::Do => "do",
+            Keyword::Repeat => "repeat",
+            Keyword::EndRepeat => "endrepeat",
+            Keyword::Break => "break",
+            Keyword::Continue => "continue",
+        }
+    }
+
+    /// Whether bracketed values may follow the keyword: a condition (if, elseif, while), a
+    /// count (repeat), a value (return, endsub) or arguments (call).
+    fn takes_values(self) -> bool {
+        matches!(
+            self,
+            Keyword::If
+                | Keyword::ElseIf
+                | Keyword::While
+                | Keyword::Repeat
+                | Keyword::Return
+                | Keyword::EndSub
+                | Keyword::Call
+        )
+    }
+}
+
+/// A scanned O-word control line.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Control {
+    pub label: Label,
+    pub keyword: Keyword,
+    /// 1-based column of the O.
+    pub col: usize,
+    /// The bracketed values after the keyword (condition, count, return value, call arguments).
+    pub values: Vec<f64>,
 }
 
 /// A lexical error with its 1-based column.
 pub(super) type LexError = (usize, ErrorKind);
 
-/// Why a letter is not read by this front end, or `None` if it is.
-fn unsupported_letter(letter: char) -> Option<(String, &'static str)> {
-    let reason = match letter {
-        'G' | 'M' | 'N' | 'X' | 'Y' | 'Z' | 'F' | 'S' | 'T' => return None,
-        'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
-            return Some((
-                format!("axis '{letter}'"),
-                "only the X, Y and Z axes are supported",
-            ));
-        }
-        'O' => {
-            return Some((
-                "O-word".to_owned(),
-                "subroutines and control flow arrive with the full G-code front end",
-            ));
-        }
-        'I' | 'J' | 'K' | 'R' => "arc words arrive with the full G-code front end",
-        'P' | 'Q' | 'L' => "it belongs to codes this G0/G1 front end does not support",
-        'D' | 'H' => "tool compensation arrives with the full G-code front end",
-        _ => "it is not a word of this G0/G1 front end",
-    };
-    Some((format!("word '{letter}'"), reason))
+/// Scans lines; reuse one for a whole program.
+#[derive(Debug, Default)]
+pub(super) struct Scanner {
+    chars: Vec<char>,
+    /// The words of the last line scanned, in line order.
+    pub words: Vec<Word>,
+    /// The text of a `(MSG, ...)` comment on the last line, with its column.
+    pub message: Option<(usize, String)>,
+    /// The parameter assignments of the last line, in order (they take effect after the line is
+    /// read, all together).
+    pub assignments: Vec<(ParamRef, f64)>,
+    /// The O-word of the last line if it was a control line.
+    pub control: Option<Control>,
 }
 
-fn unsupported(what: &str, reason: &'static str) -> ErrorKind {
+fn unsupported(what: impl Into<String>, reason: &'static str) -> ErrorKind {
     ErrorKind::Unsupported {
-        what: what.to_owned(),
+        what: what.into(),
         reason,
     }
 }
 
-/// Scans one line (without its line terminator). `chars` is a reusable buffer.
-pub(super) fn scan_line(line: &str, chars: &mut Vec<char>) -> Result<Scanned, LexError> {
-    chars.clear();
-    chars.extend(line.chars());
-    let chars: &[char] = chars;
-    let mut out = Scanned::default();
-    let mut percent_col = 0;
-    let mut i = 0;
-    while let Some(&c) = chars.get(i) {
-        let col = i + 1;
-        match c {
-            c if c.is_whitespace() => i += 1,
-            '(' => {
-                let mut j = i + 1;
-                loop {
-                    match chars.get(j) {
-                        None => return Err((col, ErrorKind::UnclosedComment)),
-                        Some(')') => break,
-                        Some('(') => return Err((j + 1, ErrorKind::NestedComment)),
-                        Some(_) => j += 1,
-                    }
-                }
-                i = j + 1;
+impl Scanner {
+    /// Scans one line (without its terminator), evaluating values with `params`. With
+    /// `block_delete` on, a line whose first non-blank character is `/` is skipped unread.
+    pub fn scan(
+        &mut self,
+        line: &str,
+        block_delete: bool,
+        params: &Params,
+    ) -> Result<LineKind, LexError> {
+        self.chars.clear();
+        self.chars.extend(line.chars());
+        self.words.clear();
+        self.message = None;
+        self.assignments.clear();
+        self.control = None;
+        let chars: &[char] = &self.chars;
+        let mut i = 0;
+        while chars.get(i).is_some_and(|c| c.is_whitespace()) {
+            i += 1;
+        }
+        if chars.get(i) == Some(&'/') {
+            if block_delete {
+                return Ok(LineKind::Skipped);
             }
-            ')' => return Err((col, ErrorKind::UnmatchedParen)),
-            ';' => break,
-            '%' => {
-                if out.percent || !out.words.is_empty() {
-                    return Err((col, ErrorKind::MisplacedPercent));
-                }
-                out.percent = true;
-                percent_col = col;
-                i += 1;
-            }
-            '/' => {
+            i += 1;
+        }
+        let mut percent_col = 0;
+        while let Some(&c) = chars.get(i) {
+            let col = i + 1;
+            if percent_col != 0 && !(c.is_whitespace() || c == '(' || c == ';') {
                 return Err((
-                    col,
-                    unsupported("block delete '/'", "optional blocks are not supported"),
+                    if c == '%' { col } else { percent_col },
+                    ErrorKind::MisplacedPercent,
                 ));
             }
-            '#' => return Err((col, param_error())),
-            '[' => return Err((col, expr_error())),
-            c if c.is_ascii_alphabetic() => {
-                if out.percent {
-                    return Err((percent_col, ErrorKind::MisplacedPercent));
+            match c {
+                c if c.is_whitespace() => i += 1,
+                '(' => {
+                    let end = comment_end(chars, i)?;
+                    let body: String = chars.get(i + 1..end).unwrap_or_default().iter().collect();
+                    let trimmed = body.trim_start();
+                    if let (Some(head), Some(rest)) = (trimmed.get(..4), trimmed.get(4..))
+                        && head.eq_ignore_ascii_case("msg,")
+                    {
+                        self.message = Some((col, rest.trim().to_owned()));
+                    }
+                    i = end + 1;
                 }
-                let letter = c.to_ascii_uppercase();
-                if let Some((what, reason)) = unsupported_letter(letter) {
-                    return Err((col, ErrorKind::Unsupported { what, reason }));
+                ')' => return Err((col, ErrorKind::UnmatchedParen)),
+                ';' => break,
+                '%' => {
+                    if !self.words.is_empty() || !self.assignments.is_empty() {
+                        return Err((col, ErrorKind::MisplacedPercent));
+                    }
+                    percent_col = col;
+                    i += 1;
                 }
-                let (word, next) = scan_number(chars, i, letter)?;
-                out.words.push(word);
-                i = next;
+                '/' => return Err((col, ErrorKind::MisplacedBlockDelete)),
+                '#' => {
+                    let r = param_ref(chars, &mut i, params, 0)?;
+                    while chars.get(i).is_some_and(|c| *c == ' ' || *c == '\t') {
+                        i += 1;
+                    }
+                    if chars.get(i) != Some(&'=') {
+                        return Err((
+                            i + 1,
+                            ErrorKind::ExpressionSyntax {
+                                expected: "'=' after the parameter of an assignment",
+                            },
+                        ));
+                    }
+                    i += 1;
+                    let value = real_value(chars, &mut i, params, 0, '=')?;
+                    self.assignments.push((r, value));
+                }
+                '@' | '^' => {
+                    return Err((
+                        col,
+                        unsupported(
+                            format!("polar coordinate word '{c}'"),
+                            "polar coordinates are not supported",
+                        ),
+                    ));
+                }
+                c if c.is_ascii_alphabetic() => {
+                    let letter = c.to_ascii_uppercase();
+                    match letter {
+                        'G' | 'M' | 'N' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'P' | 'Q'
+                        | 'F' | 'S' | 'T' | 'D' | 'H' | 'L' => {
+                            i += 1;
+                            let value = real_value(chars, &mut i, params, 0, letter).map_err(
+                                |(c, k)| match k {
+                                    // No value at all: point at the letter that lacks it.
+                                    ErrorKind::ExpectedNumber { letter: l } if l == letter => {
+                                        (col, k)
+                                    }
+                                    _ => (c, k),
+                                },
+                            )?;
+                            if value.abs() > MAX_ABS_VALUE {
+                                return Err((col, ErrorKind::NumberOutOfRange { letter, value }));
+                            }
+                            self.words.push(Word { letter, value, col });
+                        }
+                        'O' => {
+                            let only_n = self.words.iter().all(|w| w.letter == 'N');
+                            if !only_n || !self.assignments.is_empty() {
+                                return Err((col, ErrorKind::ProgramNumberNotAlone));
+                            }
+                            let control = scan_o_word(chars, i, params)?;
+                            self.words.clear();
+                            return Ok(match control {
+                                Some(control) => {
+                                    self.control = Some(control);
+                                    LineKind::Control
+                                }
+                                None => LineKind::ProgramNumber,
+                            });
+                        }
+                        'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                            return Err((
+                                col,
+                                unsupported(
+                                    format!("axis word '{letter}'"),
+                                    "the machine has the X, Y and Z axes only",
+                                ),
+                            ));
+                        }
+                        'E' => {
+                            return Err((
+                                col,
+                                unsupported("word 'E'", "E (extruder / lathe pitch) is not read"),
+                            ));
+                        }
+                        _ => return Err((col, ErrorKind::UnknownLetter { letter })),
+                    }
+                }
+                c => return Err((col, ErrorKind::UnexpectedChar { ch: c })),
             }
-            c => return Err((col, ErrorKind::UnexpectedChar { ch: c })),
+        }
+        Ok(if percent_col != 0 {
+            LineKind::Percent
+        } else if self.words.is_empty() && self.assignments.is_empty() {
+            LineKind::Blank
+        } else {
+            LineKind::Words
+        })
+    }
+}
+
+/// The label and keyword of an O-word line, read without evaluating anything (to find the end
+/// of a subroutine or loop while storing its lines). `None` if the line is no control line.
+pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
+    let chars: Vec<char> = line.chars().take(256).collect();
+    let mut i = 0;
+    let skip_blanks = |i: &mut usize| {
+        while chars.get(*i).is_some_and(|c| c.is_whitespace()) {
+            *i += 1;
+        }
+    };
+    skip_blanks(&mut i);
+    if chars.get(i) == Some(&'/') {
+        i += 1;
+        skip_blanks(&mut i);
+    }
+    // An N word may precede the O-word.
+    if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
+        i += 1;
+        while chars
+            .get(i)
+            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace())
+        {
+            i += 1;
         }
     }
-    Ok(out)
+    if !chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'o')) {
+        return None;
+    }
+    let (label, mut k) = o_label(&chars, i).ok()?;
+    skip_blanks(&mut k);
+    let start = k;
+    while chars.get(k).is_some_and(|c| c.is_ascii_alphabetic()) {
+        k += 1;
+    }
+    let word: String = chars.get(start..k)?.iter().collect();
+    Some((label, Keyword::parse(&word)?))
 }
 
-fn param_error() -> ErrorKind {
-    unsupported(
-        "parameter '#'",
-        "parameters arrive with the full G-code front end",
-    )
-}
-
-fn expr_error() -> ErrorKind {
-    unsupported(
-        "expression '['",
-        "expressions arrive with the full G-code front end",
-    )
-}
-
-/// Scans the number after the letter at `at`. Blanks between the letter and the number are
-/// allowed (RS274 ignores them); blanks inside the number are not.
-fn scan_number(chars: &[char], at: usize, letter: char) -> Result<(Word, usize), LexError> {
+/// The label at `at` (on the O) and the index after it.
+fn o_label(chars: &[char], at: usize) -> Result<(Label, usize), LexError> {
     let col = at + 1;
     let mut j = at + 1;
     while chars.get(j).is_some_and(|c| *c == ' ' || *c == '\t') {
         j += 1;
     }
-    match chars.get(j) {
-        Some('#') => return Err((j + 1, param_error())),
-        Some('[') => return Err((j + 1, expr_error())),
-        Some(c) if *c == '+' || *c == '-' || *c == '.' || c.is_ascii_digit() => {}
-        _ => return Err((col, ErrorKind::ExpectedNumber { letter })),
+    if chars.get(j) == Some(&'<') {
+        let start = j + 1;
+        while chars.get(j).is_some_and(|c| *c != '>') {
+            j += 1;
+        }
+        if chars.get(j).is_none() {
+            return Err((col, ErrorKind::MalformedOWord));
+        }
+        let name: String = chars
+            .get(start..j)
+            .unwrap_or_default()
+            .iter()
+            .filter(|c| !c.is_whitespace())
+            .flat_map(|c| c.to_lowercase())
+            .collect();
+        if name.is_empty() {
+            return Err((col, ErrorKind::MalformedOWord));
+        }
+        return Ok((Label::Name(name), j + 1));
     }
     let start = j;
-    if matches!(chars.get(j), Some('+' | '-')) {
+    while chars.get(j).is_some_and(|c| c.is_ascii_digit()) {
         j += 1;
     }
-    // The token runs over every digit, point and sign so that "1.2.3", "1-2" and "--1" are
-    // reported whole as malformed rather than as a stray character after a valid prefix.
-    let mut digits = 0usize;
-    let mut dots = 0usize;
-    let mut inner_signs = 0usize;
-    while let Some(&c) = chars.get(j) {
-        match c {
-            '0'..='9' => digits += 1,
-            '.' => dots += 1,
-            '+' | '-' => inner_signs += 1,
-            _ => break,
+    let digits: String = chars.get(start..j).unwrap_or_default().iter().collect();
+    match digits.parse::<u32>() {
+        Ok(n) => Ok((Label::Number(n), j)),
+        Err(_) if matches!(chars.get(start), Some('#' | '[')) => Err((
+            start + 1,
+            unsupported(
+                "computed O-word label",
+                "O-word labels must be numbers or <names>",
+            ),
+        )),
+        Err(_) => Err((col, ErrorKind::MalformedOWord)),
+    }
+}
+
+/// Index of the `)` closing the comment opened at `open`.
+fn comment_end(chars: &[char], open: usize) -> Result<usize, LexError> {
+    let mut j = open + 1;
+    loop {
+        match chars.get(j) {
+            None => return Err((open + 1, ErrorKind::UnclosedComment)),
+            Some(')') => return Ok(j),
+            Some('(') => return Err((j + 1, ErrorKind::NestedComment)),
+            Some(_) => j += 1,
         }
-        j += 1;
     }
-    let text: String = chars.get(start..j).unwrap_or_default().iter().collect();
-    if digits == 0 || dots > 1 || inner_signs > 0 {
-        return Err((col, ErrorKind::MalformedNumber { letter, text }));
+}
+
+/// Reads an O-word at `at` (on the O). Alone on its line (comments aside) it is a program number
+/// (`None`); followed by a keyword it is a control line, whose bracketed values are evaluated.
+fn scan_o_word(chars: &[char], at: usize, params: &Params) -> Result<Option<Control>, LexError> {
+    let col = at + 1;
+    let (label, next) = o_label(chars, at)?;
+    let mut k = next;
+    let mut keyword = None;
+    let mut values = Vec::new();
+    loop {
+        match chars.get(k) {
+            Some(c) if c.is_whitespace() => k += 1,
+            Some('(') => k = comment_end(chars, k)? + 1,
+            None | Some(';') => break,
+            Some(c) if c.is_ascii_alphabetic() && keyword.is_none() => {
+                let start = k;
+                while chars.get(k).is_some_and(|c| c.is_ascii_alphabetic()) {
+                    k += 1;
+                }
+                let word: String = chars.get(start..k).unwrap_or_default().iter().collect();
+                keyword = Some(Keyword::parse(&word).ok_or_else(|| {
+                    (
+                        start + 1,
+                        ErrorKind::UnknownKeyword {
+                            word: word.to_ascii_lowercase(),
+                        },
+                    )
+                })?);
+            }
+            Some('[') if keyword.is_some_and(Keyword::takes_values) => {
+                if values.len() >= 30 {
+                    return Err((k + 1, ErrorKind::ControlValue { keyword: "call" }));
+                }
+                values.push(real_value(chars, &mut k, params, 0, 'O')?);
+            }
+            Some(_) => return Err((k + 1, ErrorKind::MalformedOWord)),
+        }
     }
-    let value = match text.parse::<f64>() {
-        Ok(v) => v,
-        Err(_) => return Err((col, ErrorKind::MalformedNumber { letter, text })),
+    let Some(keyword) = keyword else {
+        return Ok(None);
     };
-    if !value.is_finite() || value.abs() > MAX_ABS_VALUE {
-        return Err((col, ErrorKind::NumberOutOfRange { letter, text }));
-    }
-    Ok((
-        Word {
-            letter,
-            value,
-            text,
+    let count_ok = match keyword {
+        Keyword::If | Keyword::ElseIf | Keyword::While | Keyword::Repeat => values.len() == 1,
+        Keyword::Return | Keyword::EndSub => values.len() <= 1,
+        Keyword::Call => true,
+        _ => values.is_empty(),
+    };
+    if !count_ok {
+        return Err((
             col,
-        },
-        j,
-    ))
+            ErrorKind::ControlValue {
+                keyword: keyword.name(),
+            },
+        ));
+    }
+    Ok(Some(Control {
+        label,
+        keyword,
+        col,
+        values,
+    }))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn scan(line: &str) -> Result<Scanned, LexError> {
-        scan_line(line, &mut Vec::new())
+    fn scan(line: &str) -> Result<LineKind, LexError> {
+        Scanner::default().scan(line, true, &Params::default())
     }
 
     fn words(line: &str) -> Vec<(char, f64, usize)> {
-        scan(line)
-            .unwrap()
-            .words
-            .iter()
-            .map(|w| (w.letter, w.value, w.col))
-            .collect()
+        let mut s = Scanner::default();
+        s.scan(line, false, &Params::default()).unwrap();
+        s.words.iter().map(|w| (w.letter, w.value, w.col)).collect()
     }
 
     #[test]
@@ -224,17 +504,110 @@ mod tests {
             vec![('G', 1.0, 1), ('X', -1.5, 3), ('Y', 0.5, 9), ('Z', 2.0, 17)]
         );
         assert_eq!(words("G 1 X 10"), vec![('G', 1.0, 1), ('X', 10.0, 5)]);
-        assert_eq!(words("(only a comment)"), vec![]);
-        assert_eq!(words(""), vec![]);
+        assert_eq!(words("G91.1 i1 J2 k3 R4 P5 Q6 D7 H8 L9"), {
+            let mut v = vec![('G', 91.1, 1)];
+            for (k, l) in "IJKRPQDHL".chars().enumerate() {
+                v.push((l, (k + 1) as f64, 7 + 3 * k));
+            }
+            v
+        });
+        assert_eq!(
+            words("X[1+2] Y-[2] Z#1"),
+            vec![('X', 3.0, 1), ('Y', -2.0, 8), ('Z', 0.0, 14)]
+        );
+        assert_eq!(scan("(only a comment)"), Ok(LineKind::Blank));
+        assert_eq!(scan(""), Ok(LineKind::Blank));
     }
 
     #[test]
-    fn percent_marker() {
-        let s = scan(" % (start)").unwrap();
-        assert!(s.percent && s.words.is_empty());
+    fn assignments_take_effect_after_the_line() {
+        let mut s = Scanner::default();
+        let mut p = Params::default();
+        p.set(&ParamRef::Number(1), 1.0).unwrap();
+        assert_eq!(
+            s.scan("#1=[#1+1] X#1 #<a> = 2", false, &p),
+            Ok(LineKind::Words)
+        );
+        assert_eq!(s.words[0].value, 1.0);
+        assert_eq!(
+            s.assignments,
+            vec![
+                (ParamRef::Number(1), 2.0),
+                (ParamRef::Name("a".into()), 2.0)
+            ]
+        );
+        assert_eq!(s.scan("#2 3", false, &p).unwrap_err().0, 4);
+    }
+
+    #[test]
+    fn markers_and_control() {
+        assert_eq!(scan(" % (start)"), Ok(LineKind::Percent));
         assert_eq!(scan("G0 %").unwrap_err(), (4, ErrorKind::MisplacedPercent));
         assert_eq!(scan("% G0").unwrap_err(), (1, ErrorKind::MisplacedPercent));
         assert_eq!(scan("%%").unwrap_err(), (2, ErrorKind::MisplacedPercent));
+        assert_eq!(scan("O1234 (part)"), Ok(LineKind::ProgramNumber));
+        assert_eq!(scan("o<part> ;x"), Ok(LineKind::ProgramNumber));
+        assert_eq!(
+            scan("G0 O12").unwrap_err(),
+            (4, ErrorKind::ProgramNumberNotAlone)
+        );
+        assert_eq!(scan("O").unwrap_err(), (1, ErrorKind::MalformedOWord));
+        let mut s = Scanner::default();
+        let p = Params::default();
+        assert_eq!(
+            s.scan("N5 o101 while [1 lt 2] (loop)", true, &p),
+            Ok(LineKind::Control)
+        );
+        assert_eq!(
+            s.control,
+            Some(Control {
+                label: Label::Number(101),
+                keyword: Keyword::While,
+                col: 4,
+                values: vec![1.0]
+            })
+        );
+        s.scan("o<Sub> call [1] [2+1]", true, &p).unwrap();
+        let c = s.control.clone().unwrap();
+        assert_eq!(
+            (c.label, c.values),
+            (Label::Name("sub".into()), vec![1.0, 3.0])
+        );
+        assert_eq!(
+            s.scan("o1 goto", true, &p).unwrap_err().1,
+            ErrorKind::UnknownKeyword {
+                word: "goto".into()
+            }
+        );
+        assert_eq!(s.scan("o1 while", true, &p).unwrap_err().0, 1);
+        assert_eq!(
+            peek_control(" /N10 O<a b> EndSub [3]"),
+            Some((Label::Name("ab".into()), Keyword::EndSub))
+        );
+        assert_eq!(peek_control("G0 X1"), None);
+    }
+
+    #[test]
+    fn block_delete() {
+        assert_eq!(scan("  /G0 X1"), Ok(LineKind::Skipped));
+        assert_eq!(
+            words("/N5 G0 X1"),
+            vec![('N', 5.0, 2), ('G', 0.0, 5), ('X', 1.0, 8)]
+        );
+        assert_eq!(
+            scan("G0 /X1").unwrap_err(),
+            (4, ErrorKind::MisplacedBlockDelete)
+        );
+    }
+
+    #[test]
+    fn messages() {
+        let mut s = Scanner::default();
+        let p = Params::default();
+        s.scan("G0 X1 ( msg, Tool change! )", true, &p).unwrap();
+        assert_eq!(s.message, Some((7, "Tool change!".to_owned())));
+        s.scan("(message)", true, &p).unwrap();
+        assert_eq!(s.message, None);
     }
 
     #[test]
@@ -249,7 +622,7 @@ mod tests {
             assert_eq!(
                 scan(line).unwrap_err(),
                 (
-                    1,
+                    2,
                     ErrorKind::MalformedNumber {
                         letter: 'X',
                         text: text.to_owned()

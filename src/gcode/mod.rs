@@ -1,92 +1,125 @@
-//! G-code front end (minimal): a whole program text into straight moves in absolute millimetres.
+//! G-code front end: a streaming reader and modal interpreter of the LinuxCNC / RS274/NGC
+//! dialect, from program text to path [`Element`]s in machine millimetres.
 //!
-//! This is the first stage of the motion pipeline (`gcode → planner → interp`). It reads the
-//! G0/G1 subset of RS274/NGC and nothing else; a later front end (arcs, compensation, parameters)
-//! replaces it behind the same [`Program`]/[`Move`] output, so downstream code never sees G-code.
+//! First stage of the motion pipeline (`gcode → compensation → planner → interp`). Downstream
+//! code never sees G-code: it gets [`Item`]s (lines, arcs and helices, dwells, program stops,
+//! notes, the end) from an [`Interpreter`] over any [`std::io::BufRead`], one line read at a
+//! time, so memory stays bounded whatever the file size. [`parse_program`] collects a whole
+//! text into a [`Program`] for callers that want it at once.
 //!
-//! Units in names: `_mm` millimetres, `_mm_s` millimetres per second. Whatever the program's
-//! units (G20 inch / G21 mm) and feed units (per minute), the output is always mm and mm/s.
+//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_s` seconds, `_deg` degrees. Whatever the
+//! program's units (G20 inch / G21 mm), the output is in mm and mm/s, in machine coordinates:
+//! work offsets (G54…G59.3, G10 L2/L20, rotation), G92 offsets and the tool length offset
+//! (G43/G43.1/G43.2/G44) are applied, so an element's points are the axis positions.
 //!
 //! # What is read
 //!
-//! - Comments `( ... )` (not nested, closed on the same line) and `;` to the end of the line;
-//!   upper or lower case; blanks anywhere between words and between a letter and its number.
+//! - Comments `( ... )` (not nested, closed on the same line; `(MSG, text)` becomes a note) and
+//!   `;` to the end of the line; upper or lower case; blanks between words and between a letter
+//!   and its number; several words per line; `N` line numbers (first word).
 //! - `%` alone on a line: the first one before any code opens the program, the next one ends it.
-//! - `N` line numbers (first word of the line, ignored otherwise).
-//! - G0 (rapid), G1 (feed): modal. Axis words on a line with no G0/G1 continue the modal motion;
-//!   axis words before any motion code are an error.
-//! - G20/G21 (inch/mm, default mm), G90/G91 (absolute/incremental, default absolute),
-//!   G61/G61.1/G64 (accepted: this planner always stops exactly at block ends), G17, G94.
-//! - F: feed in units per minute (mm/min under G21, in/min under G20), kept in mm/s, so a later
-//!   G20/G21 does not change the physical speed. A G1 move with no F programmed yet is an error.
-//! - M2/M30: end of program; everything after is ignored (not even scanned).
-//! - S, T, M3/M4/M5, M6, M8/M9: accepted and ignored, each leaving a [`Note`].
-//! - Axis words X, Y, Z only.
+//!   `O1234` (or `O<name>`) alone on a line is a program number and is skipped.
+//! - Block delete `/` at the start of a line: skipped while [`Setup::block_delete`] is on.
+//! - Motion (modal, also for axis words on lines with no G word): G0, G1, G2/G3 (IJK centre or R
+//!   radius, negative R for more than 180°, full circles when the end equals the start, helices
+//!   with the third axis, `P` turns), G80 (motion off). G53 (non-modal: G0/G1 in machine
+//!   coordinates), G28/G30 (rapid to the stored position, via the axis words' point if any),
+//!   G28.1/G30.1 (store the current position).
+//! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
+//!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D,
+//!   G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
+//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L2/L20 P X Y Z R (work offsets and
+//!   rotation), G92/G92.1/G92.2/G92.3.
+//! - M0/M1 (program stops), M2/M30 (end: nothing after them is read), M6 and M61 Q (set the
+//!   tool in the spindle), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97, G98/G99 accepted:
+//!   the ones without a motion effect leave a [`Note`].
 //!
-//! Everything else (arcs, other G/M codes, `#` parameters, `[` expressions, O-words, other
-//! letters) is an [`Error`] naming file, line and column.
+//! - Parameters `#1`…`#4999` and `#<name>` (local to a call, global when the name starts with
+//!   `_`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
+//!   LinuxCNC's operators and functions, and O-word flow control: `sub`/`endsub`/`call`/`return`,
+//!   `if`/`elseif`/`else`/`endif`, `while`/`endwhile`, `do`/`while`, `repeat`/`endrepeat`,
+//!   `break`, `continue`. Subroutine bodies, and a loop or `if` of the main program while it
+//!   runs, are kept in memory (at most [`MAX_STORED_BYTES`]); everything else streams.
 //!
-//! # Order within a line
+//! Everything else is an [`Error`] naming file, line and column, never a silent skip: canned
+//! cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
+//! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), subroutine files
+//! are [`ErrorKind::Unsupported`] (or [`ErrorKind::UndefinedSubroutine`]).
 //!
-//! All words of a line are read before any takes effect, and every number on the line is in the
-//! units in force *after* that line's G20/G21 (so `G20 G1 X1 F10` is 1 in at 10 in/min), and axis
-//! words follow the line's G90/G91. Stop codes (M2/M30) act after the line's motion.
+//! Every number of a line is read in the units in force *after* that line's G20/G21, and a feed
+//! keeps its physical speed when the units change later.
 
+mod block;
+mod element;
+mod expr;
+mod interp;
 mod lex;
+mod tools;
 
 use std::fmt;
+use std::io::BufRead;
 
 use nalgebra::Vector3;
 
+pub use element::{
+    ArcGeometry, BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane,
+};
+pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
+pub use interp::{
+    Interpreter, MAX_CALL_DEPTH, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM, MAX_STORED_BYTES,
+    MIN_ARC_RADIUS_MM, Setup,
+};
 pub use lex::MAX_ABS_VALUE;
-use lex::Word;
+pub use tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 
 /// Millimetres per inch (exact by definition).
 pub const MM_PER_INCH: f64 = 25.4;
 
-/// A parsed program: every move with its absolute target, computed before any motion starts.
+/// One output of the interpreter, in program order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Program {
-    /// Name of the source, as given to [`parse_program`] (used in messages).
-    pub file: String,
-    /// The machine position the program starts from (given by the caller).
-    pub start_mm: Vector3<f64>,
-    /// The moves in program order. Zero-length moves are kept (the planner skips them).
-    pub moves: Vec<Move>,
-    /// Words that were accepted but have no effect here (spindle, coolant, tools, G64).
-    pub notes: Vec<Note>,
-    /// How the program ended.
-    pub end: ProgramEnd,
+pub enum Item {
+    /// A line, arc or helix.
+    Motion(Element),
+    /// G4: stay still.
+    Dwell(Dwell),
+    /// M0, or M1 with the optional stop switch on: wait for the operator.
+    Stop(Stop),
+    /// Something accepted without a motion effect (spindle, coolant, tool selection, messages).
+    Note(Note),
+    /// The program ended; always the last item.
+    End(ProgramEnd),
 }
 
-impl Program {
-    /// The position after the last move (the start position if there is no move).
-    pub fn end_mm(&self) -> Vector3<f64> {
-        self.moves.last().map_or(self.start_mm, |m| m.target_mm)
-    }
-}
-
-/// One straight move, in absolute machine millimetres.
+/// G4 P: a pause of the motion.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Move {
-    /// 1-based line number in the source text (not the `N` number).
+pub struct Dwell {
+    /// 1-based line.
     pub line: usize,
-    /// G0: runs at the machine's maximum speed, so it has no feed.
-    pub rapid: bool,
-    /// Absolute target position.
-    pub target_mm: Vector3<f64>,
-    /// Programmed path feed for G1 (always `Some` for G1, `None` for G0); finite and positive.
-    pub feed_mm_s: Option<f64>,
+    /// 1-based column of the G4 word.
+    pub col: usize,
+    /// How long, ≥ 0.
+    pub seconds: f64,
 }
 
-/// A word that was accepted but ignored, kept so the operator can be told.
+/// M0 / M1: a program stop; the program resumes when the operator says so.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stop {
+    /// 1-based line.
+    pub line: usize,
+    /// 1-based column of the M word.
+    pub col: usize,
+    /// M1 (optional stop) rather than M0.
+    pub optional: bool,
+}
+
+/// A word that was accepted without a motion effect, kept so the operator can be told.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Note {
     /// 1-based line.
     pub line: usize,
     /// 1-based column (in characters) of the word.
     pub col: usize,
-    /// What was ignored and why.
+    /// What it was and why it has no effect.
     pub text: String,
 }
 
@@ -118,13 +151,75 @@ pub enum ProgramEnd {
     },
 }
 
-/// A parse error: where it is and what is wrong. Displays as `file:line:col: message`.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+/// A whole program, interpreted before any motion starts (see [`parse_program`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Program {
+    /// Name of the source (used in messages).
+    pub file: String,
+    /// The machine position the program starts from.
+    pub start_mm: Vector3<f64>,
+    /// Motion elements, dwells and stops in program order (no notes, no end).
+    pub items: Vec<Item>,
+    /// Words accepted without a motion effect.
+    pub notes: Vec<Note>,
+    /// How the program ended.
+    pub end: ProgramEnd,
+}
+
+impl Program {
+    /// Runs an interpreter to the end and collects its output; the first error stops it.
+    pub fn collect<R: BufRead>(interpreter: Interpreter<R>) -> Result<Program, Error> {
+        let mut program = Program {
+            file: interpreter.file().to_owned(),
+            start_mm: interpreter.start_mm(),
+            items: Vec::new(),
+            notes: Vec::new(),
+            end: ProgramEnd::EndOfText,
+        };
+        for item in interpreter {
+            match item? {
+                Item::Note(note) => program.notes.push(note),
+                Item::End(end) => program.end = end,
+                other => program.items.push(other),
+            }
+        }
+        Ok(program)
+    }
+
+    /// The motion elements in order.
+    pub fn elements(&self) -> impl DoubleEndedIterator<Item = &Element> + '_ {
+        self.items.iter().filter_map(|i| match i {
+            Item::Motion(e) => Some(e),
+            _ => None,
+        })
+    }
+
+    /// The position after the last element (the start position if there is none).
+    pub fn end_mm(&self) -> Vector3<f64> {
+        self.elements().last().map_or(self.start_mm, |e| e.end_mm)
+    }
+}
+
+/// Interprets a whole program text with the default [`Setup`] (no offsets, empty tool table)
+/// from `start_mm`, the machine's actual position, so G91 and omitted axis words resolve
+/// against where the machine really is. `file` only names the source in errors. Never panics,
+/// whatever the text.
+pub fn parse_program(text: &str, file: &str, start_mm: Vector3<f64>) -> Result<Program, Error> {
+    parse_program_with(text, file, Setup::new(start_mm))
+}
+
+/// [`parse_program`] with a full [`Setup`] (work offsets, tool table, G28 position...).
+pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Program, Error> {
+    Program::collect(Interpreter::new(text.as_bytes(), file, setup))
+}
+
+/// An error: where it is and what is wrong. Displays as `file:line:col: message`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}:{line}:{col}: {kind}")]
 pub struct Error {
-    /// Name of the source, as given to [`parse_program`].
+    /// Name of the source.
     pub file: String,
-    /// 1-based line (0 for errors that concern no line, such as a bad start position).
+    /// 1-based line (0 for errors that concern no line, such as a bad setup).
     pub line: usize,
     /// 1-based column in characters (0 when there is no line).
     pub col: usize,
@@ -132,16 +227,45 @@ pub struct Error {
     pub kind: ErrorKind,
 }
 
+impl Error {
+    /// Whether this is valid G-code that this front end does not execute (as opposed to a
+    /// mistake in the program).
+    pub fn is_unsupported(&self) -> bool {
+        self.unsupported_feature().is_some()
+    }
+
+    /// The unsupported feature, e.g. `G81` or `spiral arc`, if this is such an error.
+    pub fn unsupported_feature(&self) -> Option<&str> {
+        match &self.kind {
+            ErrorKind::Unsupported { what, .. } => Some(what),
+            ErrorKind::ArcRadiusMismatch { .. } => Some("spiral arc"),
+            _ => None,
+        }
+    }
+}
+
 /// What is wrong with a program.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ErrorKind {
     /// Valid G-code that this front end does not execute.
     #[error("unsupported: {what} ({reason})")]
     Unsupported {
-        /// The code or word, e.g. `G2`, `axis 'A'`.
+        /// The code or word, e.g. `G81`, `axis word 'A'`.
         what: String,
-        /// Why, and when it will be supported.
+        /// Why.
         reason: &'static str,
+    },
+    /// A G or M code that RS274/NGC does not define.
+    #[error("unknown code {code}")]
+    UnknownCode {
+        /// The code, e.g. `G12.5`.
+        code: String,
+    },
+    /// A letter that is no word of RS274/NGC.
+    #[error("'{letter}' is not a G-code word")]
+    UnknownLetter {
+        /// The letter.
+        letter: char,
     },
     /// A letter with no number after it.
     #[error("expected a number after '{letter}'")]
@@ -157,13 +281,112 @@ pub enum ErrorKind {
         /// The text as written.
         text: String,
     },
-    /// A number beyond [`MAX_ABS_VALUE`].
-    #[error("number '{text}' after '{letter}' is out of range (at most 1e9 in magnitude)")]
+    /// A value beyond [`MAX_ABS_VALUE`].
+    #[error("value {value} of '{letter}' is out of range (at most 1e9 in magnitude)")]
     NumberOutOfRange {
         /// The letter.
         letter: char,
-        /// The text as written.
-        text: String,
+        /// The value.
+        value: f64,
+    },
+    /// An expression that does not parse.
+    #[error("malformed expression: expected {expected}")]
+    ExpressionSyntax {
+        /// What was expected.
+        expected: &'static str,
+    },
+    /// Brackets, functions or `#` nested too deeply.
+    #[error("expression nested more than {max} levels deep")]
+    ExpressionTooDeep {
+        /// The limit.
+        max: usize,
+    },
+    /// A function or operator outside its domain.
+    #[error("math error: {what}")]
+    MathDomain {
+        /// What.
+        what: &'static str,
+    },
+    /// `/` or `MOD` by zero.
+    #[error("division by zero")]
+    DivisionByZero,
+    /// A named parameter read before it was set.
+    #[error("parameter #<{name}> is not defined")]
+    UndefinedParameter {
+        /// The name.
+        name: String,
+    },
+    /// `#` of a value that is no parameter number.
+    #[error("#{value} is not a parameter number (an integer from 1)")]
+    ParameterNumber {
+        /// The value.
+        value: f64,
+    },
+    /// Too many named parameters in one scope.
+    #[error("more than {max} named parameters")]
+    TooManyParameters {
+        /// The limit.
+        max: usize,
+    },
+    /// An unknown function name before `[`.
+    #[error("unknown function {name}")]
+    UnknownFunction {
+        /// The name.
+        name: String,
+    },
+    /// An O-word with an unknown keyword.
+    #[error("unknown O-word keyword '{word}'")]
+    UnknownKeyword {
+        /// The keyword.
+        word: String,
+    },
+    /// An O-word with the wrong number of bracketed values.
+    #[error("wrong number of [values] after '{keyword}'")]
+    ControlValue {
+        /// The keyword.
+        keyword: &'static str,
+    },
+    /// An O-word control line out of place (`endwhile` without `while`...).
+    #[error("{what} needs {expected}")]
+    ControlMismatch {
+        /// The line, e.g. `o101 endwhile`.
+        what: String,
+        /// What was missing.
+        expected: &'static str,
+    },
+    /// A subroutine, loop or `if` whose end never comes.
+    #[error("{label} is never closed: no '{label} {end}' before the end of the program")]
+    UnclosedControl {
+        /// The label.
+        label: String,
+        /// The keyword that closes it.
+        end: &'static str,
+    },
+    /// A call of a subroutine not defined before.
+    #[error(
+        "subroutine {label} is not defined (define it with 'sub' before the call; subroutine files are not searched)"
+    )]
+    UndefinedSubroutine {
+        /// The label.
+        label: String,
+    },
+    /// Calls nested too deeply.
+    #[error("subroutine calls nested more than {max} deep")]
+    CallTooDeep {
+        /// The limit.
+        max: usize,
+    },
+    /// Subroutine and loop bodies too large to keep.
+    #[error("subroutines and loop bodies hold more than {max_bytes} bytes")]
+    StoredTooLarge {
+        /// The limit.
+        max_bytes: usize,
+    },
+    /// A loop running without producing anything.
+    #[error("{lines} lines ran in loops or subroutines without any motion or output")]
+    NoProgress {
+        /// The limit.
+        lines: usize,
     },
     /// A character that starts no word, comment or marker.
     #[error("unexpected character {ch:?}")]
@@ -183,6 +406,27 @@ pub enum ErrorKind {
     /// `%` with other words on its line, or twice.
     #[error("'%' must be alone on its line (program start/end marker)")]
     MisplacedPercent,
+    /// `/` anywhere but at the start of a line.
+    #[error("block delete '/' must be the first character of the line")]
+    MisplacedBlockDelete,
+    /// An `O` word with no number or name.
+    #[error("O-word with no number or <name>")]
+    MalformedOWord,
+    /// A program number with other words on its line.
+    #[error("a program number (O-word) must be alone on its line")]
+    ProgramNumberNotAlone,
+    /// A line longer than [`MAX_LINE_BYTES`].
+    #[error("line longer than {max_bytes} bytes")]
+    LineTooLong {
+        /// The limit.
+        max_bytes: usize,
+    },
+    /// The input could not be read.
+    #[error("cannot read the program: {message}")]
+    Read {
+        /// The I/O error.
+        message: String,
+    },
     /// The same letter twice on one line (G and M excepted).
     #[error("word '{letter}' appears twice on one line")]
     RepeatedWord {
@@ -207,415 +451,146 @@ pub enum ErrorKind {
         /// What was expected.
         expected: &'static str,
     },
-    /// A G1 move and no F programmed so far.
+    /// A code without a word it needs (G4 without P, G10 without L).
+    #[error("{code} needs {letter}: {expected}")]
+    MissingWord {
+        /// The code.
+        code: String,
+        /// The missing letter.
+        letter: char,
+        /// What it gives.
+        expected: &'static str,
+    },
+    /// A word that no code on the line (nor the modal motion) uses.
+    #[error("word '{letter}' has nothing to use it: it belongs to {users}")]
+    UnusedWord {
+        /// The letter.
+        letter: char,
+        /// The codes that use it.
+        users: &'static str,
+    },
+    /// A feed move and no F programmed so far (units per minute mode).
     #[error(
-        "G1 move with no feed rate: program F (mm/min, or in/min under G20) on this line or before"
+        "{code} move with no feed rate: program F (mm/min, or in/min under G20) on this line or before"
     )]
-    MissingFeed,
-    /// Axis words and no motion mode (G0/G1) in force.
-    #[error("axis words with no motion mode in force: add G0 or G1")]
+    MissingFeed {
+        /// G1, G2 or G3.
+        code: &'static str,
+    },
+    /// A feed move in inverse time mode without F on its line.
+    #[error("{code} move in inverse time mode (G93) without F on its line")]
+    MissingInverseTimeFeed {
+        /// G1, G2 or G3.
+        code: &'static str,
+    },
+    /// Axis words and no motion mode in force.
+    #[error("axis words with no motion mode in force: add G0, G1, G2 or G3")]
     AxisWithoutMotion,
+    /// Axis words with G80 on the line.
+    #[error("axis words with G80 (motion off)")]
+    AxisWithG80,
+    /// Two codes on one line that both take the axis words (G28 and G1).
+    #[error("{first} and {second} both use the axis words of this line")]
+    AxisWordsClaimedTwice {
+        /// The first code.
+        first: String,
+        /// The second code.
+        second: String,
+    },
+    /// G53 with G2/G3.
+    #[error("G53 needs straight motion (G0 or G1)")]
+    G53NeedsStraightMotion,
     /// An `N` word that is not the first word of its line.
     #[error("line number 'N' must be the first word of the line")]
     LineNumberNotFirst,
-    /// The caller's start position has a NaN or infinite coordinate.
+    /// An arc with neither of its plane's axis words.
+    #[error("arc in the {plane} plane needs {first} or {second}")]
+    ArcMissingPlaneAxes {
+        /// G17, G18, G19.
+        plane: &'static str,
+        /// The plane's first axis.
+        first: char,
+        /// The plane's second axis.
+        second: char,
+    },
+    /// An offset word along the plane's normal (K in G17).
+    #[error("{letter} is not an arc centre word in the {plane} plane")]
+    ArcWordWrongPlane {
+        /// The letter.
+        letter: char,
+        /// G17, G18, G19.
+        plane: &'static str,
+    },
+    /// R and I/J/K on one arc.
+    #[error("arc with both R and a centre offset: use one format")]
+    ArcBothFormats,
+    /// An arc with neither R nor I/J/K.
+    #[error("arc in the {plane} plane without R or centre offsets")]
+    ArcNoCentre {
+        /// G17, G18, G19.
+        plane: &'static str,
+    },
+    /// The centre is on the start or end point.
+    #[error("zero-radius arc (centre on the start or end point)")]
+    ArcZeroRadius,
+    /// The end point is not on the circle through the start (centre format): the arc would be
+    /// a spiral, which this front end does not execute.
+    #[error(
+        "unsupported: spiral arc (the end point is off the circle: radius {start_radius_mm:.4} mm to the start, {end_radius_mm:.4} mm to the end, tolerance {tolerance_mm:.4} mm)"
+    )]
+    ArcRadiusMismatch {
+        /// Centre to start, in the plane.
+        start_radius_mm: f64,
+        /// Centre to end, in the plane.
+        end_radius_mm: f64,
+        /// The tolerance that was broken.
+        tolerance_mm: f64,
+    },
+    /// An R-format arc too small to reach its end point.
+    #[error(
+        "arc radius {radius_mm:.4} mm cannot reach the end point ({half_chord_mm:.4} mm away from the middle of the chord)"
+    )]
+    ArcRadiusTooSmall {
+        /// |R|.
+        radius_mm: f64,
+        /// Half the chord.
+        half_chord_mm: f64,
+    },
+    /// An R-format arc with the end equal to the start.
+    #[error("R-format arc with the end point equal to the start: use I/J/K for a full circle")]
+    ArcRadiusFullCircle,
+    /// A D or H word naming a tool that is not in the tool table.
+    #[error("tool {tool} ({letter}{tool}) is not in the tool table")]
+    ToolNotFound {
+        /// The tool number.
+        tool: u32,
+        /// D or H.
+        letter: char,
+    },
+    /// G41/G42 while compensation is already on.
+    #[error("{code} while cutter compensation is on: cancel it with G40 first")]
+    CompensationAlreadyOn {
+        /// The code.
+        code: String,
+    },
+    /// A change that cutter compensation forbids (plane, units, work system, G53, G28).
+    #[error("{code} is not allowed while cutter compensation is on: cancel it with G40 first")]
+    CompensationActive {
+        /// The code.
+        code: String,
+    },
+    /// A position beyond [`MAX_POSITION_MM`].
+    #[error("position out of range (more than 1e12 mm from machine zero)")]
+    PositionOutOfRange,
+    /// The caller's start position is not finite.
     #[error("start position is not finite")]
     NonFiniteStart,
-}
-
-/// Parses a whole program. Moves get absolute targets, starting from `start_mm` (the machine's
-/// actual position), so G91 and partial axis words resolve against where the machine really is.
-///
-/// `file` only names the source in errors. Never panics, whatever the text.
-pub fn parse_program(text: &str, file: &str, start_mm: Vector3<f64>) -> Result<Program, Error> {
-    let err = |line: usize, col: usize, kind: ErrorKind| Error {
-        file: file.to_owned(),
-        line,
-        col,
-        kind,
-    };
-    if !start_mm.iter().all(|v| v.is_finite()) {
-        return Err(err(0, 0, ErrorKind::NonFiniteStart));
-    }
-    let mut state = State {
-        motion: None,
-        inch: false,
-        incremental: false,
-        feed_mm_s: None,
-        position_mm: start_mm,
-    };
-    let mut moves = Vec::new();
-    let mut notes = Vec::new();
-    let mut end = ProgramEnd::EndOfText;
-    let mut opened = false;
-    let mut code_seen = false;
-    let mut chars = Vec::new();
-    for (index, text_line) in text.lines().enumerate() {
-        let line = index + 1;
-        let scanned =
-            lex::scan_line(text_line, &mut chars).map_err(|(col, k)| err(line, col, k))?;
-        if scanned.percent {
-            if !opened && !code_seen {
-                opened = true;
-                continue;
-            }
-            end = ProgramEnd::Percent { line };
-            break;
-        }
-        if scanned.words.is_empty() {
-            continue;
-        }
-        code_seen = true;
-        let block = Block::read(&scanned.words).map_err(|(col, k)| err(line, col, k))?;
-        let stop = state
-            .execute(&block, line, &mut moves, &mut notes)
-            .map_err(|(col, k)| err(line, col, k))?;
-        if let Some(stop) = stop {
-            end = stop;
-            break;
-        }
-    }
-    Ok(Program {
-        file: file.to_owned(),
-        start_mm,
-        moves,
-        notes,
-        end,
-    })
-}
-
-type BlockError = (usize, ErrorKind);
-
-/// Modal state carried from line to line.
-#[derive(Debug, Clone, Copy)]
-struct State {
-    /// `Some(true)` G0, `Some(false)` G1.
-    motion: Option<bool>,
-    inch: bool,
-    incremental: bool,
-    feed_mm_s: Option<f64>,
-    position_mm: Vector3<f64>,
-}
-
-/// A G or M code: value in tenths (`G61.1` is 611), with the column of its word.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Code {
-    letter: char,
-    tenths: u32,
-    col: usize,
-}
-
-impl fmt::Display for Code {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.tenths.is_multiple_of(10) {
-            write!(f, "{}{}", self.letter, self.tenths / 10)
-        } else {
-            write!(
-                f,
-                "{}{}.{}",
-                self.letter,
-                self.tenths / 10,
-                self.tenths % 10
-            )
-        }
-    }
-}
-
-/// The words of one line, checked and sorted into modal groups, before any takes effect.
-#[derive(Debug, Default)]
-struct Block<'a> {
-    motion: Option<Code>,
-    plane: Option<Code>,
-    units: Option<Code>,
-    path: Option<Code>,
-    distance: Option<Code>,
-    feed_mode: Option<Code>,
-    stop: Option<Code>,
-    spindle: Option<Code>,
-    tool_change: Option<Code>,
-    coolant: Option<Code>,
-    axes: [Option<&'a Word>; 3],
-    feed: Option<&'a Word>,
-    speed: Option<&'a Word>,
-    tool: Option<&'a Word>,
-}
-
-/// Why a G code (in tenths) is not supported.
-fn g_reason(tenths: u32) -> &'static str {
-    match tenths {
-        20 | 30 => "arcs arrive with the full G-code front end",
-        40 => "dwell arrives with the full G-code front end",
-        50..=53 => "splines arrive with the full G-code front end",
-        171..=199 => "only the XY plane (G17) is supported; planes matter for arcs",
-        400..=429 => "cutter radius compensation arrives with the full G-code front end",
-        430..=499 => "tool length compensation arrives with the full G-code front end",
-        100..=109 | 520..=599 | 920..=929 => {
-            "coordinate systems and offsets arrive with the full G-code front end"
-        }
-        280..=309 => "reference-point returns are not supported",
-        330..=339 | 760 => "threading is not supported",
-        380..=389 => "probing is not supported",
-        730 | 740 | 800..=899 => "canned cycles arrive with the full G-code front end",
-        900..=909 | 911..=919 => "arc centre modes arrive with the full G-code front end",
-        930 | 950 => "only units-per-minute feed (G94) is supported",
-        _ => "not handled by the minimal G0/G1 front end",
-    }
-}
-
-/// A G or M value as tenths: non-negative, at most one decimal.
-fn code_tenths(word: &Word) -> Option<u32> {
-    let tenths = word.value * 10.0;
-    let rounded = tenths.round();
-    if word.value < 0.0 || (tenths - rounded).abs() > 1e-6 || rounded > f64::from(u32::MAX) {
-        return None;
-    }
-    // In range and integral: the cast is exact.
-    Some(rounded as u32)
-}
-
-fn is_nonneg_integer(value: f64) -> bool {
-    value >= 0.0 && value.fract() == 0.0
-}
-
-fn invalid(word: &Word, expected: &'static str) -> BlockError {
-    (
-        word.col,
-        ErrorKind::InvalidValue {
-            word: word.display(),
-            expected,
-        },
-    )
-}
-
-impl<'a> Block<'a> {
-    /// Checks every word of a line; the first problem in line order is reported.
-    fn read(words: &'a [Word]) -> Result<Block<'a>, BlockError> {
-        let mut block = Block::default();
-        for (i, word) in words.iter().enumerate() {
-            match word.letter {
-                'G' => {
-                    let tenths = code_tenths(word)
-                        .ok_or_else(|| invalid(word, "a G code such as G1 or G61.1"))?;
-                    let code = Code {
-                        letter: 'G',
-                        tenths,
-                        col: word.col,
-                    };
-                    let (slot, group) = match tenths {
-                        0 | 10 => (&mut block.motion, "motion"),
-                        170 => (&mut block.plane, "plane"),
-                        200 | 210 => (&mut block.units, "units"),
-                        610 | 611 | 640 => (&mut block.path, "path control"),
-                        900 | 910 => (&mut block.distance, "distance mode"),
-                        940 => (&mut block.feed_mode, "feed mode"),
-                        _ => {
-                            return Err((
-                                word.col,
-                                ErrorKind::Unsupported {
-                                    what: code.to_string(),
-                                    reason: g_reason(tenths),
-                                },
-                            ));
-                        }
-                    };
-                    set_code(slot, code, group)?;
-                }
-                'M' => {
-                    let tenths = code_tenths(word)
-                        .filter(|t| t.is_multiple_of(10))
-                        .ok_or_else(|| invalid(word, "an M code such as M2 or M30"))?;
-                    let code = Code {
-                        letter: 'M',
-                        tenths,
-                        col: word.col,
-                    };
-                    let (slot, group) = match tenths / 10 {
-                        2 | 30 => (&mut block.stop, "program stop"),
-                        3..=5 => (&mut block.spindle, "spindle"),
-                        6 => (&mut block.tool_change, "tool change"),
-                        8 | 9 => (&mut block.coolant, "coolant"),
-                        n => {
-                            let reason = match n {
-                                0 | 1 => "program pause is not supported yet",
-                                _ => "not handled by the minimal G0/G1 front end",
-                            };
-                            return Err((
-                                word.col,
-                                ErrorKind::Unsupported {
-                                    what: code.to_string(),
-                                    reason,
-                                },
-                            ));
-                        }
-                    };
-                    set_code(slot, code, group)?;
-                }
-                'N' => {
-                    if i != 0 {
-                        return Err((word.col, ErrorKind::LineNumberNotFirst));
-                    }
-                    if !is_nonneg_integer(word.value) {
-                        return Err(invalid(word, "a non-negative integer line number"));
-                    }
-                }
-                'X' => set_word(&mut block.axes[0], word)?,
-                'Y' => set_word(&mut block.axes[1], word)?,
-                'Z' => set_word(&mut block.axes[2], word)?,
-                'F' => {
-                    set_word(&mut block.feed, word)?;
-                    if word.value <= 0.0 {
-                        return Err(invalid(word, "a feed rate greater than zero"));
-                    }
-                }
-                'S' => {
-                    set_word(&mut block.speed, word)?;
-                    if word.value < 0.0 {
-                        return Err(invalid(word, "a non-negative spindle speed"));
-                    }
-                }
-                'T' => {
-                    set_word(&mut block.tool, word)?;
-                    if !is_nonneg_integer(word.value) {
-                        return Err(invalid(word, "a non-negative integer tool number"));
-                    }
-                }
-                // The scanner only lets the letters above through.
-                other => {
-                    return Err((
-                        word.col,
-                        ErrorKind::Unsupported {
-                            what: format!("word '{other}'"),
-                            reason: "it is not a word of this G0/G1 front end",
-                        },
-                    ));
-                }
-            }
-        }
-        Ok(block)
-    }
-}
-
-fn set_code(slot: &mut Option<Code>, code: Code, group: &'static str) -> Result<(), BlockError> {
-    if let Some(first) = slot {
-        return Err((
-            code.col,
-            ErrorKind::ModalConflict {
-                group,
-                first: first.to_string(),
-                second: code.to_string(),
-            },
-        ));
-    }
-    *slot = Some(code);
-    Ok(())
-}
-
-fn set_word<'a>(slot: &mut Option<&'a Word>, word: &'a Word) -> Result<(), BlockError> {
-    if slot.is_some() {
-        return Err((
-            word.col,
-            ErrorKind::RepeatedWord {
-                letter: word.letter,
-            },
-        ));
-    }
-    *slot = Some(word);
-    Ok(())
-}
-
-impl State {
-    /// Applies one checked line; returns how the program ended if it did on this line.
-    fn execute(
-        &mut self,
-        block: &Block<'_>,
-        line: usize,
-        moves: &mut Vec<Move>,
-        notes: &mut Vec<Note>,
-    ) -> Result<Option<ProgramEnd>, BlockError> {
-        let mut note = |col: usize, text: String| notes.push(Note { line, col, text });
-        for word in [block.speed, block.tool].into_iter().flatten() {
-            let what = if word.letter == 'S' {
-                "spindle speed"
-            } else {
-                "tool selection"
-            };
-            note(
-                word.col,
-                format!(
-                    "ignored {} ({what} is not handled by the motion gateway)",
-                    word.display()
-                ),
-            );
-        }
-        for (code, what) in [
-            (block.tool_change, "tool change"),
-            (block.spindle, "spindle control"),
-            (block.coolant, "coolant control"),
-        ] {
-            if let Some(code) = code {
-                note(
-                    code.col,
-                    format!("ignored {code} ({what} is not handled by the motion gateway)"),
-                );
-            }
-        }
-        if let Some(code) = block.path.filter(|c| c.tenths == 640) {
-            note(
-                code.col,
-                format!("{code} accepted: this planner stops exactly at every block end (as G61)"),
-            );
-        }
-        if let Some(units) = block.units {
-            self.inch = units.tenths == 200;
-        }
-        if let Some(distance) = block.distance {
-            self.incremental = distance.tenths == 910;
-        }
-        let scale_mm = if self.inch { MM_PER_INCH } else { 1.0 };
-        if let Some(feed) = block.feed {
-            self.feed_mm_s = Some(feed.value * scale_mm / 60.0);
-        }
-        if let Some(motion) = block.motion {
-            self.motion = Some(motion.tenths == 0);
-        }
-        let first_axis = block.axes.iter().flatten().min_by_key(|w| w.col);
-        if let Some(first_axis) = first_axis {
-            let rapid = self
-                .motion
-                .ok_or((first_axis.col, ErrorKind::AxisWithoutMotion))?;
-            let feed_mm_s = if rapid {
-                None
-            } else {
-                let col = block.motion.map_or(first_axis.col, |c| c.col);
-                Some(self.feed_mm_s.ok_or((col, ErrorKind::MissingFeed))?)
-            };
-            let mut target_mm = self.position_mm;
-            for (axis, word) in block.axes.iter().enumerate() {
-                if let Some(word) = word {
-                    let value_mm = word.value * scale_mm;
-                    target_mm[axis] = if self.incremental {
-                        target_mm[axis] + value_mm
-                    } else {
-                        value_mm
-                    };
-                }
-            }
-            self.position_mm = target_mm;
-            moves.push(Move {
-                line,
-                rapid,
-                target_mm,
-                feed_mm_s,
-            });
-        }
-        Ok(block.stop.map(|stop| {
-            if stop.tenths == 20 {
-                ProgramEnd::M2 { line }
-            } else {
-                ProgramEnd::M30 { line }
-            }
-        }))
-    }
+    /// A [`Setup`] value out of its domain.
+    #[error("invalid setup: {what}")]
+    InvalidSetup {
+        /// What is wrong.
+        what: &'static str,
+    },
 }
 
 #[cfg(test)]
@@ -627,361 +602,160 @@ mod tests {
         Vector3::new(x, y, z)
     }
 
-    fn parse(text: &str) -> Result<Program, Error> {
-        parse_program(text, "prog.ngc", Vector3::zeros())
-    }
-
-    fn mv(line: usize, rapid: bool, target_mm: Vector3<f64>, feed_mm_s: Option<f64>) -> Move {
-        Move {
-            line,
-            rapid,
-            target_mm,
-            feed_mm_s,
-        }
-    }
-
     #[test]
-    fn golden_program() {
-        let text = "%\n\
-                    (header: a comment line)\n\
-                    N10 G21 G90 G17 G94 G61 ; setup\n\
-                    n20 g0 x10 y20 z5\n\
-                    N30 G1 X15 F600\n\
-                    Y25 (modal G1 continues)\n\
-                    G91 X1 Y-1\n\
-                    G20 G90 X1 Y2 Z0.5 F10\n\
-                    \n\
-                    G91G0Z.1\n\
-                    M30\n\
-                    G2 X1 garbage after the end is never read !\n\
-                    %\n";
-        let p = parse_program(text, "golden.ngc", v(1.0, 2.0, 3.0)).unwrap();
-        let expected = vec![
-            mv(4, true, v(10.0, 20.0, 5.0), None),
-            mv(5, false, v(15.0, 20.0, 5.0), Some(10.0)),
-            mv(6, false, v(15.0, 25.0, 5.0), Some(10.0)),
-            mv(7, false, v(16.0, 24.0, 5.0), Some(10.0)),
-            mv(8, false, v(25.4, 50.8, 12.7), Some(10.0 * 25.4 / 60.0)),
-            mv(10, true, v(25.4, 50.8, 12.7 + 0.1 * 25.4), None),
-        ];
-        assert_eq!(p.moves, expected);
-        assert_eq!(p.end, ProgramEnd::M30 { line: 11 });
-        assert_eq!(p.start_mm, v(1.0, 2.0, 3.0));
-        assert_eq!(p.end_mm(), v(25.4, 50.8, 12.7 + 0.1 * 25.4));
-        assert!(p.notes.is_empty());
-        assert_eq!(p.file, "golden.ngc");
-    }
-
-    #[test]
-    fn incremental_from_the_callers_start() {
-        let p = parse_program("G91 G1 X1 F60\nY-2\nG90 Z7", "p", v(5.0, 5.0, 5.0)).unwrap();
-        assert_eq!(
-            p.moves,
-            vec![
-                mv(1, false, v(6.0, 5.0, 5.0), Some(1.0)),
-                mv(2, false, v(6.0, 3.0, 5.0), Some(1.0)),
-                mv(3, false, v(6.0, 3.0, 7.0), Some(1.0)),
-            ]
+    fn the_stream_ends_once_and_stays_ended() {
+        let mut it = Interpreter::new(
+            "G0 X1\nM2\nG0 X2\n".as_bytes(),
+            "p",
+            Setup::new(Vector3::zeros()),
         );
-        assert_eq!(p.end, ProgramEnd::EndOfText);
-    }
-
-    #[test]
-    fn feed_keeps_physical_speed_across_unit_changes() {
-        let p = parse("G20 G1 X1 F60\nG21 X50").unwrap();
-        assert_eq!(p.moves[0].feed_mm_s, Some(25.4));
-        assert_eq!(p.moves[1].feed_mm_s, Some(25.4));
-        assert_eq!(p.moves[1].target_mm, v(50.0, 0.0, 0.0));
-    }
-
-    #[test]
-    fn zero_length_and_motion_only_lines() {
-        let p = parse("G1 F100\nG0\nX0\nG91 X0 Y0").unwrap();
-        assert_eq!(
-            p.moves,
-            vec![
-                mv(3, true, Vector3::zeros(), None),
-                mv(4, true, Vector3::zeros(), None)
-            ]
+        assert!(matches!(it.next(), Some(Ok(Item::Motion(_)))));
+        assert_eq!(it.next(), Some(Ok(Item::End(ProgramEnd::M2 { line: 2 }))));
+        assert_eq!(it.next(), None);
+        assert_eq!(it.next(), None);
+        // The line after M2 is never read.
+        assert_eq!(it.line(), 2);
+        let mut it = Interpreter::new(
+            "G0 X1\nG0 Q\nG0 X2\n".as_bytes(),
+            "p",
+            Setup::new(Vector3::zeros()),
         );
-    }
-
-    #[test]
-    fn ignored_words_leave_notes() {
-        let p = parse("T1 M6\nS1000 M3 M8\nG64\nG0 X1\nM5 M9\nM2\nX5").unwrap();
-        assert_eq!(p.moves.len(), 1);
-        assert_eq!(p.end, ProgramEnd::M2 { line: 6 });
-        let at: Vec<(usize, usize)> = p.notes.iter().map(|n| (n.line, n.col)).collect();
-        assert_eq!(
-            at,
-            vec![
-                (1, 1),
-                (1, 4),
-                (2, 1),
-                (2, 7),
-                (2, 10),
-                (3, 1),
-                (5, 1),
-                (5, 4)
-            ]
-        );
-        assert_eq!(
-            p.notes[2].to_string(),
-            "2:1: ignored S1000 (spindle speed is not handled by the motion gateway)"
-        );
-        assert!(p.notes[5].text.starts_with("G64 accepted"));
+        assert!(matches!(it.next(), Some(Ok(Item::Motion(_)))));
+        let e = it.next().unwrap().unwrap_err();
+        assert_eq!((e.line, e.col), (2, 4));
+        assert_eq!(it.next(), None);
+        let items: Vec<_> =
+            Interpreter::new("".as_bytes(), "p", Setup::new(Vector3::zeros())).collect();
+        assert_eq!(items, vec![Ok(Item::End(ProgramEnd::EndOfText))]);
     }
 
     #[test]
     fn percent_markers() {
-        let p = parse("%\nG0 X1\n%\nG0 X2").unwrap();
-        assert_eq!(p.moves.len(), 1);
+        let p = parse_program("%\nG0 X1\n%\nG0 X2", "p", Vector3::zeros()).unwrap();
+        assert_eq!(p.elements().count(), 1);
         assert_eq!(p.end, ProgramEnd::Percent { line: 3 });
-        // Without an opening marker a % after code ends the program too.
-        let p = parse("G0 X1\n%\n@@@").unwrap();
+        let p = parse_program("G0 X1\n%\n@@@", "p", Vector3::zeros()).unwrap();
         assert_eq!(p.end, ProgramEnd::Percent { line: 2 });
     }
 
     #[test]
-    fn crlf_and_tabs() {
-        let p = parse("G0\tX1\r\nY2\r\n").unwrap();
-        assert_eq!(p.moves[1].target_mm, v(1.0, 2.0, 0.0));
-    }
-
-    /// (program, line, col, message) for every error kind.
-    const ERRORS: &[(&str, usize, usize, &str)] = &[
-        (
-            "G0 X1\nG91\nX1 G2 Y1",
-            3,
-            4,
-            "unsupported: G2 (arcs arrive with the full G-code front end)",
-        ),
-        (
-            "G0 A1",
-            1,
-            4,
-            "unsupported: axis 'A' (only the X, Y and Z axes are supported)",
-        ),
-        (
-            "G0 X1 I2",
-            1,
-            7,
-            "unsupported: word 'I' (arc words arrive with the full G-code front end)",
-        ),
-        (
-            "G0 X#1",
-            1,
-            5,
-            "unsupported: parameter '#' (parameters arrive with the full G-code front end)",
-        ),
-        (
-            "#1=2",
-            1,
-            1,
-            "unsupported: parameter '#' (parameters arrive with the full G-code front end)",
-        ),
-        (
-            "G0 X[1+2]",
-            1,
-            5,
-            "unsupported: expression '[' (expressions arrive with the full G-code front end)",
-        ),
-        (
-            "o100 sub",
-            1,
-            1,
-            "unsupported: O-word (subroutines and control flow arrive with the full G-code front end)",
-        ),
-        (
-            "/G0 X1",
-            1,
-            1,
-            "unsupported: block delete '/' (optional blocks are not supported)",
-        ),
-        (
-            "G54",
-            1,
-            1,
-            "unsupported: G54 (coordinate systems and offsets arrive with the full G-code front end)",
-        ),
-        (
-            "G61.2",
-            1,
-            1,
-            "unsupported: G61.2 (not handled by the minimal G0/G1 front end)",
-        ),
-        (
-            "M0",
-            1,
-            1,
-            "unsupported: M0 (program pause is not supported yet)",
-        ),
-        (
-            "G1 F100 X1\nM1",
-            2,
-            1,
-            "unsupported: M1 (program pause is not supported yet)",
-        ),
-        (
-            "M7",
-            1,
-            1,
-            "unsupported: M7 (not handled by the minimal G0/G1 front end)",
-        ),
-        ("G1 F100\nG0 X1\nX", 3, 1, "expected a number after 'X'"),
-        ("G0 X1 Y", 1, 7, "expected a number after 'Y'"),
-        ("G0 Xa", 1, 4, "expected a number after 'X'"),
-        ("G0 X1.2.3", 1, 4, "malformed number '1.2.3' after 'X'"),
-        ("G0 X1-2", 1, 4, "malformed number '1-2' after 'X'"),
-        ("G0 X-", 1, 4, "malformed number '-' after 'X'"),
-        (
-            "G0 X12345678901",
-            1,
-            4,
-            "number '12345678901' after 'X' is out of range (at most 1e9 in magnitude)",
-        ),
-        ("G0 X1 !", 1, 7, "unexpected character '!'"),
-        (
-            "G0 X1 (comment",
-            1,
-            7,
-            "comment '(' is not closed on this line",
-        ),
-        ("G0 (a (b) c)", 1, 7, "nested comment: '(' inside a comment"),
-        ("G0 X1)", 1, 6, "')' without a matching '('"),
-        (
-            "G0 X1 %",
-            1,
-            7,
-            "'%' must be alone on its line (program start/end marker)",
-        ),
-        ("G0 X1 x2", 1, 7, "word 'X' appears twice on one line"),
-        ("G1 F1 F2", 1, 7, "word 'F' appears twice on one line"),
-        (
-            "G0 G1 X1",
-            1,
-            4,
-            "G0 and G1 on one line are both motion codes (one per line)",
-        ),
-        (
-            "G20 G21",
-            1,
-            5,
-            "G20 and G21 on one line are both units codes (one per line)",
-        ),
-        (
-            "M3 M5",
-            1,
-            4,
-            "M3 and M5 on one line are both spindle codes (one per line)",
-        ),
-        (
-            "G1.23",
-            1,
-            1,
-            "invalid G1.23: expected a G code such as G1 or G61.1",
-        ),
-        (
-            "M-2",
-            1,
-            1,
-            "invalid M-2: expected an M code such as M2 or M30",
-        ),
-        (
-            "M2.5",
-            1,
-            1,
-            "invalid M2.5: expected an M code such as M2 or M30",
-        ),
-        (
-            "N1.5 G0",
-            1,
-            1,
-            "invalid N1.5: expected a non-negative integer line number",
-        ),
-        (
-            "G1 F0 X1",
-            1,
-            4,
-            "invalid F0: expected a feed rate greater than zero",
-        ),
-        (
-            "G1 F-5",
-            1,
-            4,
-            "invalid F-5: expected a feed rate greater than zero",
-        ),
-        (
-            "S-5",
-            1,
-            1,
-            "invalid S-5: expected a non-negative spindle speed",
-        ),
-        (
-            "T2.5",
-            1,
-            1,
-            "invalid T2.5: expected a non-negative integer tool number",
-        ),
-        (
-            "G0 X1\nG1 Y2",
-            2,
-            1,
-            "G1 move with no feed rate: program F (mm/min, or in/min under G20) on this line or before",
-        ),
-        (
-            "G1\n\nY2 X1",
-            3,
-            1,
-            "G1 move with no feed rate: program F (mm/min, or in/min under G20) on this line or before",
-        ),
-        (
-            "X1",
-            1,
-            1,
-            "axis words with no motion mode in force: add G0 or G1",
-        ),
-        (
-            "G0 X1 N5",
-            1,
-            7,
-            "line number 'N' must be the first word of the line",
-        ),
-    ];
-
-    #[test]
-    fn every_error_kind_with_its_position() {
-        for &(text, line, col, message) in ERRORS {
-            let e = parse(text).expect_err(text);
-            assert_eq!((e.line, e.col), (line, col), "{text:?}: {e}");
-            assert_eq!(
-                e.to_string(),
-                format!("prog.ngc:{line}:{col}: {message}"),
-                "{text:?}"
-            );
-        }
+    fn crlf_tabs_and_bad_utf8() {
+        let p = parse_program("G0\tX1\r\nY2\r\n", "p", Vector3::zeros()).unwrap();
+        assert_eq!(p.end_mm(), v(1.0, 2.0, 0.0));
+        // Invalid UTF-8 inside a comment is harmless; outside, it is an error.
+        let bytes = b"G0 X1 (\xff\xfe)\nG0 Y\xff\n";
+        let items: Vec<_> =
+            Interpreter::new(&bytes[..], "p", Setup::new(Vector3::zeros())).collect();
+        assert!(matches!(items[0], Ok(Item::Motion(_))));
+        let e = items[1].clone().unwrap_err();
+        assert_eq!((e.line, e.col), (2, 4));
     }
 
     #[test]
-    fn non_finite_start_is_an_error() {
+    fn long_lines_are_refused_not_buffered() {
+        let text = format!("G0 X1 ({})\n", "a".repeat(MAX_LINE_BYTES));
+        let e = parse_program(&text, "p", Vector3::zeros()).unwrap_err();
+        assert_eq!(
+            e.kind,
+            ErrorKind::LineTooLong {
+                max_bytes: MAX_LINE_BYTES
+            }
+        );
+    }
+
+    #[test]
+    fn bad_setups_are_reported_at_line_zero() {
         let e = parse_program("G0 X1", "p", v(f64::NAN, 0.0, 0.0)).unwrap_err();
-        assert_eq!(e.kind, ErrorKind::NonFiniteStart);
         assert_eq!(e.to_string(), "p:0:0: start position is not finite");
+        let mut s = Setup::new(Vector3::zeros());
+        s.arc_tolerance_mm = 0.0;
+        let e = parse_program_with("G0 X1", "p", s).unwrap_err();
+        assert!(matches!(e.kind, ErrorKind::InvalidSetup { .. }));
     }
 
     #[test]
-    fn first_error_in_the_program_wins() {
-        let e = parse("G0 X1\nG2 X1\nG3 X1").unwrap_err();
-        assert_eq!((e.line, e.col), (2, 1));
+    fn endless_loops_without_motion_are_stopped() {
+        let e = parse_program(
+            "o1 while [1]\n#1 = [#1 + 1]\no1 endwhile\n",
+            "p",
+            Vector3::zeros(),
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.kind,
+            ErrorKind::NoProgress {
+                lines: MAX_IDLE_LINES
+            }
+        );
+        let e = parse_program(
+            "o1 sub\no1 call\no1 endsub\no1 call\n",
+            "p",
+            Vector3::zeros(),
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.kind,
+            ErrorKind::CallTooDeep {
+                max: MAX_CALL_DEPTH
+            }
+        );
+        assert_eq!(e.line, 2);
     }
 
+    #[test]
+    fn loops_of_the_main_program_let_their_lines_go() {
+        // 20 MB of loops in a row: more than MAX_STORED_BYTES in total, one at a time.
+        let comment = "c".repeat(1000);
+        let block = format!("o1 repeat [1] ({comment})\nG0 X1\nG0 X0\no1 endrepeat\n");
+        let count = 20 * 1024 * 1024 / block.len();
+        let text = block.repeat(count);
+        let elements = Interpreter::new(text.as_bytes(), "p", Setup::new(Vector3::zeros()))
+            .map(|i| i.unwrap())
+            .filter(|i| matches!(i, Item::Motion(_)))
+            .count();
+        assert_eq!(elements, 2 * count);
+        // Subroutine bodies are kept, within the bound.
+        let sub = format!("o<s{{}}> sub\n({comment})\no<s{{}}> endsub\n");
+        let text: String = (0..20_000)
+            .map(|k| sub.replace("{}", &k.to_string()))
+            .collect();
+        let e = parse_program(&text, "p", Vector3::zeros()).unwrap_err();
+        assert_eq!(
+            e.kind,
+            ErrorKind::StoredTooLarge {
+                max_bytes: MAX_STORED_BYTES
+            }
+        );
+    }
+
+    /// Runs a program and checks what every consumer relies on: finite values, continuity,
+    /// one End at the end. At most `limit` items are read (a loop may legitimately be endless).
     fn check_program(text: &str) {
-        if let Ok(p) = parse_program(text, "fuzz", v(1.0, -2.0, 3.0)) {
-            for m in &p.moves {
-                assert!(m.target_mm.iter().all(|c| c.is_finite()));
-                assert_eq!(m.rapid, m.feed_mm_s.is_none());
-                if let Some(f) = m.feed_mm_s {
-                    assert!(f.is_finite() && f > 0.0);
+        let start = v(1.0, -2.0, 3.0);
+        let mut position = start;
+        let mut ended = false;
+        for item in Interpreter::new(text.as_bytes(), "fuzz", Setup::new(start)).take(10_000) {
+            assert!(!ended, "an item after the end");
+            match item {
+                Ok(Item::Motion(e)) => {
+                    assert_eq!(e.start_mm, position);
+                    assert!(e.end_mm.iter().all(|c| c.is_finite()));
+                    assert_eq!(e.rapid, e.feed_mm_s.is_none());
+                    if let Some(f) = e.feed_mm_s {
+                        assert!(f.is_finite() && f > 0.0, "feed {f}");
+                    }
+                    if let ElementKind::Arc { radius_mm, .. } = e.kind {
+                        assert!(radius_mm > 0.0);
+                        let arc = e.arc().expect("arc geometry");
+                        assert!(arc.length_mm.is_finite() && arc.length_mm > 0.0);
+                    }
+                    position = e.end_mm;
+                }
+                Ok(Item::Dwell(d)) => assert!(d.seconds >= 0.0 && d.seconds.is_finite()),
+                Ok(Item::End(_)) => ended = true,
+                Ok(_) => {}
+                Err(e) => {
+                    let _ = e.to_string();
                 }
             }
         }
@@ -1000,8 +774,38 @@ mod tests {
 
         #[test]
         fn never_panics_on_gcode_like_text(
-            text in "[GgMmNXxYyZzFfSTIA#%0-9 .+\\-();\n]{0,300}"
+            text in "[GgMmNXxYyZzFfIJKRPQDHLOST#<>%\\[\\]=/*+\\-0-9 .();\n]{0,300}"
         ) {
+            check_program(&text);
+        }
+
+        #[test]
+        fn never_panics_on_plausible_blocks(
+            lines in proptest::collection::vec(
+                (
+                    prop::sample::select(vec![
+                        "G0", "G1", "G2", "G3", "G17", "G18", "G19", "G20", "G21", "G90", "G91",
+                        "G90.1", "G91.1", "G93", "G94", "G28", "G30", "G53 G0", "G92", "G92.1",
+                        "G92.2", "G92.3", "G43.1", "G49", "G10 L2 P1", "G10 L20 P0", "G4", "G54",
+                        "G55", "G64", "G61", "G40", "G41.1", "M0", "M1", "",
+                    ]),
+                    proptest::collection::vec(
+                        (prop::sample::select(vec!['X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'F', 'D', 'Q']),
+                         -50.0..50.0f64),
+                        0..5,
+                    ),
+                ),
+                0..30,
+            )
+        ) {
+            let mut text = String::new();
+            for (code, words) in lines {
+                text.push_str(code);
+                for (letter, value) in words {
+                    text.push_str(&format!(" {letter}{value:.3}"));
+                }
+                text.push('\n');
+            }
             check_program(&text);
         }
     }

@@ -1,4 +1,4 @@
-//! Motion planner (minimal): straight moves into time-parameterised trapezoid segments.
+//! Motion planner (exact stop): path elements into time-parameterised trapezoid segments.
 //!
 //! Second stage of the pipeline (`gcode → planner → interp`). Pure: no clock, no I/O; the
 //! output is a [`Plan`] whose only question downstream is [`Plan::position_at`] (as in Klipper,
@@ -8,9 +8,11 @@
 //!
 //! # Profile
 //!
-//! Each move becomes one [`Segment`] along the straight line from the previous position, with a
-//! constant-acceleration ramp up, an optional cruise and a ramp down (a triangle when the move is
-//! too short to reach cruise speed). This planner stops exactly at every block end (G61): every
+//! Each element (line, arc or helix, see [`crate::gcode::Element`]) becomes one [`Segment`]
+//! along its path from the previous position, with a constant-acceleration ramp up, an optional
+//! cruise and a ramp down (a triangle when the element is too short to reach cruise speed); a
+//! dwell becomes a segment of zero motion of its duration, a program stop (M0/M1) a segment of
+//! zero motion and zero duration that marks where the run must wait. This planner stops exactly at every block end (G61): every
 //! segment starts and ends at rest. Segments already carry start and end speeds so that a later
 //! look-ahead (junction speeds, see `shared/seeds` 000/003) can fill them in without changing
 //! the sampler.
@@ -21,10 +23,19 @@
 //! - acceleration: `a = min_i max_acc_i / |u_i|`,
 //!
 //! so every axis stays within its own velocity and acceleration limit (`|v_i| = v |u_i|`).
+//!
+//! On an arc of radius `r` (plane normal `n`, helix angle `α`) the tangent `T` and the inward
+//! normal `N` are orthogonal unit vectors, so the acceleration `a_t T + a_n N` has magnitude
+//! `√(a_t² + a_n²)` and no axis sees more than that times its share of the plane spanned by `T`
+//! and `N` (1 for an axis of the arc's plane, `sin α` for the helix axis). With `A` the smallest
+//! `max_acc_i / share_i`, the path acceleration is `a_t = A/2` and the centripetal acceleration
+//! is held to `a_n = v²/r ≤ A·√3/2` (LinuxCNC's 0.5 tangential ratio), so every axis stays
+//! within its limit while the speed ramps along the circle. Each axis's speed is `v` times its
+//! largest share of the tangent (`cos α` in the plane, `sin α` along the helix axis).
 
 use nalgebra::Vector3;
 
-use crate::gcode::{Move, Program};
+use crate::gcode::{ArcGeometry, Element, ElementKind, Item, Program};
 
 /// Largest value accepted for any machine limit; keeps squares and products of limits and
 /// lengths finite.
@@ -87,6 +98,26 @@ pub enum PlanError {
         /// The feed (`None` for a G1 move without feed).
         feed_mm_s: Option<f64>,
     },
+    /// An element does not start where the previous one ended.
+    #[error("line {line}: element does not start where the previous one ended")]
+    Discontinuity {
+        /// 1-based source line.
+        line: usize,
+    },
+    /// An arc whose geometry is degenerate (zero radius, zero normal).
+    #[error("line {line}: degenerate arc (zero radius or no plane)")]
+    InvalidArc {
+        /// 1-based source line.
+        line: usize,
+    },
+    /// A dwell that is negative or not finite.
+    #[error("line {line}: dwell {seconds} s must be finite and at least zero")]
+    InvalidDwell {
+        /// 1-based source line.
+        line: usize,
+        /// The dwell.
+        seconds: f64,
+    },
     /// The move is so long or so slow that its length or duration overflows.
     #[error("line {line}: move length or duration is not finite (move too long or feed too low)")]
     Overflow {
@@ -95,7 +126,26 @@ pub enum PlanError {
     },
 }
 
-/// One straight move with its speed profile. Times in the profile are relative to the segment
+/// What a segment follows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SegmentPath {
+    /// A straight line.
+    Line {
+        /// Unit vector from start to end.
+        direction: Vector3<f64>,
+    },
+    /// An arc or a helix; the position at distance `d` is `point_at(d / length_mm)`.
+    Arc(ArcGeometry),
+    /// G4: no motion for the segment's duration.
+    Dwell,
+    /// M0 / M1: no motion, no duration; the run waits here for the operator.
+    Stop {
+        /// M1 rather than M0.
+        optional: bool,
+    },
+}
+
+/// One element with its speed profile. Times in the profile are relative to the segment
 /// start; [`Segment::start_time_s`] places it in the plan.
 ///
 /// Path speed: rises from `v_start_mm_s` to `v_peak_mm_s` at `accel_mm_s2` during `t_acc_s`,
@@ -108,11 +158,11 @@ pub struct Segment {
     pub rapid: bool,
     /// Where the segment starts (the previous segment's `end_mm`, bit for bit).
     pub start_mm: Vector3<f64>,
-    /// Where it ends (the move's target, bit for bit).
+    /// Where it ends (the element's end, bit for bit).
     pub end_mm: Vector3<f64>,
-    /// Unit vector from start to end.
-    pub direction: Vector3<f64>,
-    /// Straight-line length, > 0.
+    /// The path followed.
+    pub path: SegmentPath,
+    /// Path length along `path` (> 0 for lines and arcs, 0 for dwells and stops).
     pub length_mm: f64,
     /// Path speed at the start (0 in this exact-stop planner).
     pub v_start_mm_s: f64,
@@ -171,23 +221,40 @@ impl Segment {
     }
 
     /// Position at `t_s` after the segment start. Exactly `start_mm` at `t_s <= 0` and exactly
-    /// `end_mm` at `t_s >= duration_s()`. The ramp down is measured back from the end, so the
-    /// approach to `end_mm` is as precise as the approach from `start_mm`; an axis that does not
-    /// move keeps its coordinate bit for bit.
+    /// `end_mm` at `t_s >= duration_s()`. On a line the ramp down is measured back from the end,
+    /// so the approach to `end_mm` is as precise as the approach from `start_mm`, and an axis
+    /// that does not move keeps its coordinate bit for bit. On an arc the point is on the circle
+    /// (helix) at the distance travelled.
     pub fn position_at(&self, t_s: f64) -> Vector3<f64> {
-        let a = self.accel_mm_s2;
-        let t_ramp_end_s = self.t_acc_s + self.t_cruise_s;
         if t_s.is_nan() || t_s <= 0.0 {
-            self.start_mm
-        } else if t_s < self.t_acc_s {
-            self.start_mm + self.direction * (self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s)
-        } else if t_s < t_ramp_end_s {
-            let d_acc_mm = self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
-            self.start_mm + self.direction * (d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s))
-        } else if t_s < self.duration_s() {
-            self.end_mm - self.direction * self.remaining_at(t_s)
-        } else {
-            self.end_mm
+            return self.start_mm;
+        }
+        if t_s >= self.duration_s() {
+            return self.end_mm;
+        }
+        match &self.path {
+            SegmentPath::Line { direction } => {
+                let a = self.accel_mm_s2;
+                if t_s < self.t_acc_s {
+                    self.start_mm + direction * (self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s)
+                } else if t_s < self.t_acc_s + self.t_cruise_s {
+                    let d_acc_mm =
+                        self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
+                    self.start_mm + direction * (d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s))
+                } else {
+                    self.end_mm - direction * self.remaining_at(t_s)
+                }
+            }
+            SegmentPath::Arc(arc) => arc.point_at(self.distance_at(t_s) / self.length_mm),
+            SegmentPath::Dwell | SegmentPath::Stop { .. } => self.start_mm,
+        }
+    }
+
+    /// The unit direction of a straight segment (`None` for arcs, dwells and stops).
+    pub fn direction(&self) -> Option<Vector3<f64>> {
+        match self.path {
+            SegmentPath::Line { direction } => Some(direction),
+            _ => None,
         }
     }
 
@@ -339,86 +406,59 @@ impl Plan {
 
 /// Plans a parsed program from its start position.
 pub fn plan(program: &Program, limits: &Limits) -> Result<Plan, PlanError> {
-    plan_moves(program.start_mm, &program.moves, limits)
+    plan_items(program.start_mm, &program.items, limits)
 }
 
-/// Plans `moves` from `start_mm`: one exact-stop trapezoid per move, zero-length moves skipped.
-pub fn plan_moves(
+/// Plans `items` (elements, dwells, stops; notes and the end are ignored) from `start_mm`:
+/// one exact-stop trapezoid per element, zero-length lines skipped. Each element must start
+/// where the previous one ended.
+pub fn plan_items<'a>(
     start_mm: Vector3<f64>,
-    moves: &[Move],
+    items: impl IntoIterator<Item = &'a Item>,
     limits: &Limits,
 ) -> Result<Plan, PlanError> {
     limits.validate()?;
     if !start_mm.iter().all(|c| c.is_finite()) {
         return Err(PlanError::NonFiniteStart);
     }
-    let mut segments = Vec::with_capacity(moves.len());
+    let mut segments = Vec::new();
     let mut position_mm = start_mm;
     let mut time_s = 0.0;
-    for m in moves {
-        let line = m.line;
-        if !m.target_mm.iter().all(|c| c.is_finite()) {
-            return Err(PlanError::NonFiniteTarget { line });
-        }
-        let feed_mm_s = if m.rapid {
-            limits.max_feed_mm_s
-        } else {
-            match m.feed_mm_s {
-                Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
-                other => {
-                    return Err(PlanError::InvalidFeed {
-                        line,
-                        feed_mm_s: other,
+    for item in items {
+        let segment = match item {
+            Item::Motion(e) => match plan_element(e, position_mm, time_s, limits)? {
+                Some(s) => s,
+                None => continue,
+            },
+            Item::Dwell(d) => {
+                if !(d.seconds >= 0.0 && d.seconds.is_finite()) {
+                    return Err(PlanError::InvalidDwell {
+                        line: d.line,
+                        seconds: d.seconds,
                     });
                 }
+                if d.seconds == 0.0 {
+                    continue;
+                }
+                still(d.line, position_mm, SegmentPath::Dwell, d.seconds, time_s)
             }
-        };
-        let delta_mm = m.target_mm - position_mm;
-        // Scaled norm: neither overflows for huge nor underflows for tiny moves.
-        let scale_mm = delta_mm.amax();
-        if scale_mm == 0.0 {
-            continue;
-        }
-        if !scale_mm.is_finite() {
-            return Err(PlanError::Overflow { line });
-        }
-        let unit_scaled = delta_mm / scale_mm;
-        let norm_scaled = unit_scaled.norm();
-        let length_mm = scale_mm * norm_scaled;
-        let direction = unit_scaled / norm_scaled;
-        let mut v_max_mm_s = feed_mm_s;
-        let mut accel_mm_s2 = f64::INFINITY;
-        for i in 0..3 {
-            let share = direction[i].abs();
-            if share > 0.0 {
-                v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / share);
-                accel_mm_s2 = accel_mm_s2.min(limits.max_acc_mm_s2[i] / share);
-            }
-        }
-        let profile = trapezoid(length_mm, 0.0, 0.0, v_max_mm_s, accel_mm_s2)
-            .ok_or(PlanError::Overflow { line })?;
-        let segment = Segment {
-            line,
-            rapid: m.rapid,
-            start_mm: position_mm,
-            end_mm: m.target_mm,
-            direction,
-            length_mm,
-            v_start_mm_s: 0.0,
-            v_peak_mm_s: profile.v_peak_mm_s,
-            v_end_mm_s: 0.0,
-            accel_mm_s2,
-            t_acc_s: profile.t_acc_s,
-            t_cruise_s: profile.t_cruise_s,
-            t_dec_s: profile.t_dec_s,
-            start_time_s: time_s,
+            Item::Stop(s) => still(
+                s.line,
+                position_mm,
+                SegmentPath::Stop {
+                    optional: s.optional,
+                },
+                0.0,
+                time_s,
+            ),
+            Item::Note(_) | Item::End(_) => continue,
         };
         time_s = segment.end_time_s();
         if !time_s.is_finite() {
-            return Err(PlanError::Overflow { line });
+            return Err(PlanError::Overflow { line: segment.line });
         }
+        position_mm = segment.end_mm;
         segments.push(segment);
-        position_mm = m.target_mm;
     }
     Ok(Plan {
         start_mm,
@@ -427,10 +467,187 @@ pub fn plan_moves(
     })
 }
 
+/// A segment without motion.
+fn still(
+    line: usize,
+    at_mm: Vector3<f64>,
+    path: SegmentPath,
+    duration_s: f64,
+    start_time_s: f64,
+) -> Segment {
+    Segment {
+        line,
+        rapid: false,
+        start_mm: at_mm,
+        end_mm: at_mm,
+        path,
+        length_mm: 0.0,
+        v_start_mm_s: 0.0,
+        v_peak_mm_s: 0.0,
+        v_end_mm_s: 0.0,
+        accel_mm_s2: 0.0,
+        t_acc_s: 0.0,
+        t_cruise_s: duration_s,
+        t_dec_s: 0.0,
+        start_time_s,
+    }
+}
+
+/// The segment of one element from `position_mm` (`None` for a zero-length line).
+fn plan_element(
+    e: &Element,
+    position_mm: Vector3<f64>,
+    start_time_s: f64,
+    limits: &Limits,
+) -> Result<Option<Segment>, PlanError> {
+    let line = e.line;
+    if !e.end_mm.iter().all(|c| c.is_finite()) {
+        return Err(PlanError::NonFiniteTarget { line });
+    }
+    if e.start_mm != position_mm {
+        return Err(PlanError::Discontinuity { line });
+    }
+    let feed_mm_s = if e.rapid {
+        limits.max_feed_mm_s
+    } else {
+        match e.feed_mm_s {
+            Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
+            other => {
+                return Err(PlanError::InvalidFeed {
+                    line,
+                    feed_mm_s: other,
+                });
+            }
+        }
+    };
+    let (path, length_mm, v_max_mm_s, accel_mm_s2) = match e.kind {
+        ElementKind::Line => {
+            let delta_mm = e.end_mm - position_mm;
+            // Scaled norm: neither overflows for huge nor underflows for tiny moves.
+            let scale_mm = delta_mm.amax();
+            if scale_mm == 0.0 {
+                return Ok(None);
+            }
+            if !scale_mm.is_finite() {
+                return Err(PlanError::Overflow { line });
+            }
+            let unit_scaled = delta_mm / scale_mm;
+            let norm_scaled = unit_scaled.norm();
+            let length_mm = scale_mm * norm_scaled;
+            let direction = unit_scaled / norm_scaled;
+            let mut v_max_mm_s = feed_mm_s;
+            let mut accel_mm_s2 = f64::INFINITY;
+            for i in 0..3 {
+                let share = direction[i].abs();
+                if share > 0.0 {
+                    v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / share);
+                    accel_mm_s2 = accel_mm_s2.min(limits.max_acc_mm_s2[i] / share);
+                }
+            }
+            (
+                SegmentPath::Line { direction },
+                length_mm,
+                v_max_mm_s,
+                accel_mm_s2,
+            )
+        }
+        ElementKind::Arc { .. } => {
+            let arc = e.arc().ok_or(PlanError::InvalidArc { line })?;
+            let length_mm = arc.length_mm;
+            if !(length_mm > 0.0 && length_mm.is_finite()) {
+                return Err(PlanError::Overflow { line });
+            }
+            let (v_max_mm_s, accel_mm_s2) = arc_limits(&arc, feed_mm_s, limits);
+            (SegmentPath::Arc(arc), length_mm, v_max_mm_s, accel_mm_s2)
+        }
+    };
+    let profile = trapezoid(length_mm, 0.0, 0.0, v_max_mm_s, accel_mm_s2)
+        .ok_or(PlanError::Overflow { line })?;
+    Ok(Some(Segment {
+        line,
+        rapid: e.rapid,
+        start_mm: position_mm,
+        end_mm: e.end_mm,
+        path,
+        length_mm,
+        v_start_mm_s: 0.0,
+        v_peak_mm_s: profile.v_peak_mm_s,
+        v_end_mm_s: 0.0,
+        accel_mm_s2,
+        t_acc_s: profile.t_acc_s,
+        t_cruise_s: profile.t_cruise_s,
+        t_dec_s: profile.t_dec_s,
+        start_time_s,
+    }))
+}
+
+/// Speed cap and path acceleration on an arc (see the module documentation).
+fn arc_limits(arc: &ArcGeometry, feed_mm_s: f64, limits: &Limits) -> (f64, f64) {
+    let sin_a = arc.helix_sin();
+    let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+    let mut v_max_mm_s = feed_mm_s;
+    let mut budget_mm_s2 = f64::INFINITY;
+    for i in 0..3 {
+        let n_i = arc.normal[i].abs().min(1.0);
+        let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
+        let speed_share = (p_i * cos_a + n_i * sin_a).min(1.0);
+        if speed_share > 0.0 {
+            v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / speed_share);
+        }
+        let acc_share = (p_i + n_i * sin_a).min(1.0);
+        if acc_share > 0.0 {
+            budget_mm_s2 = budget_mm_s2.min(limits.max_acc_mm_s2[i] / acc_share);
+        }
+    }
+    let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
+    let centripetal_mm_s2 = budget_mm_s2 * (0.75f64).sqrt();
+    v_max_mm_s = v_max_mm_s.min((centripetal_mm_s2 * radius_mm).sqrt());
+    (v_max_mm_s, 0.5 * budget_mm_s2)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gcode::parse_program;
+    use crate::gcode::{BlendMode, CompState, Plane, parse_program};
+    use crate::gcode::{Element, ElementKind, Item};
+
+    /// A straight move as the old G0/G1 front end gave it: a target, the start implied.
+    #[derive(Debug, Clone, Copy)]
+    struct Move {
+        line: usize,
+        rapid: bool,
+        target_mm: Vector3<f64>,
+        feed_mm_s: Option<f64>,
+    }
+
+    /// Plans straight moves from `start_mm`, each starting where the previous one ended.
+    fn plan_moves(
+        start_mm: Vector3<f64>,
+        moves: &[Move],
+        limits: &Limits,
+    ) -> Result<Plan, PlanError> {
+        let mut from = start_mm;
+        let items: Vec<Item> = moves
+            .iter()
+            .map(|m| {
+                let e = Element {
+                    line: m.line,
+                    col: 1,
+                    kind: ElementKind::Line,
+                    rapid: m.rapid,
+                    start_mm: from,
+                    end_mm: m.target_mm,
+                    feed_mm_s: m.feed_mm_s,
+                    blend: BlendMode::ExactStop,
+                    comp: CompState::Off,
+                    plane: Plane::Xy,
+                };
+                from = m.target_mm;
+                Item::Motion(e)
+            })
+            .collect();
+        plan_items(start_mm, &items, limits)
+    }
 
     fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
         Vector3::new(x, y, z)
@@ -544,8 +761,8 @@ mod tests {
         assert!(close(s.accel_mm_s2, 500.0 * sqrt2));
         assert!(close(s.length_mm, 100.0 * sqrt2));
         // Y runs exactly at its limits, X at half of its own.
-        assert!(close(s.v_peak_mm_s * s.direction[1], 50.0));
-        assert!(close(s.accel_mm_s2 * s.direction[1], 500.0));
+        assert!(close(s.v_peak_mm_s * s.direction().unwrap()[1], 50.0));
+        assert!(close(s.accel_mm_s2 * s.direction().unwrap()[1], 500.0));
         let hand_s = (100.0 * sqrt2) / (50.0 * sqrt2) + (50.0 * sqrt2) / (500.0 * sqrt2);
         assert!(close(p.duration_s(), hand_s));
 
@@ -721,5 +938,169 @@ mod tests {
         let z = p.segments()[2];
         assert!(z.is_triangle());
         assert!(close(z.v_peak_mm_s, 200f64.sqrt()));
+    }
+
+    fn plan_text(text: &str, limits: &Limits) -> Plan {
+        let prog = parse_program(text, "p.ngc", Vector3::zeros()).unwrap();
+        plan(&prog, limits).unwrap()
+    }
+
+    #[test]
+    fn arcs_follow_the_circle_and_end_exactly() {
+        // A clockwise half circle of radius 10 about (10, 0), then a helix of one turn.
+        let p = plan_text("G21 F600\nG2 X20 Y0 I10\nG3 X20 Y0 Z-4 I-10\n", &limits());
+        let (arc, helix) = (p.segments()[0], p.segments()[1]);
+        assert!(matches!(arc.path, SegmentPath::Arc(_)));
+        assert!(close(arc.length_mm, 10.0 * std::f64::consts::PI));
+        let center = v(10.0, 0.0, 0.0);
+        let mut last_distance = 0.0;
+        for k in 0..=200 {
+            let t = arc.duration_s() * f64::from(k) / 200.0;
+            let q = arc.position_at(t);
+            assert!(
+                ((q - center).norm() - 10.0).abs() < 1e-9,
+                "off the circle at {t}"
+            );
+            assert_eq!(q.z, 0.0);
+            // Clockwise from (0,0) over the top: y ≥ 0.
+            assert!(q.y >= -1e-12);
+            let d = arc.distance_at(t);
+            assert!(d >= last_distance);
+            last_distance = d;
+        }
+        assert_eq!(arc.position_at(arc.duration_s()), v(20.0, 0.0, 0.0));
+        assert!(close(arc.position_at(arc.duration_s() / 2.0).y, 10.0));
+        // The helix: z falls in proportion to the distance travelled.
+        for k in 0..=50 {
+            let t = helix.duration_s() * f64::from(k) / 50.0;
+            let q = helix.position_at(t);
+            let s = helix.distance_at(t) / helix.length_mm;
+            assert!((q.z + 4.0 * s).abs() < 1e-9);
+            assert!(((q - v(10.0, 0.0, q.z)).norm() - 10.0).abs() < 1e-9);
+        }
+        assert_eq!(p.end_mm(), v(20.0, 0.0, -4.0));
+    }
+
+    #[test]
+    fn arc_speed_is_held_by_the_centripetal_acceleration() {
+        // r = 1 mm in XY: A = min(1000, 500) = 500, so v ≤ sqrt(500 · √3/2 · 1) ≈ 20.8 mm/s,
+        // below the 80 mm/s feed; the path acceleration is A/2.
+        let p = plan_text("G21 F4800\nG2 X2 Y0 I1\n", &limits());
+        let s = p.segments()[0];
+        assert!(close(s.v_peak_mm_s, (500.0 * 0.75f64.sqrt()).sqrt()));
+        assert!(close(s.accel_mm_s2, 250.0));
+        // A big radius: the feed, clamped to the plane axes' speeds (Y: 50 mm/s), wins.
+        let p = plan_text("G21 F4800\nG2 X200 Y0 I100\n", &limits());
+        assert!(close(p.segments()[0].v_peak_mm_s, 50.0));
+    }
+
+    #[test]
+    fn dwells_and_stops_hold_still() {
+        let p = plan_text("G21 G0 X1\nG4 P0.5\nM0\nG4 P0\nG0 X2\n", &limits());
+        let kinds: Vec<SegmentPath> = p.segments().iter().map(|s| s.path).collect();
+        assert!(matches!(kinds[1], SegmentPath::Dwell));
+        assert!(matches!(kinds[2], SegmentPath::Stop { optional: false }));
+        assert_eq!(kinds.len(), 4);
+        let dwell = p.segments()[1];
+        assert_eq!(dwell.duration_s(), 0.5);
+        for k in 0..=10 {
+            let t = dwell.start_time_s + 0.05 * f64::from(k);
+            assert_eq!(p.position_at(t), v(1.0, 0.0, 0.0));
+        }
+        assert_eq!(p.segments()[2].duration_s(), 0.0);
+        assert_eq!(p.segments()[3].start_time_s, dwell.end_time_s());
+    }
+
+    #[test]
+    fn elements_must_chain() {
+        let e = Element {
+            line: 4,
+            col: 1,
+            kind: ElementKind::Line,
+            rapid: true,
+            start_mm: v(1.0, 0.0, 0.0),
+            end_mm: v(2.0, 0.0, 0.0),
+            feed_mm_s: None,
+            blend: BlendMode::ExactStop,
+            comp: CompState::Off,
+            plane: Plane::Xy,
+        };
+        assert_eq!(
+            plan_items(Vector3::zeros(), &[Item::Motion(e)], &limits()),
+            Err(PlanError::Discontinuity { line: 4 })
+        );
+    }
+
+    mod arcs {
+        use super::*;
+        use proptest::prelude::*;
+
+        proptest! {
+            #![proptest_config(ProptestConfig::with_cases(64))]
+
+            /// Sampled like the interpolator does, every axis keeps its speed and acceleration
+            /// limits and the path stays on the circle.
+            #[test]
+            fn sampled_arcs_hold_the_axis_limits(
+                plane in 0usize..3,
+                cw in any::<bool>(),
+                radius in 0.5..50.0f64,
+                angle_deg in 10.0..700.0f64,
+                helix in -20.0..20.0f64,
+                feed in 100.0..20000.0f64,
+                vel in proptest::array::uniform3(10.0..500.0f64),
+                acc in proptest::array::uniform3(50.0..5000.0f64),
+            ) {
+                let (plane_code, a, b) = [("G17", 'X', 'Y'), ("G18", 'Z', 'X'), ("G19", 'Y', 'Z')][plane];
+                let offset = ['I', 'J', 'K'][['X', 'Y', 'Z'].iter().position(|l| *l == a).unwrap()];
+                let normal_letter = ['Z', 'Y', 'X'][plane];
+                // Start at (r, 0) in plane coordinates about the origin; end at the angle.
+                let theta = angle_deg.to_radians() * if cw { -1.0 } else { 1.0 };
+                let turns = (angle_deg / 360.0).floor();
+                let text = format!(
+                    "G21 {plane_code} G0 {a}{radius} {b}0\n{} {a}{:.9} {b}{:.9} {normal_letter}{helix:.6} {offset}{} F{feed} P{}\n",
+                    if cw { "G2" } else { "G3" },
+                    radius * theta.cos(),
+                    radius * theta.sin(),
+                    -radius,
+                    turns + 1.0,
+                );
+                let prog = parse_program(&text, "p", Vector3::zeros()).unwrap();
+                let lim = Limits {
+                    max_vel_mm_s: Vector3::from(vel),
+                    max_acc_mm_s2: Vector3::from(acc),
+                    max_feed_mm_s: 1000.0,
+                };
+                let p = plan(&prog, &lim).unwrap();
+                let seg = *p.segments().last().unwrap();
+                let SegmentPath::Arc(arc) = seg.path else { panic!("not an arc") };
+                let period = (seg.duration_s() / 4000.0).min(0.001);
+                let mut prev2 = seg.position_at(-period);
+                let mut prev = seg.position_at(0.0);
+                let mut k = 1.0;
+                loop {
+                    let t = k * period;
+                    let q = seg.position_at(t);
+                    let rel = q - arc.center_mm;
+                    let in_plane = rel - arc.normal * rel.dot(&arc.normal);
+                    prop_assert!((in_plane.norm() - radius).abs() < 1e-6 * radius.max(1.0));
+                    for i in 0..3 {
+                        let v_i = (q[i] - prev[i]).abs() / period;
+                        let a_i = (q[i] - 2.0 * prev[i] + prev2[i]).abs() / (period * period);
+                        prop_assert!(v_i <= lim.max_vel_mm_s[i] * 1.001 + 1e-6,
+                            "axis {} speed {} > {}", i, v_i, lim.max_vel_mm_s[i]);
+                        prop_assert!(a_i <= lim.max_acc_mm_s2[i] * 1.01 + 1e-3,
+                            "axis {} acceleration {} > {}", i, a_i, lim.max_acc_mm_s2[i]);
+                    }
+                    if t >= seg.duration_s() {
+                        prop_assert_eq!(q, seg.end_mm);
+                        break;
+                    }
+                    prev2 = prev;
+                    prev = q;
+                    k += 1.0;
+                }
+            }
+        }
     }
 }

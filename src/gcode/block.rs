@@ -1,0 +1,491 @@
+//! One line's words, checked and sorted into modal groups before any takes effect.
+//!
+//! Only what can be decided from the line alone is checked here (known codes, one code per
+//! modal group, each letter once, value domains); what depends on the modal state (which words
+//! a modal G2 uses, whether a tool exists) is the interpreter's.
+
+use std::fmt;
+
+use super::ErrorKind;
+use super::lex::Word;
+
+/// A block-level error with its 1-based column.
+pub(super) type BlockError = (usize, ErrorKind);
+
+/// A G or M code: value in tenths (`G61.1` is 611), with the column of its word.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Code {
+    pub letter: char,
+    pub tenths: u32,
+    pub col: usize,
+}
+
+impl fmt::Display for Code {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.tenths.is_multiple_of(10) {
+            write!(f, "{}{}", self.letter, self.tenths / 10)
+        } else {
+            write!(
+                f,
+                "{}{}.{}",
+                self.letter,
+                self.tenths / 10,
+                self.tenths % 10
+            )
+        }
+    }
+}
+
+/// Modal groups (and the non-modal group 0) of the codes this front end executes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Group {
+    Motion,
+    NonModal,
+    Plane,
+    Distance,
+    ArcDistance,
+    FeedMode,
+    Units,
+    Comp,
+    ToolLength,
+    Coord,
+    Path,
+    Retract,
+    LatheMode,
+    SpindleMode,
+    Stop,
+    ToolChange,
+    Spindle,
+    Coolant,
+    Override,
+}
+
+impl Group {
+    fn name(self) -> &'static str {
+        match self {
+            Group::Motion => "motion",
+            Group::NonModal => "non-modal (group 0)",
+            Group::Plane => "plane selection",
+            Group::Distance => "distance mode",
+            Group::ArcDistance => "arc centre mode",
+            Group::FeedMode => "feed mode",
+            Group::Units => "units",
+            Group::Comp => "cutter compensation",
+            Group::ToolLength => "tool length offset",
+            Group::Coord => "coordinate system",
+            Group::Path => "path control",
+            Group::Retract => "canned cycle return",
+            Group::LatheMode => "lathe diameter/radius",
+            Group::SpindleMode => "spindle speed mode",
+            Group::Stop => "program stop",
+            Group::ToolChange => "tool change",
+            Group::Spindle => "spindle",
+            Group::Coolant => "coolant",
+            Group::Override => "override switch",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+const GROUPS: usize = Group::Override as usize + 1;
+
+/// What a G code is: its group, or why it is not executed.
+enum Known {
+    In(Group),
+    Unsupported(&'static str),
+    Unknown,
+}
+
+fn classify_g(tenths: u32) -> Known {
+    use Known::*;
+    match tenths {
+        0 | 10 | 20 | 30 | 800 => In(Group::Motion),
+        40 | 100 | 280 | 281 | 300 | 301 | 530 | 920..=923 => In(Group::NonModal),
+        170 | 180 | 190 => In(Group::Plane),
+        900 | 910 => In(Group::Distance),
+        901 | 911 => In(Group::ArcDistance),
+        930 | 940 => In(Group::FeedMode),
+        200 | 210 => In(Group::Units),
+        400 | 410 | 411 | 420 | 421 => In(Group::Comp),
+        430 | 431 | 432 | 440 | 490 => In(Group::ToolLength),
+        540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => In(Group::Coord),
+        610 | 611 | 640 => In(Group::Path),
+        980 | 990 => In(Group::Retract),
+        80 => In(Group::LatheMode),
+        970 => In(Group::SpindleMode),
+        50..=53 => Unsupported("splines (G5, G5.1, G5.2, G5.3) are not supported"),
+        70 => Unsupported("lathe diameter mode is not supported"),
+        150 | 160 => Unsupported("polar coordinates are not supported"),
+        171 | 181 | 191 => Unsupported("the UVW planes are not supported: the machine has X, Y, Z"),
+        330 | 331 | 760 => {
+            Unsupported("spindle-synchronised motion (threading, rigid tapping) is not supported")
+        }
+        380..=389 => Unsupported("probing is not supported"),
+        730 | 740 | 810..=890 => Unsupported("canned cycles are not supported"),
+        950 => Unsupported("feed per revolution is spindle-synchronised: not supported"),
+        960 => Unsupported("constant surface speed is spindle-synchronised: not supported"),
+        500 | 510 | 520 | 680 | 690 => {
+            Unsupported("scaling, local offsets and G68 rotation are not supported")
+        }
+        _ => Unknown,
+    }
+}
+
+fn classify_m(number: u32) -> Known {
+    use Known::*;
+    match number {
+        0 | 1 | 2 | 30 => In(Group::Stop),
+        6 | 61 => In(Group::ToolChange),
+        3..=5 | 19 => In(Group::Spindle),
+        7..=9 => In(Group::Coolant),
+        48..=53 => In(Group::Override),
+        60 => Unsupported("pallet change pause is not supported"),
+        62..=68 => Unsupported("digital and analog I/O is not supported"),
+        70..=73 => Unsupported("saving and restoring modal state is not supported"),
+        100..=199 => Unsupported("user-defined M codes are not supported"),
+        _ => Unknown,
+    }
+}
+
+/// The letters a block may hold (besides G and M), in a fixed order for the word table.
+const LETTERS: [char; 16] = [
+    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N',
+];
+
+fn letter_index(letter: char) -> Option<usize> {
+    LETTERS.iter().position(|l| *l == letter)
+}
+
+/// The words of one line, checked and sorted into modal groups.
+#[derive(Debug, Default)]
+pub(super) struct Block {
+    groups: [Option<Code>; GROUPS],
+    words: [Option<Word>; LETTERS.len()],
+    /// The second coolant code of `M7 M8` (both on one line is allowed).
+    pub coolant2: Option<Code>,
+}
+
+fn invalid(word: &Word, expected: &'static str) -> BlockError {
+    (
+        word.col,
+        ErrorKind::InvalidValue {
+            word: format!("{}{}", word.letter, word.value),
+            expected,
+        },
+    )
+}
+
+/// A G or M value as tenths: non-negative, at most one decimal.
+fn code_tenths(word: &Word) -> Option<u32> {
+    let tenths = word.value * 10.0;
+    let rounded = tenths.round();
+    if word.value < 0.0 || (tenths - rounded).abs() > 1e-6 || rounded > f64::from(u32::MAX) {
+        return None;
+    }
+    // In range and integral: the cast is exact.
+    Some(rounded as u32)
+}
+
+/// Whether `value` is a non-negative integer that fits a `u32`.
+pub(super) fn as_index(value: f64) -> Option<u32> {
+    (value >= 0.0 && value.fract() == 0.0 && value <= f64::from(u32::MAX)).then_some(value as u32)
+}
+
+impl Block {
+    /// Checks every word of a line; the first problem in line order is reported.
+    pub fn read(words: &[Word]) -> Result<Block, BlockError> {
+        let mut block = Block::default();
+        for (i, word) in words.iter().enumerate() {
+            match word.letter {
+                'G' => {
+                    let tenths = code_tenths(word)
+                        .ok_or_else(|| invalid(word, "a G code such as G1 or G61.1"))?;
+                    let code = Code {
+                        letter: 'G',
+                        tenths,
+                        col: word.col,
+                    };
+                    match classify_g(tenths) {
+                        Known::In(group) => block.set_code(group, code)?,
+                        Known::Unsupported(reason) => {
+                            return Err((
+                                word.col,
+                                ErrorKind::Unsupported {
+                                    what: code.to_string(),
+                                    reason,
+                                },
+                            ));
+                        }
+                        Known::Unknown => {
+                            return Err((
+                                word.col,
+                                ErrorKind::UnknownCode {
+                                    code: code.to_string(),
+                                },
+                            ));
+                        }
+                    }
+                }
+                'M' => {
+                    let tenths = code_tenths(word)
+                        .filter(|t| t.is_multiple_of(10))
+                        .ok_or_else(|| invalid(word, "an M code such as M2 or M30"))?;
+                    let code = Code {
+                        letter: 'M',
+                        tenths,
+                        col: word.col,
+                    };
+                    match classify_m(tenths / 10) {
+                        // M7 and M8 together are allowed (mist and flood).
+                        Known::In(Group::Coolant) => match block.get(Group::Coolant) {
+                            Some(first)
+                                if block.coolant2.is_none()
+                                    && first.tenths != 90
+                                    && code.tenths != 90
+                                    && first.tenths != code.tenths =>
+                            {
+                                block.coolant2 = Some(code);
+                            }
+                            _ => block.set_code(Group::Coolant, code)?,
+                        },
+                        Known::In(group) => block.set_code(group, code)?,
+                        Known::Unsupported(reason) => {
+                            return Err((
+                                word.col,
+                                ErrorKind::Unsupported {
+                                    what: code.to_string(),
+                                    reason,
+                                },
+                            ));
+                        }
+                        Known::Unknown => {
+                            return Err((
+                                word.col,
+                                ErrorKind::UnknownCode {
+                                    code: code.to_string(),
+                                },
+                            ));
+                        }
+                    }
+                }
+                letter => {
+                    if letter == 'N' && i != 0 {
+                        return Err((word.col, ErrorKind::LineNumberNotFirst));
+                    }
+                    let Some(slot) = letter_index(letter).and_then(|k| block.words.get_mut(k))
+                    else {
+                        return Err((word.col, ErrorKind::UnknownLetter { letter }));
+                    };
+                    if slot.is_some() {
+                        return Err((word.col, ErrorKind::RepeatedWord { letter }));
+                    }
+                    *slot = Some(*word);
+                    check_domain(word)?;
+                }
+            }
+        }
+        Ok(block)
+    }
+
+    fn set_code(&mut self, group: Group, code: Code) -> Result<(), BlockError> {
+        let Some(slot) = self.groups.get_mut(group.index()) else {
+            return Ok(());
+        };
+        // G80 beside another motion code is ignored (LinuxCNC: `G80 G0` is a common preamble).
+        if group == Group::Motion {
+            match slot {
+                Some(first) if first.tenths == 800 && code.tenths != 800 => {
+                    *slot = Some(code);
+                    return Ok(());
+                }
+                Some(first) if code.tenths == 800 && first.tenths != 800 => return Ok(()),
+                _ => {}
+            }
+        }
+        if let Some(first) = slot {
+            return Err((
+                code.col,
+                ErrorKind::ModalConflict {
+                    group: group.name(),
+                    first: first.to_string(),
+                    second: code.to_string(),
+                },
+            ));
+        }
+        *slot = Some(code);
+        Ok(())
+    }
+
+    fn get(&self, group: Group) -> Option<Code> {
+        self.groups.get(group.index()).copied().flatten()
+    }
+
+    /// The word for `letter` (one of X Y Z I J K R P Q F S T D H L N).
+    pub fn word(&self, letter: char) -> Option<Word> {
+        letter_index(letter)
+            .and_then(|k| self.words.get(k))
+            .copied()
+            .flatten()
+    }
+
+    /// The X, Y, Z words.
+    pub fn axes(&self) -> [Option<Word>; 3] {
+        [self.word('X'), self.word('Y'), self.word('Z')]
+    }
+
+    /// The first axis word of the line (by column).
+    pub fn first_axis(&self) -> Option<Word> {
+        self.axes().into_iter().flatten().min_by_key(|w| w.col)
+    }
+
+    /// G0, G1, G2, G3 or G80.
+    pub fn motion(&self) -> Option<Code> {
+        self.get(Group::Motion)
+    }
+    /// G4, G10, G28, G28.1, G30, G30.1, G53, G92, G92.1, G92.2, G92.3.
+    pub fn non_modal(&self) -> Option<Code> {
+        self.get(Group::NonModal)
+    }
+    /// G17, G18, G19.
+    pub fn plane(&self) -> Option<Code> {
+        self.get(Group::Plane)
+    }
+    /// G90, G91.
+    pub fn distance(&self) -> Option<Code> {
+        self.get(Group::Distance)
+    }
+    /// G90.1, G91.1.
+    pub fn arc_distance(&self) -> Option<Code> {
+        self.get(Group::ArcDistance)
+    }
+    /// G93, G94.
+    pub fn feed_mode(&self) -> Option<Code> {
+        self.get(Group::FeedMode)
+    }
+    /// G20, G21.
+    pub fn units(&self) -> Option<Code> {
+        self.get(Group::Units)
+    }
+    /// G40, G41, G41.1, G42, G42.1.
+    pub fn comp(&self) -> Option<Code> {
+        self.get(Group::Comp)
+    }
+    /// G43, G43.1, G43.2, G44, G49.
+    pub fn tool_length(&self) -> Option<Code> {
+        self.get(Group::ToolLength)
+    }
+    /// G54 … G59.3.
+    pub fn coord(&self) -> Option<Code> {
+        self.get(Group::Coord)
+    }
+    /// G61, G61.1, G64.
+    pub fn path(&self) -> Option<Code> {
+        self.get(Group::Path)
+    }
+    /// G98, G99 (accepted, noted: they only matter to canned cycles).
+    pub fn retract(&self) -> Option<Code> {
+        self.get(Group::Retract)
+    }
+    /// G97 (spindle RPM mode, the only one: noted).
+    pub fn spindle_mode(&self) -> Option<Code> {
+        self.get(Group::SpindleMode)
+    }
+    /// M0, M1, M2, M30.
+    pub fn stop(&self) -> Option<Code> {
+        self.get(Group::Stop)
+    }
+    /// M6, M61.
+    pub fn tool_change(&self) -> Option<Code> {
+        self.get(Group::ToolChange)
+    }
+    /// M3, M4, M5, M19.
+    pub fn spindle(&self) -> Option<Code> {
+        self.get(Group::Spindle)
+    }
+    /// M7, M8, M9 (see also [`Block::coolant2`]).
+    pub fn coolant(&self) -> Option<Code> {
+        self.get(Group::Coolant)
+    }
+    /// M48 … M53.
+    pub fn override_switch(&self) -> Option<Code> {
+        self.get(Group::Override)
+    }
+}
+
+/// Value domains that hold whatever the codes on the line.
+fn check_domain(word: &Word) -> Result<(), BlockError> {
+    match word.letter {
+        'N' if as_index(word.value).is_none() => {
+            Err(invalid(word, "a non-negative integer line number"))
+        }
+        'F' if word.value < 0.0 => Err(invalid(word, "a feed rate of 0 or more")),
+        'S' if word.value < 0.0 => Err(invalid(word, "a non-negative spindle speed")),
+        'T' | 'H' if as_index(word.value).is_none() => {
+            Err(invalid(word, "a non-negative integer tool number"))
+        }
+        'L' if as_index(word.value).is_none() => Err(invalid(word, "a non-negative integer")),
+        'D' | 'Q' if word.value < 0.0 => Err(invalid(word, "a non-negative value")),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::lex::Scanner;
+
+    fn read(line: &str) -> Result<Block, BlockError> {
+        let mut s = Scanner::default();
+        s.scan(line, false, &crate::gcode::expr::Params::default())
+            .expect("scans");
+        Block::read(&s.words)
+    }
+
+    #[test]
+    fn groups_and_words() {
+        let b = read("N10 G17 G21 G90 G91.1 G94 G40 G49 G54 G64 G0 X1 Y2 Z3 F100 S5 M3 M8 T1 M6")
+            .unwrap();
+        assert_eq!(b.plane().unwrap().tenths, 170);
+        assert_eq!(b.motion().unwrap().to_string(), "G0");
+        assert_eq!(b.arc_distance().unwrap().to_string(), "G91.1");
+        assert_eq!(b.word('F').unwrap().value, 100.0);
+        assert_eq!(b.first_axis().unwrap().letter, 'X');
+        assert_eq!(b.tool_change().unwrap().to_string(), "M6");
+        let b = read("M7 M8").unwrap();
+        assert_eq!(
+            (b.coolant().unwrap().tenths, b.coolant2.unwrap().tenths),
+            (70, 80)
+        );
+        assert!(read("M8 M9").is_err());
+    }
+
+    #[test]
+    fn conflicts_and_domains() {
+        assert_eq!(
+            read("G0 G1").unwrap_err().1.to_string(),
+            "G0 and G1 on one line are both motion codes (one per line)"
+        );
+        assert_eq!(
+            read("G4 P1 G28").unwrap_err().1.to_string(),
+            "G4 and G28 on one line are both non-modal (group 0) codes (one per line)"
+        );
+        assert_eq!(read("X1 X2").unwrap_err().0, 4);
+        assert_eq!(read("G80 G0").unwrap().motion().unwrap().to_string(), "G0");
+        assert_eq!(read("G1 G80").unwrap().motion().unwrap().to_string(), "G1");
+        assert_eq!(
+            read("G1 F-1").unwrap_err().1.to_string(),
+            "invalid F-1: expected a feed rate of 0 or more"
+        );
+        assert_eq!(
+            read("G81 X1").unwrap_err().1.to_string(),
+            "unsupported: G81 (canned cycles are not supported)"
+        );
+        assert_eq!(
+            read("G12.5").unwrap_err().1.to_string(),
+            "unknown code G12.5"
+        );
+    }
+}

@@ -1,0 +1,614 @@
+//! Parameters (`#1`, `#<name>`) and expressions (`[1 + #2 * SIN[30]]`) of RS274/NGC.
+//!
+//! Grammar (LinuxCNC's): a value is a number, `#` followed by a value (the parameter of that
+//! number) or `<name>`, `[expression]`, a function `ABS ACOS ASIN COS EXP FIX FUP ROUND LN SIN
+//! SQRT TAN [value]`, `ATAN[y]/[x]`, `EXISTS[#<name>]`, or a sign followed by a value. Binary
+//! operators from the lowest precedence: `AND OR XOR`, `EQ NE GT GE LT LE`, `+ -`,
+//! `* / MOD`, `**`; left to right within a level. Angles are in degrees. Blanks are allowed
+//! anywhere between tokens. Every error has the column where it was found.
+
+use std::collections::HashMap;
+
+use super::ErrorKind;
+
+/// How deep brackets, functions and `#` may nest in one value (a bound on recursion).
+pub const MAX_NESTING: usize = 64;
+
+/// Numbered parameters a program may set: `#1` … `#4999` (`#1`–`#30` are a subroutine's
+/// arguments and locals). `#5000` and above are LinuxCNC's system parameters.
+pub const MAX_USER_PARAMETER: u32 = 4999;
+
+/// Most named parameters one scope (the main program or one call) may hold.
+pub const MAX_NAMED_PARAMETERS: usize = 10_000;
+
+/// An error with its 1-based column.
+pub(super) type ExprError = (usize, ErrorKind);
+
+/// A parameter reference.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) enum ParamRef {
+    /// `#n`.
+    Number(u32),
+    /// `#<name>`, lower-cased, blanks removed. Names starting with `_` are global, others are
+    /// local to the subroutine call (or to the main program).
+    Name(String),
+}
+
+#[derive(Debug, Clone)]
+struct Scope {
+    /// `#1` … `#30`.
+    locals: [f64; 30],
+    named: HashMap<String, f64>,
+}
+
+impl Scope {
+    fn new() -> Scope {
+        Scope {
+            locals: [0.0; 30],
+            named: HashMap::new(),
+        }
+    }
+}
+
+/// The parameter store: global numbered and named parameters, and a scope per call level.
+#[derive(Debug, Clone)]
+pub(super) struct Params {
+    numbered: HashMap<u32, f64>,
+    global: HashMap<String, f64>,
+    scopes: Vec<Scope>,
+}
+
+impl Default for Params {
+    fn default() -> Params {
+        Params {
+            numbered: HashMap::new(),
+            global: HashMap::new(),
+            scopes: vec![Scope::new()],
+        }
+    }
+}
+
+impl Params {
+    fn scope(&self) -> &Scope {
+        // There is always the main program's scope.
+        self.scopes.last().unwrap_or_else(|| unreachable!())
+    }
+
+    fn scope_mut(&mut self) -> &mut Scope {
+        if self.scopes.is_empty() {
+            self.scopes.push(Scope::new());
+        }
+        let last = self.scopes.len() - 1;
+        &mut self.scopes[last]
+    }
+
+    /// The value of a parameter.
+    pub fn get(&self, r: &ParamRef) -> Result<f64, ErrorKind> {
+        match r {
+            ParamRef::Number(n @ 1..=30) => Ok(self.scope().locals[*n as usize - 1]),
+            ParamRef::Number(n) if *n <= MAX_USER_PARAMETER => {
+                Ok(self.numbered.get(n).copied().unwrap_or(0.0))
+            }
+            ParamRef::Number(n) => Err(system_parameter(*n)),
+            ParamRef::Name(name) => {
+                let map = if name.starts_with('_') {
+                    &self.global
+                } else {
+                    &self.scope().named
+                };
+                map.get(name)
+                    .copied()
+                    .ok_or_else(|| ErrorKind::UndefinedParameter { name: name.clone() })
+            }
+        }
+    }
+
+    /// Whether a named parameter is defined (`EXISTS`).
+    pub fn exists(&self, name: &str) -> bool {
+        if name.starts_with('_') {
+            self.global.contains_key(name)
+        } else {
+            self.scope().named.contains_key(name)
+        }
+    }
+
+    /// Sets a parameter.
+    pub fn set(&mut self, r: &ParamRef, value: f64) -> Result<(), ErrorKind> {
+        match r {
+            ParamRef::Number(n @ 1..=30) => self.scope_mut().locals[*n as usize - 1] = value,
+            ParamRef::Number(n) if *n <= MAX_USER_PARAMETER => {
+                self.numbered.insert(*n, value);
+            }
+            ParamRef::Number(n) => return Err(system_parameter(*n)),
+            ParamRef::Name(name) => {
+                let map = if name.starts_with('_') {
+                    &mut self.global
+                } else {
+                    &mut self.scope_mut().named
+                };
+                if map.len() >= MAX_NAMED_PARAMETERS && !map.contains_key(name) {
+                    return Err(ErrorKind::TooManyParameters {
+                        max: MAX_NAMED_PARAMETERS,
+                    });
+                }
+                map.insert(name.clone(), value);
+            }
+        }
+        Ok(())
+    }
+
+    /// Enters a subroutine: new locals, `#1`… set to the call's arguments.
+    pub fn push_scope(&mut self, args: &[f64]) {
+        let mut scope = Scope::new();
+        for (slot, value) in scope.locals.iter_mut().zip(args) {
+            *slot = *value;
+        }
+        self.scopes.push(scope);
+    }
+
+    /// Leaves a subroutine (the main program's scope stays).
+    pub fn pop_scope(&mut self) {
+        if self.scopes.len() > 1 {
+            self.scopes.pop();
+        }
+    }
+}
+
+fn system_parameter(n: u32) -> ErrorKind {
+    ErrorKind::Unsupported {
+        what: format!("system parameter #{n}"),
+        reason: "parameters #5000 and above (LinuxCNC's system parameters) are not kept",
+    }
+}
+
+fn syntax(col: usize, expected: &'static str) -> ExprError {
+    (col, ErrorKind::ExpressionSyntax { expected })
+}
+
+fn skip_blanks(chars: &[char], i: &mut usize) {
+    while chars.get(*i).is_some_and(|c| *c == ' ' || *c == '\t') {
+        *i += 1;
+    }
+}
+
+/// Reads a parameter reference at `*i` (on the `#`).
+pub(super) fn param_ref(
+    chars: &[char],
+    i: &mut usize,
+    params: &Params,
+    depth: usize,
+) -> Result<ParamRef, ExprError> {
+    let col = *i + 1;
+    if depth > MAX_NESTING {
+        return Err((col, ErrorKind::ExpressionTooDeep { max: MAX_NESTING }));
+    }
+    *i += 1;
+    skip_blanks(chars, i);
+    if chars.get(*i) == Some(&'<') {
+        let start = *i + 1;
+        let mut j = start;
+        while chars.get(j).is_some_and(|c| *c != '>') {
+            j += 1;
+        }
+        if chars.get(j).is_none() {
+            return Err(syntax(col, "'>' closing the parameter name"));
+        }
+        let name: String = chars
+            .get(start..j)
+            .unwrap_or_default()
+            .iter()
+            .filter(|c| !c.is_whitespace())
+            .flat_map(|c| c.to_lowercase())
+            .collect();
+        if name.is_empty() {
+            return Err(syntax(col, "a parameter name between '<' and '>'"));
+        }
+        *i = j + 1;
+        return Ok(ParamRef::Name(name));
+    }
+    let value = real_value(chars, i, params, depth + 1, '#')?;
+    let n = value.round();
+    if (value - n).abs() > 1e-4 || !(1.0..=1e6).contains(&n) {
+        return Err((col, ErrorKind::ParameterNumber { value }));
+    }
+    // In 1..=1e6: exact.
+    Ok(ParamRef::Number(n as u32))
+}
+
+/// Reads a value at `*i` (blanks first allowed): a number, parameter, expression, function or
+/// signed value. `letter` names the word in messages.
+pub(super) fn real_value(
+    chars: &[char],
+    i: &mut usize,
+    params: &Params,
+    depth: usize,
+    letter: char,
+) -> Result<f64, ExprError> {
+    skip_blanks(chars, i);
+    let col = *i + 1;
+    if depth > MAX_NESTING {
+        return Err((col, ErrorKind::ExpressionTooDeep { max: MAX_NESTING }));
+    }
+    let value = match chars.get(*i) {
+        Some('[') => expression(chars, i, params, depth + 1)?,
+        Some('#') => {
+            let r = param_ref(chars, i, params, depth + 1)?;
+            params.get(&r).map_err(|k| (col, k))?
+        }
+        // A sign before a parameter, expression or function; before digits it is the number's.
+        Some(c @ ('+' | '-'))
+            if chars
+                .get(*i + 1)
+                .is_some_and(|d| *d == '#' || *d == '[' || d.is_ascii_alphabetic()) =>
+        {
+            let sign = if *c == '-' { -1.0 } else { 1.0 };
+            *i += 1;
+            sign * real_value(chars, i, params, depth + 1, letter)?
+        }
+        Some(c) if c.is_ascii_digit() || matches!(c, '+' | '-' | '.') => number(chars, i, letter)?,
+        Some(c) if c.is_ascii_alphabetic() => function(chars, i, params, depth + 1)?,
+        _ => return Err((col, ErrorKind::ExpectedNumber { letter })),
+    };
+    if !value.is_finite() {
+        return Err((
+            col,
+            ErrorKind::MathDomain {
+                what: "a result that is not finite",
+            },
+        ));
+    }
+    Ok(value)
+}
+
+/// A plain number `[+-]digits[.digits]`.
+fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError> {
+    let col = *i + 1;
+    let start = *i;
+    let mut j = *i;
+    if matches!(chars.get(j), Some('+' | '-')) {
+        j += 1;
+    }
+    // The token runs over every digit, point and sign so that "1.2.3", "1-2" and "--1" are
+    // reported whole as malformed rather than as a stray character after a valid prefix.
+    let (mut digits, mut dots, mut signs) = (0usize, 0usize, 0usize);
+    while let Some(&c) = chars.get(j) {
+        match c {
+            '0'..='9' => digits += 1,
+            '.' => dots += 1,
+            // In a word (`X1-2`) a sign inside the number is malformed; after `#` or inside
+            // an expression it is the next operator.
+            '+' | '-' if letter.is_ascii_alphabetic() => signs += 1,
+            _ => break,
+        }
+        j += 1;
+    }
+    let text: String = chars.get(start..j).unwrap_or_default().iter().collect();
+    *i = j;
+    if digits == 0 || dots > 1 || signs > 0 {
+        return Err((col, ErrorKind::MalformedNumber { letter, text }));
+    }
+    text.parse::<f64>()
+        .map_err(|_| (col, ErrorKind::MalformedNumber { letter, text }))
+}
+
+/// `[expression]` at `*i` (on the `[`).
+fn expression(
+    chars: &[char],
+    i: &mut usize,
+    params: &Params,
+    depth: usize,
+) -> Result<f64, ExprError> {
+    let col = *i + 1;
+    *i += 1;
+    let value = binary(chars, i, params, depth, 0)?;
+    skip_blanks(chars, i);
+    if chars.get(*i) != Some(&']') {
+        return Err(syntax(
+            if *i < chars.len() { *i + 1 } else { col },
+            "an operator or ']' closing the expression",
+        ));
+    }
+    *i += 1;
+    Ok(value)
+}
+
+#[derive(Clone, Copy)]
+enum Op {
+    Pow,
+    Mul,
+    Div,
+    Mod,
+    Add,
+    Sub,
+    Eq,
+    Ne,
+    Gt,
+    Ge,
+    Lt,
+    Le,
+    And,
+    Or,
+    Xor,
+}
+
+impl Op {
+    fn precedence(self) -> u8 {
+        match self {
+            Op::Pow => 4,
+            Op::Mul | Op::Div | Op::Mod => 3,
+            Op::Add | Op::Sub => 2,
+            Op::Eq | Op::Ne | Op::Gt | Op::Ge | Op::Lt | Op::Le => 1,
+            Op::And | Op::Or | Op::Xor => 0,
+        }
+    }
+}
+
+/// The operator at `*i`, if any, and the index after it.
+fn peek_op(chars: &[char], i: usize) -> Option<(Op, usize)> {
+    match chars.get(i)? {
+        '*' if chars.get(i + 1) == Some(&'*') => Some((Op::Pow, i + 2)),
+        '*' => Some((Op::Mul, i + 1)),
+        '/' => Some((Op::Div, i + 1)),
+        '+' => Some((Op::Add, i + 1)),
+        '-' => Some((Op::Sub, i + 1)),
+        c if c.is_ascii_alphabetic() => {
+            let mut j = i;
+            while chars.get(j).is_some_and(|c| c.is_ascii_alphabetic()) {
+                j += 1;
+            }
+            let word: String = chars
+                .get(i..j)?
+                .iter()
+                .map(|c| c.to_ascii_uppercase())
+                .collect();
+            let op = match word.as_str() {
+                "MOD" => Op::Mod,
+                "EQ" => Op::Eq,
+                "NE" => Op::Ne,
+                "GT" => Op::Gt,
+                "GE" => Op::Ge,
+                "LT" => Op::Lt,
+                "LE" => Op::Le,
+                "AND" => Op::And,
+                "OR" => Op::Or,
+                "XOR" => Op::Xor,
+                _ => return None,
+            };
+            Some((op, j))
+        }
+        _ => None,
+    }
+}
+
+/// Precedence climbing: operands and operators of precedence ≥ `min`, left to right.
+fn binary(
+    chars: &[char],
+    i: &mut usize,
+    params: &Params,
+    depth: usize,
+    min: u8,
+) -> Result<f64, ExprError> {
+    let mut left = real_value(chars, i, params, depth + 1, '[')?;
+    loop {
+        skip_blanks(chars, i);
+        let col = *i + 1;
+        let Some((op, next)) = peek_op(chars, *i) else {
+            return Ok(left);
+        };
+        if op.precedence() < min {
+            return Ok(left);
+        }
+        *i = next;
+        let right = binary(chars, i, params, depth + 1, op.precedence() + 1)?;
+        left = apply(op, left, right).map_err(|k| (col, k))?;
+    }
+}
+
+fn truth(x: f64) -> bool {
+    x != 0.0
+}
+
+fn flag(b: bool) -> f64 {
+    if b { 1.0 } else { 0.0 }
+}
+
+fn apply(op: Op, a: f64, b: f64) -> Result<f64, ErrorKind> {
+    let value = match op {
+        Op::Pow => {
+            if a < 0.0 && b.fract() != 0.0 {
+                return Err(ErrorKind::MathDomain {
+                    what: "a negative number to a fractional power",
+                });
+            }
+            a.powf(b)
+        }
+        Op::Mul => a * b,
+        Op::Div | Op::Mod if b == 0.0 => return Err(ErrorKind::DivisionByZero),
+        Op::Div => a / b,
+        // LinuxCNC: the result has the sign of the divisor's... of `fmod`, made non-negative.
+        Op::Mod => {
+            let r = a % b;
+            if r < 0.0 { r + b.abs() } else { r }
+        }
+        Op::Add => a + b,
+        Op::Sub => a - b,
+        Op::Eq => flag(a == b),
+        Op::Ne => flag(a != b),
+        Op::Gt => flag(a > b),
+        Op::Ge => flag(a >= b),
+        Op::Lt => flag(a < b),
+        Op::Le => flag(a <= b),
+        Op::And => flag(truth(a) && truth(b)),
+        Op::Or => flag(truth(a) || truth(b)),
+        Op::Xor => flag(truth(a) != truth(b)),
+    };
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(ErrorKind::MathDomain {
+            what: "a result that is not finite",
+        })
+    }
+}
+
+/// A function call at `*i` (on its name).
+fn function(
+    chars: &[char],
+    i: &mut usize,
+    params: &Params,
+    depth: usize,
+) -> Result<f64, ExprError> {
+    let col = *i + 1;
+    let start = *i;
+    while chars.get(*i).is_some_and(|c| c.is_ascii_alphabetic()) {
+        *i += 1;
+    }
+    let name: String = chars
+        .get(start..*i)
+        .unwrap_or_default()
+        .iter()
+        .map(|c| c.to_ascii_uppercase())
+        .collect();
+    skip_blanks(chars, i);
+    if chars.get(*i) != Some(&'[') {
+        return Err(syntax(col, "'[' after a function name"));
+    }
+    if name == "EXISTS" {
+        *i += 1;
+        skip_blanks(chars, i);
+        if chars.get(*i) != Some(&'#') {
+            return Err(syntax(*i + 1, "#<name> inside EXISTS[...]"));
+        }
+        let r = param_ref(chars, i, params, depth + 1)?;
+        skip_blanks(chars, i);
+        if chars.get(*i) != Some(&']') {
+            return Err(syntax(*i + 1, "']' closing EXISTS[...]"));
+        }
+        *i += 1;
+        return Ok(match r {
+            ParamRef::Name(n) => flag(params.exists(&n)),
+            ParamRef::Number(_) => 1.0,
+        });
+    }
+    let arg = expression(chars, i, params, depth + 1)?;
+    let domain = |what: &'static str| Err((col, ErrorKind::MathDomain { what }));
+    let value = match name.as_str() {
+        "ABS" => arg.abs(),
+        "ACOS" | "ASIN" if !(-1.0..=1.0).contains(&arg) => {
+            return domain("ACOS or ASIN of a value outside [-1, 1]");
+        }
+        "ACOS" => arg.acos().to_degrees(),
+        "ASIN" => arg.asin().to_degrees(),
+        "ATAN" => {
+            skip_blanks(chars, i);
+            if chars.get(*i) != Some(&'/') {
+                return Err(syntax(*i + 1, "'/' in ATAN[y]/[x]"));
+            }
+            *i += 1;
+            skip_blanks(chars, i);
+            if chars.get(*i) != Some(&'[') {
+                return Err(syntax(*i + 1, "'[' in ATAN[y]/[x]"));
+            }
+            let x = expression(chars, i, params, depth + 1)?;
+            arg.atan2(x).to_degrees()
+        }
+        "COS" => arg.to_radians().cos(),
+        "SIN" => arg.to_radians().sin(),
+        "TAN" => arg.to_radians().tan(),
+        "EXP" => arg.exp(),
+        "FIX" => arg.floor(),
+        "FUP" => arg.ceil(),
+        "ROUND" => arg.round(),
+        "LN" if arg <= 0.0 => return domain("LN of a value that is not positive"),
+        "LN" => arg.ln(),
+        "SQRT" if arg < 0.0 => return domain("SQRT of a negative value"),
+        "SQRT" => arg.sqrt(),
+        _ => return Err((col, ErrorKind::UnknownFunction { name })),
+    };
+    Ok(value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn eval_with(text: &str, params: &Params) -> Result<f64, ExprError> {
+        let chars: Vec<char> = text.chars().collect();
+        let mut i = 0;
+        let v = real_value(&chars, &mut i, params, 0, 'X')?;
+        assert_eq!(i, chars.len(), "{text}: not all read");
+        Ok(v)
+    }
+
+    fn eval(text: &str) -> f64 {
+        eval_with(text, &Params::default()).unwrap()
+    }
+
+    #[test]
+    fn arithmetic_and_precedence() {
+        assert_eq!(eval("[1 + 2 * 3]"), 7.0);
+        assert_eq!(eval("[[1 + 2] * 3]"), 9.0);
+        assert_eq!(eval("[2 ** 3 * 2]"), 16.0);
+        assert_eq!(eval("[10 - 4 - 3]"), 3.0);
+        assert_eq!(eval("[7 MOD 3]"), 1.0);
+        assert_eq!(eval("[-7 mod 3]"), 2.0);
+        assert_eq!(eval("[1 lt 2 and 3 gt 2]"), 1.0);
+        assert_eq!(eval("[1 + 1 EQ 2]"), 1.0);
+        assert_eq!(eval("-[2]"), -2.0);
+        assert_eq!(eval("[-.5*2]"), -1.0);
+        assert!((eval("sin[30]") - 0.5).abs() < 1e-12);
+        assert!((eval("ATAN[1]/[1]") - 45.0).abs() < 1e-12);
+        assert_eq!(
+            eval("[SQRT[16] + ABS[-1] + FIX[1.7] + FUP[1.2] + ROUND[2.5]]"),
+            11.0
+        );
+    }
+
+    #[test]
+    fn parameters_and_scopes() {
+        let mut p = Params::default();
+        p.set(&ParamRef::Number(1), 2.0).unwrap();
+        p.set(&ParamRef::Number(100), 3.0).unwrap();
+        p.set(&ParamRef::Name("scale".into()), 0.5).unwrap();
+        p.set(&ParamRef::Name("_g".into()), 7.0).unwrap();
+        assert_eq!(eval_with("[#1 * #100 + #<Sca le>]", &p).unwrap(), 6.5);
+        assert_eq!(eval_with("##1", &p).unwrap(), 0.0);
+        assert_eq!(eval_with("#[#1 * 50]", &p).unwrap(), 3.0);
+        assert_eq!(eval_with("EXISTS[#<scale>]", &p).unwrap(), 1.0);
+        p.push_scope(&[9.0]);
+        assert_eq!(eval_with("#1", &p).unwrap(), 9.0);
+        assert_eq!(eval_with("#100", &p).unwrap(), 3.0);
+        assert_eq!(eval_with("#<_g>", &p).unwrap(), 7.0);
+        assert_eq!(eval_with("EXISTS[#<scale>]", &p).unwrap(), 0.0);
+        assert!(eval_with("#<scale>", &p).is_err());
+        p.pop_scope();
+        assert_eq!(eval_with("#1", &p).unwrap(), 2.0);
+    }
+
+    #[test]
+    fn errors_have_columns() {
+        let e = |t: &str| eval_with(t, &Params::default()).unwrap_err();
+        assert_eq!(e("[1/0]").1, ErrorKind::DivisionByZero);
+        assert_eq!(e("[1/0]").0, 3);
+        assert_eq!(e("SQRT[-1]").0, 1);
+        assert_eq!(e("[1 + ]").1, ErrorKind::ExpectedNumber { letter: '[' });
+        assert_eq!(e("[1 2]").0, 4);
+        assert_eq!(
+            e("#<nope>").1,
+            ErrorKind::UndefinedParameter {
+                name: "nope".into()
+            }
+        );
+        assert!(matches!(e("#5220").1, ErrorKind::Unsupported { .. }));
+        assert_eq!(
+            e("FOO[1]").1,
+            ErrorKind::UnknownFunction { name: "FOO".into() }
+        );
+        let deep = format!("{}1{}", "[".repeat(500), "]".repeat(500));
+        assert_eq!(
+            e(&deep).1,
+            ErrorKind::ExpressionTooDeep { max: MAX_NESTING }
+        );
+        assert!(matches!(e("[10 ** 400]").1, ErrorKind::MathDomain { .. }));
+    }
+}

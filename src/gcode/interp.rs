@@ -1,0 +1,1844 @@
+//! The streaming interpreter: lines in, [`Item`]s out, with the modal state in between.
+//!
+//! Each call to [`Iterator::next`] reads at most one more line (a line yields 0 to a few items:
+//! G28 with axis words makes two moves), so memory is bounded by the longest line
+//! ([`MAX_LINE_BYTES`]) and the tool table, whatever the file size.
+//!
+//! # Coordinates
+//!
+//! The state keeps the current point twice: in machine coordinates (what the axes do, the
+//! output) and in program coordinates (the current work system, what G91 and omitted axis words
+//! refer to), like LinuxCNC. A program point `p` maps to the machine as
+//!
+//! `machine = R(p + g92) + work_offset + tool_offset`
+//!
+//! with `R` the rotation of the work system about Z (G10 L2 R), as in LinuxCNC's canon layer.
+//! When an offset changes, the machine point stays and the program point is recomputed: the
+//! offset takes effect with the next move of each axis. An axis that a move leaves alone keeps
+//! its machine coordinate bit for bit.
+//!
+//! # Order of execution within a line
+//!
+//! As RS274/NGC (LinuxCNC): units (G20/G21, first: every number of the line is read in the units
+//! in force after it), feed mode, F, S, T, M6/M61, spindle, coolant, overrides, G4 dwell, plane,
+//! cutter compensation, tool length offset, work system, path control, distance modes, G98/G99,
+//! G10/G28/G30/G92, motion (with G53), then M0/M1/M2/M30.
+
+use std::collections::{HashMap, VecDeque};
+use std::f64::consts::FRAC_PI_2;
+use std::io::{BufRead, Read};
+use std::rc::Rc;
+
+use nalgebra::Vector3;
+
+use super::block::{Block, BlockError, Code, as_index};
+use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
+use super::expr::{ParamRef, Params};
+use super::lex::{Control, Keyword, Label, LineKind, Scanner, Word, peek_control};
+use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
+use super::{Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
+
+/// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
+
+/// Largest machine coordinate magnitude the interpreter produces; beyond it a program is in
+/// error (G91 accumulating, huge offsets).
+pub const MAX_POSITION_MM: f64 = 1.0e12;
+
+/// An arc radius below this is a zero-radius arc (LinuxCNC's 0.00005 in).
+pub const MIN_ARC_RADIUS_MM: f64 = 0.00127;
+
+/// How an interpretation starts: the machine's position and configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Setup {
+    /// Where the machine is (machine coordinates): moves start here.
+    pub start_mm: Vector3<f64>,
+    /// Work offsets of G54, G55, G56, G57, G58, G59, G59.1, G59.2, G59.3 (machine coordinates
+    /// of each system's origin). G54 is in force at the start.
+    pub work_offsets_mm: [Vector3<f64>; 9],
+    /// The G28 position (machine coordinates).
+    pub g28_mm: Vector3<f64>,
+    /// The G30 position (machine coordinates).
+    pub g30_mm: Vector3<f64>,
+    /// Tool radii and lengths; G10 L1 changes the interpreter's copy for the rest of the run.
+    pub tools: ToolTable,
+    /// Tool in the spindle at the start (0 = none); G43 without H and G41/G42 without D use
+    /// the tool in the spindle.
+    pub loaded_tool: u32,
+    /// Arc end-point check (centre format): the distances from the centre to the start and to
+    /// the end may differ by this much...
+    pub arc_tolerance_mm: f64,
+    /// ...or by this fraction of the radius, whichever is larger. Beyond, the arc would be a
+    /// spiral, which is reported as unsupported; within, the path spirals between the two radii.
+    pub arc_tolerance_rel: f64,
+    /// Block delete switch: skip lines starting with `/` (LinuxCNC's default: on).
+    pub block_delete: bool,
+    /// Optional stop switch: M1 stops like M0 (LinuxCNC's default: on); off, M1 is noted
+    /// and skipped.
+    pub optional_stop: bool,
+}
+
+impl Setup {
+    /// Defaults (LinuxCNC's): no work offsets, G28/G30 at machine zero, an empty tool table,
+    /// no tool loaded, block delete and optional stop on, and the arc tolerance of LinuxCNC's
+    /// interpreter: 2·√2·0.01 mm (an arc whose centre and end point were rounded to 0.01 mm
+    /// passes) or 0.1 % of the radius, whichever is larger. CAM output with four decimals in
+    /// inches carries radius errors of several µm on sub-millimetre arcs, so a tighter default
+    /// would reject real programs.
+    pub fn new(start_mm: Vector3<f64>) -> Setup {
+        Setup {
+            start_mm,
+            work_offsets_mm: [Vector3::zeros(); 9],
+            g28_mm: Vector3::zeros(),
+            g30_mm: Vector3::zeros(),
+            tools: ToolTable::new(),
+            loaded_tool: 0,
+            arc_tolerance_mm: 2.0 * std::f64::consts::SQRT_2 * 0.01,
+            arc_tolerance_rel: 0.001,
+            block_delete: true,
+            optional_stop: true,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ErrorKind> {
+        let point = |v: &Vector3<f64>| {
+            v.iter()
+                .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
+        };
+        let bad = |what: &'static str| Err(ErrorKind::InvalidSetup { what });
+        if !point(&self.start_mm) {
+            return Err(ErrorKind::NonFiniteStart);
+        }
+        if !self.work_offsets_mm.iter().all(point) {
+            return bad("work_offsets_mm must be finite and at most 1e12 mm");
+        }
+        if !point(&self.g28_mm) || !point(&self.g30_mm) {
+            return bad("g28_mm and g30_mm must be finite and at most 1e12 mm");
+        }
+        if !(self.arc_tolerance_mm > 0.0 && self.arc_tolerance_mm.is_finite()) {
+            return bad("arc_tolerance_mm must be finite and greater than zero");
+        }
+        if !(self.arc_tolerance_rel > 0.0 && self.arc_tolerance_rel.is_finite()) {
+            return bad("arc_tolerance_rel must be finite and greater than zero");
+        }
+        let tools_ok = self.tools.iter().all(|(_, t)| {
+            t.radius_mm >= 0.0
+                && t.radius_mm <= MAX_TOOL_SIZE_MM
+                && t.length_mm.abs() <= MAX_TOOL_SIZE_MM
+        });
+        if !tools_ok {
+            return bad("tool radii must be from 0 to 10000 mm and lengths at most 10000 mm");
+        }
+        Ok(())
+    }
+}
+
+/// The motion mode (modal group 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Motion {
+    Rapid,
+    Linear,
+    Cw,
+    Ccw,
+}
+
+/// Modal state and positions.
+#[derive(Debug, Clone)]
+struct State {
+    pos_mm: Vector3<f64>,
+    prog_mm: Vector3<f64>,
+    motion: Option<Motion>,
+    plane: Plane,
+    inch: bool,
+    incremental: bool,
+    arc_absolute: bool,
+    inverse_time: bool,
+    feed_mm_s: Option<f64>,
+    blend: BlendMode,
+    comp: CompState,
+    tool_offset_mm: Vector3<f64>,
+    coord: usize,
+    work_offsets_mm: [Vector3<f64>; 9],
+    rotations_deg: [f64; 9],
+    g92_mm: Vector3<f64>,
+    g92_on: bool,
+    g28_mm: Vector3<f64>,
+    g30_mm: Vector3<f64>,
+    tools: ToolTable,
+    selected_tool: Option<u32>,
+    loaded_tool: u32,
+    arc_tolerance_mm: f64,
+    arc_tolerance_rel: f64,
+    optional_stop: bool,
+    /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
+    used: u16,
+}
+
+const CHECKED: &str = "XYZIJKRPQDHL";
+
+fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
+    if deg == 0.0 {
+        return v;
+    }
+    let (s, c) = deg.to_radians().sin_cos();
+    Vector3::new(v.x * c - v.y * s, v.x * s + v.y * c, v.z)
+}
+
+fn err_at(col: usize, kind: ErrorKind) -> BlockError {
+    (col, kind)
+}
+
+fn missing(col: usize, code: Code, letter: char, expected: &'static str) -> BlockError {
+    err_at(
+        col,
+        ErrorKind::MissingWord {
+            code: code.to_string(),
+            letter,
+            expected,
+        },
+    )
+}
+
+fn invalid(word: Word, expected: &'static str) -> BlockError {
+    err_at(
+        word.col,
+        ErrorKind::InvalidValue {
+            word: format!("{}{}", word.letter, word.value),
+            expected,
+        },
+    )
+}
+
+impl State {
+    fn new(setup: Setup) -> State {
+        State {
+            pos_mm: setup.start_mm,
+            prog_mm: setup.start_mm - setup.work_offsets_mm[0],
+            motion: None,
+            plane: Plane::Xy,
+            inch: false,
+            incremental: false,
+            arc_absolute: false,
+            inverse_time: false,
+            feed_mm_s: None,
+            blend: BlendMode::Blend {
+                p_mm: 0.0,
+                q_mm: 0.0,
+            },
+            comp: CompState::Off,
+            tool_offset_mm: Vector3::zeros(),
+            coord: 0,
+            work_offsets_mm: setup.work_offsets_mm,
+            rotations_deg: [0.0; 9],
+            g92_mm: Vector3::zeros(),
+            g92_on: false,
+            g28_mm: setup.g28_mm,
+            g30_mm: setup.g30_mm,
+            tools: setup.tools,
+            selected_tool: None,
+            loaded_tool: setup.loaded_tool,
+            arc_tolerance_mm: setup.arc_tolerance_mm,
+            arc_tolerance_rel: setup.arc_tolerance_rel,
+            optional_stop: setup.optional_stop,
+            used: 0,
+        }
+    }
+
+    fn scale(&self) -> f64 {
+        if self.inch { MM_PER_INCH } else { 1.0 }
+    }
+
+    fn rotation_deg(&self) -> f64 {
+        self.rotations_deg[self.coord]
+    }
+
+    fn g92(&self) -> Vector3<f64> {
+        if self.g92_on {
+            self.g92_mm
+        } else {
+            Vector3::zeros()
+        }
+    }
+
+    fn to_machine(&self, prog: Vector3<f64>) -> Vector3<f64> {
+        rotate_xy(prog + self.g92(), self.rotation_deg())
+            + self.work_offsets_mm[self.coord]
+            + self.tool_offset_mm
+    }
+
+    fn to_program(&self, machine: Vector3<f64>) -> Vector3<f64> {
+        rotate_xy(
+            machine - self.work_offsets_mm[self.coord] - self.tool_offset_mm,
+            -self.rotation_deg(),
+        ) - self.g92()
+    }
+
+    /// After an offset change: the machine stays, the program point moves.
+    fn resync(&mut self) {
+        self.prog_mm = self.to_program(self.pos_mm);
+    }
+
+    /// Marks a letter of the line as used and returns its word.
+    fn take(&mut self, b: &Block, letter: char) -> Option<Word> {
+        let w = b.word(letter)?;
+        if let Some(k) = CHECKED.find(letter) {
+            self.used |= 1 << k;
+        }
+        Some(w)
+    }
+
+    /// Value of a length word in mm.
+    fn take_mm(&mut self, b: &Block, letter: char) -> Option<f64> {
+        let scale = self.scale();
+        self.take(b, letter).map(|w| w.value * scale)
+    }
+
+    /// The program-coordinate target of the line's axis words (G90/G91 applied).
+    fn prog_target(&mut self, b: &Block) -> Vector3<f64> {
+        let mut p = self.prog_mm;
+        for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            if let Some(v) = self.take_mm(b, letter) {
+                p[i] = if self.incremental { p[i] + v } else { v };
+            }
+        }
+        p
+    }
+
+    /// The machine point of a program target; axes whose program coordinate does not change
+    /// keep their machine coordinate exactly.
+    fn machine_of(&self, prog: Vector3<f64>) -> Vector3<f64> {
+        let mut m = self.to_machine(prog);
+        let same = |i: usize| prog[i] == self.prog_mm[i];
+        if self.rotation_deg() == 0.0 {
+            for i in 0..3 {
+                if same(i) {
+                    m[i] = self.pos_mm[i];
+                }
+            }
+        } else {
+            if same(0) && same(1) {
+                m[0] = self.pos_mm[0];
+                m[1] = self.pos_mm[1];
+            }
+            if same(2) {
+                m[2] = self.pos_mm[2];
+            }
+        }
+        m
+    }
+
+    fn check_position(&self, col: usize, m: &Vector3<f64>) -> Result<(), BlockError> {
+        if m.iter()
+            .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
+        {
+            Ok(())
+        } else {
+            Err(err_at(col, ErrorKind::PositionOutOfRange))
+        }
+    }
+
+    fn lookup_tool(&self, number: u32, col: usize, letter: char) -> Result<Tool, BlockError> {
+        self.tools.get(number).ok_or_else(|| {
+            err_at(
+                col,
+                ErrorKind::ToolNotFound {
+                    tool: number,
+                    letter,
+                },
+            )
+        })
+    }
+
+    /// The tool a D or H word names, or the tool in the spindle without it.
+    fn tool_word(
+        &mut self,
+        b: &Block,
+        letter: char,
+        code: Code,
+    ) -> Result<(u32, Tool), BlockError> {
+        match self.take(b, letter) {
+            Some(w) => {
+                let n = as_index(w.value)
+                    .filter(|n| *n <= MAX_TOOL_NUMBER)
+                    .ok_or_else(|| invalid(w, "a tool number from 0 to 99999"))?;
+                Ok((n, self.lookup_tool(n, w.col, letter)?))
+            }
+            None => Ok((
+                self.loaded_tool,
+                self.lookup_tool(self.loaded_tool, code.col, letter)?,
+            )),
+        }
+    }
+
+    /// Executes one checked line; items go to `out`. Returns how the program ended, if it did.
+    fn execute(
+        &mut self,
+        b: &Block,
+        line: usize,
+        out: &mut VecDeque<Item>,
+    ) -> Result<Option<ProgramEnd>, BlockError> {
+        self.used = 0;
+        let note = |out: &mut VecDeque<Item>, col: usize, text: String| {
+            out.push_back(Item::Note(Note { line, col, text }));
+        };
+
+        // Units first: every number of the line is in the units in force after it.
+        if let Some(units) = b.units() {
+            let inch = units.tenths == 200;
+            if inch != self.inch && self.comp != CompState::Off {
+                return Err(err_at(
+                    units.col,
+                    ErrorKind::CompensationActive {
+                        code: units.to_string(),
+                    },
+                ));
+            }
+            self.inch = inch;
+        }
+        let scale = self.scale();
+
+        if let Some(mode) = b.feed_mode() {
+            let inverse = mode.tenths == 930;
+            if inverse != self.inverse_time {
+                // A feed in one mode means nothing in the other: a new F is required.
+                self.feed_mm_s = None;
+            }
+            self.inverse_time = inverse;
+        }
+        let inverse_f = if self.inverse_time {
+            b.word('F').map(|w| w.value).filter(|f| *f > 0.0)
+        } else {
+            if let Some(w) = b.word('F') {
+                // F0 is legal; a feed move needs a positive feed afterwards.
+                self.feed_mm_s = Some(w.value * scale / 60.0).filter(|f| *f > 0.0);
+            }
+            None
+        };
+
+        if let Some(s) = b.word('S') {
+            note(
+                out,
+                s.col,
+                format!(
+                    "S{}: spindle speed recorded (spindle control is out of scope)",
+                    s.value
+                ),
+            );
+        }
+        if let Some(t) = b.word('T') {
+            // The domain check made it a non-negative integer.
+            let n = as_index(t.value).unwrap_or(0);
+            self.selected_tool = Some(n);
+            note(
+                out,
+                t.col,
+                format!("T{n}: tool selected (tool changes are out of scope)"),
+            );
+        }
+        if let Some(code) = b.tool_change() {
+            if code.tenths == 60 {
+                if let Some(n) = self.selected_tool {
+                    self.loaded_tool = n;
+                }
+                note(
+                    out,
+                    code.col,
+                    format!(
+                        "M6: tool {} is now the tool in the spindle for G43 and G41/G42 (the change itself is out of scope)",
+                        self.loaded_tool
+                    ),
+                );
+            } else {
+                let q = self
+                    .take(b, 'Q')
+                    .ok_or_else(|| missing(code.col, code, 'Q', "the tool number"))?;
+                self.loaded_tool = as_index(q.value)
+                    .filter(|n| *n <= MAX_TOOL_NUMBER)
+                    .ok_or_else(|| invalid(q, "a tool number from 0 to 99999"))?;
+                note(
+                    out,
+                    code.col,
+                    format!(
+                        "M61: tool {} set as the tool in the spindle",
+                        self.loaded_tool
+                    ),
+                );
+            }
+        }
+        for (code, what) in [
+            (b.spindle(), "spindle control is out of scope"),
+            (b.coolant(), "coolant control is out of scope"),
+            (b.coolant2, "coolant control is out of scope"),
+            (
+                b.override_switch(),
+                "override switches are not handled by the interpreter",
+            ),
+            (
+                b.spindle_mode(),
+                "spindle RPM mode is the only mode: no effect",
+            ),
+            (
+                b.retract(),
+                "canned-cycle return mode has no effect (canned cycles are not supported)",
+            ),
+        ] {
+            if let Some(code) = code {
+                note(out, code.col, format!("{code}: {what}"));
+            }
+        }
+
+        let non_modal = b.non_modal();
+        if let Some(code) = non_modal.filter(|c| c.tenths == 40) {
+            let p = self
+                .take(b, 'P')
+                .ok_or_else(|| missing(code.col, code, 'P', "the dwell time in seconds"))?;
+            if p.value < 0.0 {
+                return Err(invalid(p, "a dwell time of 0 s or more"));
+            }
+            out.push_back(Item::Dwell(Dwell {
+                line,
+                col: code.col,
+                seconds: p.value,
+            }));
+        }
+
+        if let Some(code) = b.plane() {
+            let plane = match code.tenths {
+                170 => Plane::Xy,
+                180 => Plane::Zx,
+                _ => Plane::Yz,
+            };
+            if plane != self.plane && self.comp != CompState::Off {
+                return Err(err_at(
+                    code.col,
+                    ErrorKind::CompensationActive {
+                        code: code.to_string(),
+                    },
+                ));
+            }
+            self.plane = plane;
+        }
+
+        if let Some(code) = b.comp() {
+            self.cutter_comp(b, code, scale)?;
+        }
+        if let Some(code) = b.tool_length() {
+            self.tool_length(b, code, scale)?;
+        }
+        if let Some(code) = b.coord() {
+            let index = match code.tenths {
+                540..=590 => (code.tenths - 540) / 10,
+                t => t - 591 + 6,
+            } as usize;
+            if index != self.coord && self.comp != CompState::Off {
+                return Err(err_at(
+                    code.col,
+                    ErrorKind::CompensationActive {
+                        code: code.to_string(),
+                    },
+                ));
+            }
+            self.coord = index.min(8);
+            self.resync();
+        }
+        if let Some(code) = b.path() {
+            self.blend = match code.tenths {
+                610 => BlendMode::ExactPath,
+                611 => BlendMode::ExactStop,
+                _ => {
+                    let p = match self.take(b, 'P') {
+                        Some(w) if w.value < 0.0 => {
+                            return Err(invalid(w, "a tolerance of 0 or more"));
+                        }
+                        Some(w) => w.value * scale,
+                        None => 0.0,
+                    };
+                    let q = self.take(b, 'Q').map_or(p, |w| w.value * scale);
+                    BlendMode::Blend { p_mm: p, q_mm: q }
+                }
+            };
+        }
+        if let Some(code) = b.distance() {
+            self.incremental = code.tenths == 910;
+        }
+        if let Some(code) = b.arc_distance() {
+            self.arc_absolute = code.tenths == 901;
+        }
+
+        // Codes that take the axis words for themselves.
+        let consumer = non_modal
+            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 920))
+            .or(b.tool_length().filter(|c| matches!(c.tenths, 431 | 432)));
+        if let (Some(first), Some(motion)) = (consumer, b.motion().filter(|m| m.tenths != 800)) {
+            return Err(err_at(
+                motion.col,
+                ErrorKind::AxisWordsClaimedTwice {
+                    first: first.to_string(),
+                    second: motion.to_string(),
+                },
+            ));
+        }
+        if let Some(code) = non_modal {
+            match code.tenths {
+                100 => self.g10(b, code, scale)?,
+                280 | 300 => self.home(b, code, line, out)?,
+                281 => self.g28_mm = self.pos_mm,
+                301 => self.g30_mm = self.pos_mm,
+                920 => {
+                    if b.first_axis().is_none() {
+                        return Err(missing(code.col, code, 'X', "at least one axis word"));
+                    }
+                    let q = rotate_xy(
+                        self.pos_mm - self.work_offsets_mm[self.coord] - self.tool_offset_mm,
+                        -self.rotation_deg(),
+                    );
+                    let base = self.g92();
+                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                        self.g92_mm[i] = match self.take_mm(b, letter) {
+                            Some(v) => q[i] - v,
+                            None => base[i],
+                        };
+                    }
+                    self.g92_on = true;
+                    self.resync();
+                }
+                921 => {
+                    self.g92_mm = Vector3::zeros();
+                    self.g92_on = false;
+                    self.resync();
+                }
+                922 => {
+                    self.g92_on = false;
+                    self.resync();
+                }
+                923 => {
+                    self.g92_on = true;
+                    self.resync();
+                }
+                _ => {}
+            }
+        }
+
+        // G8 (lathe radius mode) is the only lathe mode: nothing to do.
+
+        if consumer.is_none() {
+            self.motion(
+                b,
+                line,
+                non_modal.filter(|c| c.tenths == 530),
+                inverse_f,
+                out,
+            )?;
+        }
+
+        self.check_unused(b)?;
+
+        Ok(match b.stop() {
+            Some(code) if code.tenths == 0 || code.tenths == 10 => {
+                let optional = code.tenths == 10;
+                if optional && !self.optional_stop {
+                    note(
+                        out,
+                        code.col,
+                        "M1: optional stop skipped (the optional stop switch is off)".to_owned(),
+                    );
+                } else {
+                    out.push_back(Item::Stop(Stop {
+                        line,
+                        col: code.col,
+                        optional,
+                    }));
+                }
+                None
+            }
+            Some(code) if code.tenths == 20 => Some(ProgramEnd::M2 { line }),
+            Some(_) => Some(ProgramEnd::M30 { line }),
+            None => None,
+        })
+    }
+
+    fn cutter_comp(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
+        if code.tenths == 400 {
+            self.comp = CompState::Off;
+            return Ok(());
+        }
+        if self.comp != CompState::Off {
+            return Err(err_at(
+                code.col,
+                ErrorKind::CompensationAlreadyOn {
+                    code: code.to_string(),
+                },
+            ));
+        }
+        if self.plane == Plane::Yz {
+            return Err(err_at(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!("{code} in the YZ plane (G19)"),
+                    reason: "cutter compensation works in the XY (G17) and ZX (G18) planes",
+                },
+            ));
+        }
+        let (tool, radius_mm) = if code.tenths == 411 || code.tenths == 421 {
+            let d = self
+                .take(b, 'D')
+                .ok_or_else(|| missing(code.col, code, 'D', "the tool diameter"))?;
+            // L (lathe tool orientation) is accepted with G41.1/G42.1 and has no effect here.
+            self.take(b, 'L');
+            (None, d.value * scale / 2.0)
+        } else {
+            let (n, t) = self.tool_word(b, 'D', code)?;
+            (Some(n), t.radius_mm)
+        };
+        self.comp = if code.tenths / 10 == 41 {
+            CompState::Left { tool, radius_mm }
+        } else {
+            CompState::Right { tool, radius_mm }
+        };
+        Ok(())
+    }
+
+    fn tool_length(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
+        let axis = Vector3::new(0.0, 0.0, 1.0);
+        match code.tenths {
+            430 | 440 => {
+                let (_, t) = self.tool_word(b, 'H', code)?;
+                let sign = if code.tenths == 430 { 1.0 } else { -1.0 };
+                self.tool_offset_mm = axis * (sign * t.length_mm);
+            }
+            431 | 432 => {
+                let mut offset = Vector3::zeros();
+                let mut any = false;
+                for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                    if let Some(w) = self.take(b, letter) {
+                        offset[i] = w.value * scale;
+                        any = true;
+                    }
+                }
+                if code.tenths == 432 && !any {
+                    let (_, t) = self.tool_word(b, 'H', code)?;
+                    offset = axis * t.length_mm;
+                    any = true;
+                }
+                if !any {
+                    return Err(missing(code.col, code, 'Z', "the offset as axis words"));
+                }
+                self.tool_offset_mm = if code.tenths == 431 {
+                    offset
+                } else {
+                    self.tool_offset_mm + offset
+                };
+            }
+            _ => self.tool_offset_mm = Vector3::zeros(),
+        }
+        self.resync();
+        Ok(())
+    }
+
+    fn g10(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
+        let l = self
+            .take(b, 'L')
+            .ok_or_else(|| missing(code.col, code, 'L', "L1, L2 or L20"))?;
+        let p = self
+            .take(b, 'P')
+            .ok_or_else(|| missing(code.col, code, 'P', "the tool or coordinate system number"))?;
+        match l.value as u32 {
+            1 => {
+                let n = as_index(p.value)
+                    .filter(|n| (1..=MAX_TOOL_NUMBER).contains(n))
+                    .ok_or_else(|| invalid(p, "a tool number from 1 to 99999"))?;
+                let mut tool = self.tools.get(n).unwrap_or(Tool::NONE);
+                if let Some(r) = self.take(b, 'R') {
+                    let radius_mm = r.value * scale;
+                    if !(0.0..=MAX_TOOL_SIZE_MM).contains(&radius_mm) {
+                        return Err(invalid(r, "a tool radius from 0 to 10000 mm"));
+                    }
+                    tool.radius_mm = radius_mm;
+                }
+                if let Some(z) = self.take(b, 'Z') {
+                    let length_mm = z.value * scale;
+                    if length_mm.abs() > MAX_TOOL_SIZE_MM {
+                        return Err(invalid(z, "a tool length of at most 10000 mm"));
+                    }
+                    tool.length_mm = length_mm;
+                }
+                for letter in ['X', 'Y'] {
+                    if let Some(w) = b.word(letter) {
+                        return Err(err_at(
+                            w.col,
+                            ErrorKind::Unsupported {
+                                what: format!("G10 L1 with {letter}"),
+                                reason: "lathe tool offsets are not supported: give R (radius) and Z (length)",
+                            },
+                        ));
+                    }
+                }
+                self.tools.insert(n, tool);
+            }
+            2 | 20 => {
+                let index = as_index(p.value)
+                    .filter(|n| *n <= 9)
+                    .ok_or_else(|| invalid(p, "a coordinate system number from 0 (current) to 9"))?
+                    as usize;
+                let index = if index == 0 { self.coord } else { index - 1 };
+                if l.value as u32 == 2 {
+                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                        if let Some(v) = self.take(b, letter) {
+                            self.work_offsets_mm[index][i] = v.value * scale;
+                        }
+                    }
+                    if let Some(r) = self.take(b, 'R') {
+                        self.rotations_deg[index] = r.value;
+                    }
+                } else {
+                    if self.rotations_deg[index] != 0.0
+                        && (b.word('X').is_some() || b.word('Y').is_some())
+                    {
+                        return Err(err_at(
+                            l.col,
+                            ErrorKind::Unsupported {
+                                what: "G10 L20 on a rotated coordinate system".to_owned(),
+                                reason: "set rotated systems with G10 L2",
+                            },
+                        ));
+                    }
+                    let g92 = self.g92();
+                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                        if let Some(v) = self.take(b, letter) {
+                            self.work_offsets_mm[index][i] =
+                                self.pos_mm[i] - self.tool_offset_mm[i] - g92[i] - v.value * scale;
+                        }
+                    }
+                    if let Some(r) = self.take(b, 'R') {
+                        self.rotations_deg[index] = r.value;
+                    }
+                }
+                if !self.work_offsets_mm[index]
+                    .iter()
+                    .all(|c| c.abs() <= MAX_POSITION_MM)
+                {
+                    return Err(err_at(code.col, ErrorKind::PositionOutOfRange));
+                }
+                if index == self.coord {
+                    self.resync();
+                }
+            }
+            10 | 11 => {
+                return Err(err_at(
+                    l.col,
+                    ErrorKind::Unsupported {
+                        what: format!("G10 L{}", l.value),
+                        reason: "tool touch-off from the current position is not supported: use G10 L1",
+                    },
+                ));
+            }
+            _ => return Err(invalid(l, "L1 (tool), L2 or L20 (coordinate system)")),
+        }
+        Ok(())
+    }
+
+    /// G28 / G30: via the axis words' point (if any), then to the stored position.
+    fn home(
+        &mut self,
+        b: &Block,
+        code: Code,
+        line: usize,
+        out: &mut VecDeque<Item>,
+    ) -> Result<(), BlockError> {
+        if self.comp != CompState::Off {
+            return Err(err_at(
+                code.col,
+                ErrorKind::CompensationActive {
+                    code: code.to_string(),
+                },
+            ));
+        }
+        let home = if code.tenths == 280 {
+            self.g28_mm
+        } else {
+            self.g30_mm
+        };
+        let given: [bool; 3] = [
+            b.word('X').is_some(),
+            b.word('Y').is_some(),
+            b.word('Z').is_some(),
+        ];
+        let target = if given.iter().any(|g| *g) {
+            let prog = self.prog_target(b);
+            let via = self.machine_of(prog);
+            self.check_position(code.col, &via)?;
+            self.push_line(line, code.col, true, via, None, out);
+            let mut target = via;
+            for i in 0..3 {
+                if given[i] {
+                    target[i] = home[i];
+                }
+            }
+            target
+        } else {
+            home
+        };
+        self.push_line(line, code.col, true, target, None, out);
+        self.resync();
+        Ok(())
+    }
+
+    /// Emits a straight move from the current point to `end_mm` (nothing if it has no length)
+    /// and makes `end_mm` the current point.
+    fn push_line(
+        &mut self,
+        line: usize,
+        col: usize,
+        rapid: bool,
+        end_mm: Vector3<f64>,
+        feed_mm_s: Option<f64>,
+        out: &mut VecDeque<Item>,
+    ) {
+        if end_mm != self.pos_mm {
+            out.push_back(Item::Motion(Element {
+                line,
+                col,
+                kind: ElementKind::Line,
+                rapid,
+                start_mm: self.pos_mm,
+                end_mm,
+                feed_mm_s,
+                blend: self.blend,
+                comp: self.comp,
+                plane: self.plane,
+            }));
+        }
+        self.pos_mm = end_mm;
+    }
+
+    fn motion(
+        &mut self,
+        b: &Block,
+        line: usize,
+        g53: Option<Code>,
+        inverse_f: Option<f64>,
+        out: &mut VecDeque<Item>,
+    ) -> Result<(), BlockError> {
+        let code = b.motion();
+        let first_axis = b.first_axis();
+        if let Some(code) = code {
+            self.motion = match code.tenths {
+                0 => Some(Motion::Rapid),
+                10 => Some(Motion::Linear),
+                20 => Some(Motion::Cw),
+                30 => Some(Motion::Ccw),
+                _ => {
+                    if let Some(w) = first_axis {
+                        return Err(err_at(w.col, ErrorKind::AxisWithG80));
+                    }
+                    None
+                }
+            };
+        }
+        let on_line = code.filter(|c| c.tenths != 800);
+        if on_line.is_none() && first_axis.is_none() {
+            if let Some(g53) = g53 {
+                return Err(missing(
+                    g53.col,
+                    g53,
+                    'X',
+                    "axis words (G0 or G1 in machine coordinates)",
+                ));
+            }
+            return Ok(());
+        }
+        let Some(mode) = self.motion else {
+            let col = first_axis.map_or(0, |w| w.col);
+            return Err(err_at(col, ErrorKind::AxisWithoutMotion));
+        };
+        let col = on_line.map_or_else(|| first_axis.map_or(0, |w| w.col), |c| c.col);
+        let rapid = mode == Motion::Rapid;
+        let feed = |state: &State, length_mm: f64| -> Result<Option<f64>, BlockError> {
+            if rapid {
+                return Ok(None);
+            }
+            let name = match mode {
+                Motion::Linear => "G1",
+                Motion::Cw => "G2",
+                _ => "G3",
+            };
+            if state.inverse_time {
+                let f = inverse_f
+                    .ok_or_else(|| err_at(col, ErrorKind::MissingInverseTimeFeed { code: name }))?;
+                Ok(Some(length_mm * f / 60.0))
+            } else {
+                state
+                    .feed_mm_s
+                    .map(Some)
+                    .ok_or_else(|| err_at(col, ErrorKind::MissingFeed { code: name }))
+            }
+        };
+        if let Some(g53) = g53 {
+            if !matches!(mode, Motion::Rapid | Motion::Linear) {
+                return Err(err_at(g53.col, ErrorKind::G53NeedsStraightMotion));
+            }
+            if self.comp != CompState::Off {
+                return Err(err_at(
+                    g53.col,
+                    ErrorKind::CompensationActive {
+                        code: g53.to_string(),
+                    },
+                ));
+            }
+            let mut m = self.pos_mm;
+            for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                if let Some(v) = self.take_mm(b, letter) {
+                    m[i] = v;
+                }
+            }
+            self.check_position(col, &m)?;
+            let f = feed(self, (m - self.pos_mm).norm())?;
+            self.push_line(line, col, rapid, m, f, out);
+            self.resync();
+            return Ok(());
+        }
+        match mode {
+            // G0/G1 alone only sets the mode.
+            Motion::Rapid | Motion::Linear if first_axis.is_none() => {}
+            Motion::Rapid | Motion::Linear => {
+                let prog = self.prog_target(b);
+                let m = self.machine_of(prog);
+                self.check_position(col, &m)?;
+                let f = feed(self, (m - self.pos_mm).norm())?;
+                self.push_line(line, col, rapid, m, f, out);
+                self.prog_mm = prog;
+            }
+            Motion::Cw | Motion::Ccw => {
+                let element = self.arc(b, line, col, mode == Motion::Cw)?;
+                let mut element = element;
+                element.feed_mm_s = feed(self, element.length_mm())?;
+                out.push_back(Item::Motion(element));
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the arc of a G2/G3 line and moves the current point to its end.
+    fn arc(&mut self, b: &Block, line: usize, col: usize, cw: bool) -> Result<Element, BlockError> {
+        let (a, c, n) = self.plane.axes();
+        let axis_letters = ['X', 'Y', 'Z'];
+        let offset_letters = ['I', 'J', 'K'];
+        // Without either plane axis word the end is the start in the plane: a full circle in
+        // centre format (LinuxCNC), impossible in radius format.
+        if b.word(axis_letters[a]).is_none()
+            && b.word(axis_letters[c]).is_none()
+            && b.word('R').is_some()
+        {
+            return Err(err_at(
+                col,
+                ErrorKind::ArcMissingPlaneAxes {
+                    plane: self.plane.code(),
+                    first: axis_letters[a],
+                    second: axis_letters[c],
+                },
+            ));
+        }
+        if let Some(w) = b.word(offset_letters[n]) {
+            return Err(err_at(
+                w.col,
+                ErrorKind::ArcWordWrongPlane {
+                    letter: offset_letters[n],
+                    plane: self.plane.code(),
+                },
+            ));
+        }
+        let start = self.prog_mm;
+        let mut end = self.prog_target(b);
+        let scale = self.scale();
+        let ia = self.take(b, offset_letters[a]);
+        let ic = self.take(b, offset_letters[c]);
+        let r_word = self.take(b, 'R');
+        let turns = match self.take(b, 'P') {
+            Some(p) => {
+                as_index(p.value)
+                    .filter(|t| (1..=10_000).contains(t))
+                    .ok_or_else(|| invalid(p, "a whole number of turns from 1 to 10000"))?
+                    - 1
+            }
+            None => 0,
+        };
+        let chord = (end[a] - start[a]).hypot(end[c] - start[c]);
+        let full = chord <= FULL_CIRCLE_EPS_MM;
+        let (ca, cc) = match (r_word, ia.or(ic)) {
+            (Some(_), Some(w)) => return Err(err_at(w.col, ErrorKind::ArcBothFormats)),
+            (None, None) => {
+                return Err(err_at(
+                    col,
+                    ErrorKind::ArcNoCentre {
+                        plane: self.plane.code(),
+                    },
+                ));
+            }
+            (None, Some(_)) => {
+                let off = |w: Option<Word>| w.map_or(0.0, |w| w.value * scale);
+                let (ca, cc) = if self.arc_absolute {
+                    (off(ia), off(ic))
+                } else {
+                    (start[a] + off(ia), start[c] + off(ic))
+                };
+                let r1 = (start[a] - ca).hypot(start[c] - cc);
+                let r2 = (end[a] - ca).hypot(end[c] - cc);
+                if r1 < MIN_ARC_RADIUS_MM || r2 < MIN_ARC_RADIUS_MM {
+                    return Err(err_at(col, ErrorKind::ArcZeroRadius));
+                }
+                let tolerance_mm = self
+                    .arc_tolerance_mm
+                    .max(self.arc_tolerance_rel * r1.max(r2));
+                if (r1 - r2).abs() > tolerance_mm {
+                    return Err(err_at(
+                        col,
+                        ErrorKind::ArcRadiusMismatch {
+                            start_radius_mm: r1,
+                            end_radius_mm: r2,
+                            tolerance_mm,
+                        },
+                    ));
+                }
+                (ca, cc)
+            }
+            (Some(r), None) => {
+                if full {
+                    return Err(err_at(r.col, ErrorKind::ArcRadiusFullCircle));
+                }
+                let radius = r.value * scale;
+                let abs_r = radius.abs();
+                let half = chord / 2.0;
+                if half - abs_r > MIN_ARC_RADIUS_MM {
+                    return Err(err_at(
+                        r.col,
+                        ErrorKind::ArcRadiusTooSmall {
+                            radius_mm: abs_r,
+                            half_chord_mm: half,
+                        },
+                    ));
+                }
+                let half = half.min(abs_r);
+                let mid_a = (start[a] + end[a]) / 2.0;
+                let mid_c = (start[c] + end[c]) / 2.0;
+                let heading = (end[c] - start[c]).atan2(end[a] - start[a]);
+                let theta = if cw == (radius > 0.0) {
+                    heading - FRAC_PI_2
+                } else {
+                    heading + FRAC_PI_2
+                };
+                let offset = (abs_r * abs_r - half * half).max(0.0).sqrt();
+                (mid_a + offset * theta.cos(), mid_c + offset * theta.sin())
+            }
+        };
+        if full {
+            end[a] = start[a];
+            end[c] = start[c];
+        }
+        let mut center = start;
+        center[a] = ca;
+        center[c] = cc;
+        let m_end = self.machine_of(end);
+        self.check_position(col, &m_end)?;
+        let center_mm = self.to_machine(center);
+        let mut normal = Vector3::zeros();
+        normal[n] = if cw { -1.0 } else { 1.0 };
+        let normal = rotate_xy(normal, self.rotation_deg());
+        let radius_mm = (start[a] - ca).hypot(start[c] - cc);
+        let element = Element {
+            line,
+            col,
+            kind: ElementKind::Arc {
+                center_mm,
+                normal,
+                cw,
+                turns,
+                radius_mm,
+            },
+            rapid: false,
+            start_mm: self.pos_mm,
+            end_mm: m_end,
+            feed_mm_s: None,
+            blend: self.blend,
+            comp: self.comp,
+            plane: self.plane,
+        };
+        if element.arc().is_none() {
+            return Err(err_at(col, ErrorKind::ArcZeroRadius));
+        }
+        self.pos_mm = m_end;
+        self.prog_mm = end;
+        Ok(element)
+    }
+
+    /// Every word that needs a user must have found one.
+    fn check_unused(&self, b: &Block) -> Result<(), BlockError> {
+        for (k, letter) in CHECKED.chars().enumerate() {
+            if self.used & (1 << k) != 0 {
+                continue;
+            }
+            if let Some(w) = b.word(letter) {
+                let kind = match letter {
+                    'X' | 'Y' | 'Z' => ErrorKind::AxisWithoutMotion,
+                    _ => ErrorKind::UnusedWord {
+                        letter,
+                        users: match letter {
+                            'I' | 'J' | 'K' => "an arc (G2/G3) in a plane that has this axis",
+                            'R' => "an R-format arc (G2/G3) or G10",
+                            'P' => "G4, G10, G64 or an arc (turns)",
+                            'Q' => "G64 or M61",
+                            'D' => "G41/G42 (tool number) or G41.1/G42.1 (diameter)",
+                            'H' => "G43, G43.2 or G44",
+                            _ => "G10 or G41.1/G42.1",
+                        },
+                    },
+                };
+                return Err(err_at(w.col, kind));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Deepest subroutine call nesting.
+pub const MAX_CALL_DEPTH: usize = 64;
+
+/// Most bytes of program text kept in memory for subroutine bodies and for the loop or `if`
+/// being run from the main stream (the only text the interpreter keeps).
+pub const MAX_STORED_BYTES: usize = 16 * 1024 * 1024;
+
+/// Most lines run inside loops and subroutines without producing any item: a loop that never
+/// moves is reported rather than run forever.
+pub const MAX_IDLE_LINES: usize = 1_000_000;
+
+/// Stored program lines: (1-based source line, text), with each line's O-word (label and
+/// keyword) parsed once, for the jumps of loops and `if`s.
+#[derive(Debug)]
+struct Body {
+    lines: Vec<(usize, String)>,
+    controls: Vec<Option<(Label, Keyword)>>,
+}
+
+impl Body {
+    fn new(lines: Vec<(usize, String)>) -> Lines {
+        let controls = lines.iter().map(|(_, t)| peek_control(t)).collect();
+        Rc::new(Body { lines, controls })
+    }
+
+    /// What the body counts against [`MAX_STORED_BYTES`]: its text and a fixed overhead per
+    /// line and per body (so empty bodies are not free either).
+    fn bytes(&self) -> usize {
+        BODY_OVERHEAD + self.lines.iter().map(|(_, t)| t.len() + 16).sum::<usize>()
+    }
+}
+
+type Lines = Rc<Body>;
+
+/// Bytes counted for each stored body besides its lines.
+const BODY_OVERHEAD: usize = 64;
+
+/// A body being run from memory: a subroutine call, or a loop / `if` of the main stream.
+#[derive(Debug)]
+struct Frame {
+    lines: Lines,
+    /// Index of the next line to run.
+    pc: usize,
+    /// A subroutine call (it has its own parameter scope).
+    sub: bool,
+    /// Remaining passes of each running `repeat`, by the index of its line.
+    repeats: HashMap<usize, u64>,
+}
+
+/// The streaming interpreter of [`crate::gcode`]: lines in, [`Item`]s out, one line read per
+/// step, with the modal state (units, distance and feed modes, plane, offsets, tool length,
+/// compensation, parameters) in between; machine coordinates out.
+///
+/// Yields [`Item`]s in program order and ends with exactly one [`Item::End`]; after an error
+/// (or the end) it yields nothing more.
+pub struct Interpreter<R> {
+    reader: R,
+    file: String,
+    start_mm: Vector3<f64>,
+    state: State,
+    params: Params,
+    scanner: Scanner,
+    buf: Vec<u8>,
+    queue: VecDeque<Item>,
+    /// Lines read from the reader.
+    line: usize,
+    /// Source line being run (for errors).
+    at: usize,
+    frames: Vec<Frame>,
+    subs: HashMap<Label, Lines>,
+    stored_bytes: usize,
+    /// The next control line was jumped to as the next branch of an `if`.
+    branch_pending: bool,
+    idle_lines: usize,
+    block_delete: bool,
+    opened: bool,
+    code_seen: bool,
+    done: bool,
+    pending_error: Option<Error>,
+}
+
+impl<R: BufRead> Interpreter<R> {
+    /// An interpreter reading `reader` (named `file` in errors), starting from `setup`.
+    ///
+    /// A bad setup (a position that is not finite, a tolerance ≤ 0) is reported as the first
+    /// item, an error at line 0.
+    pub fn new(reader: R, file: impl Into<String>, setup: Setup) -> Interpreter<R> {
+        let file = file.into();
+        let pending_error = setup.validate().err().map(|kind| Error {
+            file: file.clone(),
+            line: 0,
+            col: 0,
+            kind,
+        });
+        Interpreter {
+            reader,
+            file,
+            start_mm: setup.start_mm,
+            block_delete: setup.block_delete,
+            state: State::new(setup),
+            params: Params::default(),
+            scanner: Scanner::default(),
+            buf: Vec::new(),
+            queue: VecDeque::new(),
+            line: 0,
+            at: 0,
+            frames: Vec::new(),
+            subs: HashMap::new(),
+            stored_bytes: 0,
+            branch_pending: false,
+            idle_lines: 0,
+            opened: false,
+            code_seen: false,
+            done: false,
+            pending_error,
+        }
+    }
+
+    /// The name given for the source.
+    pub fn file(&self) -> &str {
+        &self.file
+    }
+
+    /// Where the machine was at the start ([`Setup::start_mm`]).
+    pub fn start_mm(&self) -> Vector3<f64> {
+        self.start_mm
+    }
+
+    /// Number of lines read from the source so far.
+    pub fn line(&self) -> usize {
+        self.line
+    }
+
+    /// The current point in machine coordinates (after the line read last: items of that line
+    /// may still be queued).
+    pub fn position_mm(&self) -> Vector3<f64> {
+        self.state.pos_mm
+    }
+
+    /// The interpreter's tool table, with the G10 L1 changes made so far.
+    pub fn tools(&self) -> &ToolTable {
+        &self.state.tools
+    }
+
+    fn error(&self, col: usize, kind: ErrorKind) -> Error {
+        Error {
+            file: self.file.clone(),
+            line: self.at,
+            col,
+            kind,
+        }
+    }
+
+    /// Reads one line into `buf` (terminator stripped); `false` at the end of the input.
+    fn read_line(&mut self) -> Result<bool, Error> {
+        self.buf.clear();
+        let limit = MAX_LINE_BYTES as u64 + 2;
+        let n = (&mut self.reader)
+            .take(limit)
+            .read_until(b'\n', &mut self.buf)
+            .map_err(|e| Error {
+                file: self.file.clone(),
+                line: self.line + 1,
+                col: 0,
+                kind: ErrorKind::Read {
+                    message: e.to_string(),
+                },
+            })?;
+        if n == 0 {
+            return Ok(false);
+        }
+        self.line += 1;
+        self.at = self.line;
+        if self.buf.last() == Some(&b'\n') {
+            self.buf.pop();
+        }
+        if self.buf.last() == Some(&b'\r') {
+            self.buf.pop();
+        }
+        if self.buf.len() > MAX_LINE_BYTES {
+            return Err(self.error(
+                1,
+                ErrorKind::LineTooLong {
+                    max_bytes: MAX_LINE_BYTES,
+                },
+            ));
+        }
+        Ok(true)
+    }
+
+    /// The text of the line in `buf`.
+    fn buf_text(&self) -> String {
+        String::from_utf8_lossy(&self.buf).into_owned()
+    }
+
+    /// Reads and runs one line (from the innermost frame, or the reader), queueing its items.
+    fn step(&mut self) -> Result<(), Error> {
+        if let Some(frame) = self.frames.last_mut() {
+            if let Some((line, text)) = frame.lines.lines.get(frame.pc).cloned() {
+                frame.pc += 1;
+                self.idle_lines += 1;
+                if self.idle_lines > MAX_IDLE_LINES {
+                    self.at = line;
+                    return Err(self.error(
+                        0,
+                        ErrorKind::NoProgress {
+                            lines: MAX_IDLE_LINES,
+                        },
+                    ));
+                }
+                return self.run_line(line, &text, true);
+            }
+            // The end of a body: a subroutine returns, a loop of the main stream is done (and
+            // its lines are let go).
+            if let Some(f) = self.frames.pop() {
+                if f.sub {
+                    self.params.pop_scope();
+                } else {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
+                }
+            }
+            return Ok(());
+        }
+        if !self.read_line()? {
+            self.queue.push_back(Item::End(ProgramEnd::EndOfText));
+            self.done = true;
+            return Ok(());
+        }
+        let text = self.buf_text();
+        self.run_line(self.line, &text, false)
+    }
+
+    fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
+        self.at = line;
+        let kind = self
+            .scanner
+            .scan(text, self.block_delete, &self.params)
+            .map_err(|(col, k)| self.error(col, k))?;
+        if let Some((col, text)) = self.scanner.message.take() {
+            self.queue.push_back(Item::Note(Note {
+                line,
+                col,
+                text: format!("message: {text}"),
+            }));
+        }
+        let pending = std::mem::take(&mut self.branch_pending);
+        match kind {
+            LineKind::Blank | LineKind::Skipped | LineKind::ProgramNumber => {}
+            LineKind::Percent => {
+                if in_frame {
+                    return Err(self.error(1, ErrorKind::MisplacedPercent));
+                }
+                if !self.opened && !self.code_seen {
+                    self.opened = true;
+                } else {
+                    self.queue
+                        .push_back(Item::End(ProgramEnd::Percent { line }));
+                    self.done = true;
+                }
+            }
+            LineKind::Words => {
+                self.code_seen = true;
+                if !self.scanner.words.is_empty() {
+                    let block =
+                        Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
+                    let end = self
+                        .state
+                        .execute(&block, line, &mut self.queue)
+                        .map_err(|(col, k)| self.error(col, k))?;
+                    if let Some(end) = end {
+                        self.queue.push_back(Item::End(end));
+                        self.done = true;
+                    }
+                }
+                let col = self.scanner.words.first().map_or(1, |w| w.col);
+                for (r, value) in std::mem::take(&mut self.scanner.assignments) {
+                    self.params.set(&r, value).map_err(|k| self.error(col, k))?;
+                }
+            }
+            LineKind::Control => {
+                self.code_seen = true;
+                if let Some(control) = self.scanner.control.take() {
+                    self.control(control, line, text, in_frame, pending)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Keeps `text` of stored lines within [`MAX_STORED_BYTES`].
+    fn store(
+        &mut self,
+        lines: &mut Vec<(usize, String)>,
+        line: usize,
+        text: String,
+        col: usize,
+    ) -> Result<(), Error> {
+        self.stored_bytes += text.len() + 16;
+        if self.stored_bytes > MAX_STORED_BYTES {
+            return Err(self.error(
+                col,
+                ErrorKind::StoredTooLarge {
+                    max_bytes: MAX_STORED_BYTES,
+                },
+            ));
+        }
+        lines.push((line, text));
+        Ok(())
+    }
+
+    /// Reads lines from the reader up to and including the line `label end`.
+    fn capture(
+        &mut self,
+        label: &Label,
+        end: Keyword,
+        col: usize,
+        lines: &mut Vec<(usize, String)>,
+    ) -> Result<(), Error> {
+        let start = self.at;
+        loop {
+            if !self.read_line()? {
+                self.at = start;
+                return Err(self.error(
+                    col,
+                    ErrorKind::UnclosedControl {
+                        label: label.to_string(),
+                        end: end.name(),
+                    },
+                ));
+            }
+            let text = self.buf_text();
+            let found = peek_control(&text).is_some_and(|(l, k)| l == *label && k == end);
+            self.store(lines, self.line, text, col)?;
+            if found {
+                self.at = start;
+                return Ok(());
+            }
+        }
+    }
+
+    /// Index in the innermost frame of the first line at or after `from` (forward) or before
+    /// `from` (backward) with `label` and one of `keywords`.
+    fn find_control(
+        &self,
+        label: &Label,
+        keywords: &[Keyword],
+        from: usize,
+        forward: bool,
+    ) -> Option<(usize, Keyword)> {
+        let frame = self.frames.last()?;
+        let controls = &frame.lines.controls;
+        let matches = |i: usize| match controls.get(i) {
+            Some(Some((l, k))) if l == label && keywords.contains(k) => Some((i, *k)),
+            _ => None,
+        };
+        if forward {
+            (from..controls.len()).find_map(matches)
+        } else {
+            (0..from.min(controls.len())).rev().find_map(matches)
+        }
+    }
+
+    fn jump(&mut self, to: usize) {
+        if let Some(frame) = self.frames.last_mut() {
+            frame.pc = to;
+        }
+    }
+
+    fn mismatch(&self, c: &Control, expected: &'static str) -> Error {
+        self.error(
+            c.col,
+            ErrorKind::ControlMismatch {
+                what: format!("{} {}", c.label, c.keyword.name()),
+                expected,
+            },
+        )
+    }
+
+    /// Runs an O-word control line.
+    fn control(
+        &mut self,
+        c: Control,
+        line: usize,
+        text: &str,
+        in_frame: bool,
+        branch: bool,
+    ) -> Result<(), Error> {
+        use Keyword::*;
+        let value = c.values.first().copied().unwrap_or(0.0);
+        // Index of this line in the innermost frame.
+        let here = self.frames.last().map_or(0, |f| f.pc.saturating_sub(1));
+        match c.keyword {
+            Sub => {
+                let mut body = Vec::new();
+                if in_frame {
+                    let end = self
+                        .find_control(&c.label, &[EndSub], here + 1, true)
+                        .ok_or_else(|| self.mismatch(&c, "its endsub in the same body"))?
+                        .0;
+                    if let Some(frame) = self.frames.last() {
+                        body = frame
+                            .lines
+                            .lines
+                            .get(here + 1..end)
+                            .unwrap_or_default()
+                            .to_vec();
+                    }
+                    let bytes: usize = body.iter().map(|(_, t)| t.len() + 16).sum();
+                    self.stored_bytes += bytes + BODY_OVERHEAD;
+                    if self.stored_bytes > MAX_STORED_BYTES {
+                        return Err(self.error(
+                            c.col,
+                            ErrorKind::StoredTooLarge {
+                                max_bytes: MAX_STORED_BYTES,
+                            },
+                        ));
+                    }
+                    self.jump(end + 1);
+                } else {
+                    self.capture(&c.label, EndSub, c.col, &mut body)?;
+                    if let Some((_, end)) = body.pop() {
+                        // The endsub line is not kept; the body's overhead is.
+                        self.stored_bytes =
+                            (self.stored_bytes + BODY_OVERHEAD).saturating_sub(end.len() + 16);
+                    }
+                }
+                // A redefinition frees what the old body held.
+                if let Some(old) = self.subs.insert(c.label, Body::new(body)) {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(old.bytes());
+                }
+            }
+            Call => {
+                let body = self.subs.get(&c.label).cloned().ok_or_else(|| {
+                    self.error(
+                        c.col,
+                        ErrorKind::UndefinedSubroutine {
+                            label: c.label.to_string(),
+                        },
+                    )
+                })?;
+                if self.frames.iter().filter(|f| f.sub).count() >= MAX_CALL_DEPTH {
+                    return Err(self.error(
+                        c.col,
+                        ErrorKind::CallTooDeep {
+                            max: MAX_CALL_DEPTH,
+                        },
+                    ));
+                }
+                self.params.push_scope(&c.values);
+                self.frames.push(Frame {
+                    lines: body,
+                    pc: 0,
+                    sub: true,
+                    repeats: HashMap::new(),
+                });
+            }
+            Return | EndSub => {
+                if !self.frames.iter().any(|f| f.sub) {
+                    return Err(self.mismatch(&c, "to be inside a subroutine"));
+                }
+                while let Some(f) = self.frames.pop() {
+                    if f.sub {
+                        self.params.pop_scope();
+                        break;
+                    }
+                }
+                if let Some(v) = c.values.first() {
+                    self.params
+                        .set(&ParamRef::Name("_value".into()), *v)
+                        .map_err(|k| self.error(c.col, k))?;
+                }
+            }
+            If | While | Do | Repeat if !in_frame => {
+                // Run the whole structure from memory, this line first.
+                let end = match c.keyword {
+                    If => EndIf,
+                    While => EndWhile,
+                    Do => While,
+                    _ => EndRepeat,
+                };
+                let mut lines = Vec::new();
+                self.store(&mut lines, line, text.to_owned(), c.col)?;
+                self.capture(&c.label, end, c.col, &mut lines)?;
+                self.stored_bytes += BODY_OVERHEAD;
+                self.frames.push(Frame {
+                    lines: Body::new(lines),
+                    pc: 0,
+                    sub: false,
+                    repeats: HashMap::new(),
+                });
+            }
+            _ if !in_frame => return Err(self.mismatch(&c, "to follow its opening line")),
+            If => {
+                if value == 0.0 {
+                    self.next_branch(&c, here + 1)?;
+                }
+            }
+            ElseIf if branch => {
+                if value == 0.0 {
+                    self.next_branch(&c, here + 1)?;
+                }
+            }
+            // Reached after running the previous branch: the if is done.
+            ElseIf | Else => {
+                let end = self
+                    .find_control(&c.label, &[EndIf], here + 1, true)
+                    .ok_or_else(|| self.mismatch(&c, "an endif after it"))?
+                    .0;
+                self.jump(end + 1);
+            }
+            EndIf | Do => {}
+            While => {
+                let opener = self.find_control(&c.label, &[Do, While, EndWhile], here, false);
+                if let Some((do_at, Do)) = opener {
+                    // The end of a do loop.
+                    if value != 0.0 {
+                        self.jump(do_at + 1);
+                    }
+                } else if value == 0.0 {
+                    let end = self
+                        .find_control(&c.label, &[EndWhile], here + 1, true)
+                        .ok_or_else(|| self.mismatch(&c, "an endwhile after it"))?
+                        .0;
+                    self.jump(end + 1);
+                }
+            }
+            EndWhile => {
+                let start = self
+                    .find_control(&c.label, &[While], here, false)
+                    .ok_or_else(|| self.mismatch(&c, "a while before it"))?
+                    .0;
+                self.jump(start);
+            }
+            Repeat => {
+                if !(0.0..=1e12).contains(&value) {
+                    return Err(self.error(c.col, ErrorKind::ControlValue { keyword: "repeat" }));
+                }
+                let count = value.round() as u64;
+                if count == 0 {
+                    let end = self
+                        .find_control(&c.label, &[EndRepeat], here + 1, true)
+                        .ok_or_else(|| self.mismatch(&c, "an endrepeat after it"))?
+                        .0;
+                    self.jump(end + 1);
+                } else if let Some(frame) = self.frames.last_mut() {
+                    frame.repeats.insert(here, count);
+                }
+            }
+            EndRepeat => {
+                let start = self
+                    .find_control(&c.label, &[Repeat], here, false)
+                    .ok_or_else(|| self.mismatch(&c, "a repeat before it"))?
+                    .0;
+                if let Some(frame) = self.frames.last_mut() {
+                    let left = frame
+                        .repeats
+                        .get(&start)
+                        .copied()
+                        .unwrap_or(1)
+                        .saturating_sub(1);
+                    if left > 0 {
+                        frame.repeats.insert(start, left);
+                        frame.pc = start + 1;
+                    } else {
+                        frame.repeats.remove(&start);
+                    }
+                }
+            }
+            Break => {
+                let end = self
+                    .find_control(&c.label, &[EndWhile, EndRepeat, While], here + 1, true)
+                    .ok_or_else(|| self.mismatch(&c, "the end of its loop after it"))?
+                    .0;
+                self.jump(end + 1);
+            }
+            Continue => {
+                let (start, kind) = self
+                    .find_control(&c.label, &[While, Do, Repeat], here, false)
+                    .ok_or_else(|| self.mismatch(&c, "the start of its loop before it"))?;
+                let to = match kind {
+                    While => Some(start),
+                    Do => self
+                        .find_control(&c.label, &[While], here + 1, true)
+                        .map(|(i, _)| i),
+                    _ => self
+                        .find_control(&c.label, &[EndRepeat], here + 1, true)
+                        .map(|(i, _)| i),
+                }
+                .ok_or_else(|| self.mismatch(&c, "the end of its loop after it"))?;
+                self.jump(to);
+            }
+        }
+        Ok(())
+    }
+
+    /// After a false `if`/`elseif` at `from - 1`: goes to the next `elseif` (to test it), past
+    /// the `else`, or past the `endif`.
+    fn next_branch(&mut self, c: &Control, from: usize) -> Result<(), Error> {
+        let (at, kind) = self
+            .find_control(
+                &c.label,
+                &[Keyword::ElseIf, Keyword::Else, Keyword::EndIf],
+                from,
+                true,
+            )
+            .ok_or_else(|| self.mismatch(c, "an endif after it"))?;
+        match kind {
+            Keyword::ElseIf => {
+                self.branch_pending = true;
+                self.jump(at);
+            }
+            _ => self.jump(at + 1),
+        }
+        Ok(())
+    }
+}
+
+impl<R: BufRead> Iterator for Interpreter<R> {
+    type Item = Result<Item, Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if let Some(e) = self.pending_error.take() {
+            self.done = true;
+            return Some(Err(e));
+        }
+        loop {
+            if let Some(item) = self.queue.pop_front() {
+                self.idle_lines = 0;
+                return Some(Ok(item));
+            }
+            if self.done {
+                return None;
+            }
+            if let Err(e) = self.step() {
+                self.done = true;
+                self.queue.clear();
+                return Some(Err(e));
+            }
+        }
+    }
+}
+
+impl<R: BufRead> std::iter::FusedIterator for Interpreter<R> {}
