@@ -32,7 +32,7 @@ const STATE_TIMEOUT_S: f64 = 2.0;
 const SETTLE_TIMEOUT_S: f64 = 3.0;
 /// Feedback older than this many cycles is an alarm (a drive that stops answering SYNC is
 /// caught here long before its heartbeat times out).
-const STALE_CYCLES: u64 = 25;
+const STALE_CYCLES: u64 = 50;
 
 /// What the master needs to know of one axis, resolved from the machine file.
 #[derive(Debug, Clone)]
