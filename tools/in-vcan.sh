@@ -212,7 +212,22 @@ start=$(date +%s.%N)
 # UML backs the guest's memory with a file in TMPDIR: on tmpfs it stays in RAM. On disk (/tmp)
 # the host's proactive reclaim (DAMON pageout, seen here) pages it out and every guest system
 # call slows from ~20 µs to ~500 µs (measured with a clock_gettime loop in the guest).
-TMPDIR="${VCAN_UML_TMPDIR:-/dev/shm}" timeout -k 10 "$TIMEOUT" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
+#
+# UML is a uniprocessor guest whose every system call is a ptrace round trip between two host
+# threads (the guest process and UML's kernel). Left to the host scheduler they land on different
+# CPUs, and each round trip waits for a cross-CPU wake-up; on a virtual machine host (a
+# Firecracker guest here) that took ~300 µs per guest system call instead of ~21 µs pinned to
+# one CPU (same clock_gettime loop). So the guest runs pinned to one CPU: the last one this
+# script may use, or VCAN_CPU (a CPU number; "none" to leave it unpinned).
+pin=()
+cpu=${VCAN_CPU:-$(sed -n 's/^Cpus_allowed_list:[[:space:]]*//p' /proc/self/status | tr ',-' '\n\n' | tail -1)}
+if [[ "$cpu" != none ]]; then
+    [[ "$cpu" =~ ^[0-9]+$ ]] || die "VCAN_CPU must be a CPU number or 'none', got '$cpu'"
+    command -v taskset >/dev/null || die "taskset (util-linux) missing: cannot pin the UML guest"
+    pin=(taskset -c "$cpu")
+    note "UML pinned to CPU $cpu"
+fi
+TMPDIR="${VCAN_UML_TMPDIR:-/dev/shm}" timeout -k 10 "$TIMEOUT" "${pin[@]}" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
     init="$INIT" uml_dir="$WORK" con=null con0=null,fd:1 "${KERNEL_LOG[@]}" \
     </dev/null >"$WORK/console" &
 uml_pid=$!
