@@ -53,6 +53,7 @@ pub mod eds;
 pub mod gateway;
 pub mod gcode;
 pub mod interp;
+pub mod offline;
 pub mod planner;
 pub mod rt;
 pub mod sim;

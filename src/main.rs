@@ -41,6 +41,20 @@ enum Command {
         #[arg(long)]
         log: Option<PathBuf>,
     },
+    /// Plan a program offline (no bus): summary, tool-centre path, setpoints.
+    Plan {
+        /// The program (`-` for standard input).
+        program: PathBuf,
+        /// Machine file (the embedded demo machine when omitted).
+        #[arg(long)]
+        machine: Option<PathBuf>,
+        /// Write the compensated tool-centre path here, one JSON object per element per line.
+        #[arg(long, value_name = "FILE.jsonl")]
+        path: Option<PathBuf>,
+        /// Write the interpolated setpoints here, one CSV row per cycle (what `run` streams).
+        #[arg(long, value_name = "FILE.csv")]
+        setpoints: Option<PathBuf>,
+    },
     /// Simulated CiA 402 drives as real peers on a bus.
     Simdrive {
         /// SocketCAN interface (or `sim`, which is only useful in tests).
@@ -178,6 +192,35 @@ fn main() -> ExitCode {
 
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     match Cli::parse().command {
+        Command::Plan {
+            program,
+            machine,
+            path,
+            setpoints,
+        } => {
+            let machine = match machine {
+                Some(p) => Machine::load(&p)?,
+                None => Machine::demo(),
+            };
+            let opts = canmotion::offline::PlanOptions {
+                path_out: path,
+                setpoints_out: setpoints,
+            };
+            let start_mm = nalgebra::Vector3::zeros();
+            let summary = if program.as_os_str() == "-" {
+                canmotion::offline::plan_stream(
+                    &machine,
+                    std::io::stdin().lock(),
+                    "<stdin>",
+                    start_mm,
+                    &opts,
+                )?
+            } else {
+                canmotion::offline::plan_file(&machine, &program, start_mm, &opts)?
+            };
+            print!("{}", summary.report(&machine));
+            Ok(())
+        }
         Command::Run {
             program,
             machine,

@@ -23,6 +23,10 @@ pub const AXIS_LETTERS: [&str; 9] = ["X", "Y", "Z", "A", "B", "C", "U", "V", "W"
 pub const DEMO_MACHINE: &str = include_str!("../../dictionaries/machines/demo-xyz.toml");
 /// The drive dictionary the demo machine names.
 pub const DEMO_DRIVE: &str = include_str!("../../dictionaries/drives/cia402-servo.toml");
+/// The demo machine's tool table.
+pub const DEMO_TOOLS: &str = include_str!("../../dictionaries/tools/demo-tools.toml");
+/// Where the embedded demo tool table lives in the source tree (for messages).
+pub const DEMO_TOOLS_PATH: &str = "dictionaries/tools/demo-tools.toml";
 /// Where the embedded demo machine file lives in the source tree (for messages).
 pub const DEMO_MACHINE_PATH: &str = "dictionaries/machines/demo-xyz.toml";
 
@@ -34,6 +38,21 @@ struct RawMachine {
     sync: RawSync,
     heartbeat: RawHeartbeat,
     axis: Vec<RawAxis>,
+    #[serde(default)]
+    program: RawProgram,
+}
+
+/// `[program]`: how programs are interpreted on this machine (all keys optional).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProgram {
+    tool_table: Option<String>,
+    #[serde(default)]
+    loaded_tool: u32,
+    g28_mm: Option<Vec<f64>>,
+    g30_mm: Option<Vec<f64>>,
+    #[serde(default)]
+    work_offsets_mm: std::collections::BTreeMap<String, Vec<f64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -334,6 +353,118 @@ pub struct Machine {
     pub axes: Vec<AxisConfig>,
     /// The bus load limit the machine was admitted under.
     pub max_load_percent: f64,
+    /// How programs are interpreted on this machine (`[program]`).
+    pub program: ProgramSetup,
+}
+
+/// Work offset names in the order of [`crate::gcode::Setup::work_offsets_mm`].
+pub const WORK_OFFSETS: [&str; 9] = [
+    "G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3",
+];
+
+/// The machine's `[program]` table: what the interpreter starts with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProgramSetup {
+    /// The tool table file as written (relative to the machine file), if any.
+    pub tool_table_file: Option<PathBuf>,
+    /// The tool table (empty without `tool_table`); filled by [`Machine::load`] and
+    /// [`Machine::demo`], left empty by [`Machine::parse`].
+    pub tools: crate::gcode::ToolTable,
+    /// Tool in the spindle at the start (0 = none).
+    pub loaded_tool: u32,
+    /// G28 and G30 positions, machine mm (X, Y, Z).
+    pub g28_mm: nalgebra::Vector3<f64>,
+    /// See `g28_mm`.
+    pub g30_mm: nalgebra::Vector3<f64>,
+    /// Origins of G54 … G59.3 in machine mm (see [`WORK_OFFSETS`]).
+    pub work_offsets_mm: [nalgebra::Vector3<f64>; 9],
+}
+
+impl Machine {
+    /// The interpreter's setup on this machine, starting at `start_mm`.
+    pub fn setup(&self, start_mm: nalgebra::Vector3<f64>) -> crate::gcode::Setup {
+        let mut setup = crate::gcode::Setup::new(start_mm);
+        setup.tools = self.program.tools.clone();
+        setup.loaded_tool = self.program.loaded_tool;
+        setup.g28_mm = self.program.g28_mm;
+        setup.g30_mm = self.program.g30_mm;
+        setup.work_offsets_mm = self.program.work_offsets_mm;
+        setup
+    }
+}
+
+fn program_setup(ctx: &Ctx, raw: &RawProgram) -> Result<ProgramSetup, ConfigError> {
+    let point = |key: &str, v: &[f64]| -> Result<nalgebra::Vector3<f64>, ConfigError> {
+        match v {
+            [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e9) => {
+                Ok(nalgebra::Vector3::new(*x, *y, *z))
+            }
+            _ => Err(ctx.err(
+                "program",
+                key,
+                format!("{v:?} must be [x, y, z] in mm, finite and at most 1e9 in magnitude"),
+            )),
+        }
+    };
+    let mut work_offsets_mm = [nalgebra::Vector3::zeros(); 9];
+    for (name, v) in &raw.work_offsets_mm {
+        let i = WORK_OFFSETS.iter().position(|w| w == name).ok_or_else(|| {
+            ctx.err(
+                "program.work_offsets_mm",
+                name,
+                format!("no such work offset; one of {}", WORK_OFFSETS.join(" ")),
+            )
+        })?;
+        work_offsets_mm[i] = point(&format!("work_offsets_mm.{name}"), v)?;
+    }
+    if raw.loaded_tool > crate::gcode::MAX_TOOL_NUMBER {
+        return Err(ctx.err(
+            "program",
+            "loaded_tool",
+            format!(
+                "{} above the largest tool number {}",
+                raw.loaded_tool,
+                crate::gcode::MAX_TOOL_NUMBER
+            ),
+        ));
+    }
+    if raw.loaded_tool != 0 && raw.tool_table.is_none() {
+        return Err(ctx.err("program", "loaded_tool", "a loaded tool needs a tool_table"));
+    }
+    Ok(ProgramSetup {
+        tool_table_file: raw.tool_table.as_ref().map(PathBuf::from),
+        tools: crate::gcode::ToolTable::new(),
+        loaded_tool: raw.loaded_tool,
+        g28_mm: raw
+            .g28_mm
+            .as_deref()
+            .map_or(Ok(nalgebra::Vector3::zeros()), |v| point("g28_mm", v))?,
+        g30_mm: raw
+            .g30_mm
+            .as_deref()
+            .map_or(Ok(nalgebra::Vector3::zeros()), |v| point("g30_mm", v))?,
+        work_offsets_mm,
+    })
+}
+
+/// Checks that the loaded tool is in the table (once the table is read).
+fn check_loaded_tool(path: &Path, program: &ProgramSetup) -> Result<(), ConfigError> {
+    if program.loaded_tool != 0 && program.tools.get(program.loaded_tool).is_none() {
+        return Err(ConfigError::Invalid {
+            file: path.to_path_buf(),
+            table: "program".into(),
+            key: "loaded_tool".into(),
+            message: format!(
+                "tool {} is not in the tool table {}",
+                program.loaded_tool,
+                program
+                    .tool_table_file
+                    .as_ref()
+                    .map_or(String::new(), |p| p.display().to_string())
+            ),
+        });
+    }
+    Ok(())
 }
 
 struct Ctx<'a> {
@@ -373,15 +504,25 @@ impl Machine {
             source,
         })?;
         let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-        Machine::parse(path, &text, |rel| DriveDictionary::load(&base.join(rel)))
+        let mut machine =
+            Machine::parse(path, &text, |rel| DriveDictionary::load(&base.join(rel)))?;
+        if let Some(rel) = &machine.program.tool_table_file {
+            machine.program.tools = crate::gcode::ToolTable::load(&base.join(rel))?;
+        }
+        check_loaded_tool(path, &machine.program)?;
+        Ok(machine)
     }
 
     /// The embedded demo machine (three simulated axes on the in-process bus).
     pub fn demo() -> Machine {
-        Machine::parse(Path::new(DEMO_MACHINE_PATH), DEMO_MACHINE, |rel| {
+        let mut machine = Machine::parse(Path::new(DEMO_MACHINE_PATH), DEMO_MACHINE, |rel| {
             DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), DEMO_DRIVE)
         })
-        .expect("the embedded demo machine is valid (a unit test checks it)")
+        .expect("the embedded demo machine is valid (a unit test checks it)");
+        machine.program.tools =
+            crate::gcode::ToolTable::parse(Path::new(DEMO_TOOLS_PATH), DEMO_TOOLS)
+                .expect("the embedded demo tool table is valid (a unit test checks it)");
+        machine
     }
 
     /// Parse a machine file's text; `load_dict` resolves dictionary paths.
@@ -703,6 +844,7 @@ impl Machine {
             },
             axes,
             max_load_percent: raw.bus.max_load_percent,
+            program: program_setup(&ctx, &raw.program)?,
         };
         machine.admit(&ctx)?;
         Ok(machine)
@@ -946,6 +1088,76 @@ mod tests {
         assert!(e.starts_with("m.toml: [bus] cycle_us: 1234"), "{e}");
         let e = demo_with("[machine]", "[machine]\nspeed = 3");
         assert!(e.contains("speed"), "{e}");
+    }
+
+    #[test]
+    fn the_program_table_is_checked_and_reaches_the_interpreter_setup() {
+        let e = demo_with("G54 = [0.0, 0.0, 0.0]", "G60 = [1.0, 2.0, 3.0]");
+        assert!(
+            e.starts_with("m.toml: [program.work_offsets_mm] G60: no such work offset"),
+            "{e}"
+        );
+        let e = demo_with("g28_mm = [0.0, 0.0, 0.0]", "g28_mm = [1.0, 2.0]");
+        assert!(e.starts_with("m.toml: [program] g28_mm: [1.0, 2.0]"), "{e}");
+        let e = demo_with("loaded_tool = 1", "loaded_tool = 1\nspindle = 2");
+        assert!(e.contains("spindle"), "{e}");
+
+        let m = Machine::demo();
+        assert_eq!(m.program.loaded_tool, 1);
+        let t1 = m.program.tools.get(1).expect("tool 1 in the demo table");
+        assert_eq!((t1.radius_mm, t1.length_mm), (2.0, 50.0));
+        let text = DEMO_MACHINE.replacen(
+            "G54 = [0.0, 0.0, 0.0]",
+            "G54 = [10.0, 0.0, 0.0], \"G59.3\" = [1.0, 2.0, -3.5]",
+            1,
+        );
+        let m = Machine::parse(Path::new("m.toml"), &text, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), DEMO_DRIVE)
+        })
+        .unwrap();
+        let setup = m.setup(nalgebra::Vector3::new(1.0, 1.0, 1.0));
+        assert_eq!(setup.start_mm, nalgebra::Vector3::new(1.0, 1.0, 1.0));
+        assert_eq!(setup.work_offsets_mm[0].x, 10.0);
+        assert_eq!(
+            setup.work_offsets_mm[8],
+            nalgebra::Vector3::new(1.0, 2.0, -3.5)
+        );
+    }
+
+    #[test]
+    fn a_loaded_tool_missing_from_the_table_is_refused_on_load() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries");
+        let text = DEMO_MACHINE
+            .replacen(
+                "../drives/cia402-servo.toml",
+                &root.join("drives/cia402-servo.toml").display().to_string(),
+                3,
+            )
+            .replacen(
+                "../tools/demo-tools.toml",
+                &root.join("tools/demo-tools.toml").display().to_string(),
+                1,
+            );
+        let ok = dir.path().join("ok.toml");
+        std::fs::write(&ok, &text).unwrap();
+        assert_eq!(
+            Machine::load(&ok)
+                .unwrap()
+                .program
+                .tools
+                .get(2)
+                .unwrap()
+                .radius_mm,
+            3.0
+        );
+        let bad = dir.path().join("bad.toml");
+        std::fs::write(&bad, text.replacen("loaded_tool = 1", "loaded_tool = 9", 1)).unwrap();
+        let e = Machine::load(&bad).unwrap_err().to_string();
+        assert!(
+            e.contains("[program] loaded_tool: tool 9 is not in the tool table"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -182,6 +182,8 @@ pub struct CyclicMaster {
     pub first_motion_cycle: Option<u64>,
     /// Largest |following error| per axis while streaming and settling (mm).
     pub max_ferr_mm: Vec<f64>,
+    /// The latest following error computed from a fresh TPDO, per axis.
+    last_ferr_mm: Vec<f64>,
     /// Cycles spent streaming.
     pub streaming_cycles: u64,
 }
@@ -210,6 +212,7 @@ impl CyclicMaster {
             bit12_cycle: None,
             first_motion_cycle: None,
             max_ferr_mm: vec![0.0; n],
+            last_ferr_mm: vec![0.0; n],
             streaming_cycles: 0,
             axes,
         }
@@ -627,7 +630,9 @@ impl CyclicMaster {
 
         // Following error: the drive interpolates towards the setpoint latched at the last SYNC,
         // and its TPDO reports the position at that SYNC, when the setpoint sent two cycles ago
-        // was the demand.
+        // was the demand. Only a TPDO that answered the last SYNC is compared: a stale one (the
+        // drive or this thread ran late) belongs to an older demand, and comparing it with this
+        // one would report the distance travelled meanwhile as following error.
         let mut rec = CycleRecord {
             cycle: self.cycle,
             phase: self.phase,
@@ -640,7 +645,13 @@ impl CyclicMaster {
             rec.cmd_mm[i] = self.sp_mm[i][0];
             if let Some(p) = *act {
                 rec.act_mm[i] = p;
+                let fresh = self.fb[i].is_some_and(|f| f.cycle + 1 == self.cycle);
+                if !fresh {
+                    rec.ferr_mm[i] = self.last_ferr_mm[i];
+                    continue;
+                }
                 let ferr = self.sp_mm[i][2] - p;
+                self.last_ferr_mm[i] = ferr;
                 rec.ferr_mm[i] = ferr;
                 if matches!(self.phase, Phase::Streaming | Phase::Settling) {
                     self.max_ferr_mm[i] = self.max_ferr_mm[i].max(ferr.abs());
@@ -893,6 +904,33 @@ mod tests {
         // X and Y came to rest short of the target.
         let last = cmds.last().unwrap();
         assert!(last[0] < 200.0 && last[1] < 150.0);
+    }
+
+    #[test]
+    fn a_late_tpdo_is_not_reported_as_following_error() {
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 30);
+        let armed = r.master.armed_mm().unwrap();
+        r.master
+            .supply_motion(motion(armed, "G1 X60 Y5 Z-1 F6000\n"));
+        for _ in 0..60 {
+            r.step();
+        }
+        // X's drive keeps following but its TPDOs miss five SYNCs (fewer than the alarm's
+        // STALE_CYCLES): the axis moved on meanwhile, it did not lag.
+        r.drives[0].silent = true;
+        for _ in 0..5 {
+            r.step();
+        }
+        r.drives[0].silent = false;
+        r.run_until(Phase::Done, 5000);
+        assert_eq!(r.master.failure(), None);
+        // This rig's drive reports exactly the demand latched two SYNCs earlier, in counts.
+        assert!(
+            r.master.max_ferr_mm[0] <= 1.0 / r.master.axes[0].counts_per_mm,
+            "following error {} mm from stale feedback",
+            r.master.max_ferr_mm[0]
+        );
     }
 
     #[test]

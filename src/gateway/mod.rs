@@ -355,10 +355,10 @@ pub fn plan_program(
     start_mm: Vector3<f64>,
 ) -> Result<Plan, GatewayError> {
     use crate::gcode::{Error as GcodeError, ErrorKind as GcodeErrorKind, Item};
-    let program = crate::gcode::parse_program(text, name, start_mm)?;
+    let program = crate::gcode::parse_program_with(text, name, machine.setup(start_mm))?;
     for item in &program.items {
-        let element = match item {
-            Item::Motion(e) => e,
+        match item {
+            Item::Motion(e) => check_element(machine, name, e)?,
             // The cyclic loop cannot wait for an operator yet: refuse rather than run through
             // a stop the programmer asked for.
             Item::Stop(stop) => {
@@ -372,52 +372,73 @@ pub fn plan_program(
                     },
                 }));
             }
-            _ => continue,
-        };
-        // A line is checked at its end (its start was checked as the previous end); an arc can
-        // leave the box of its end points, so its whole extent is checked.
-        let (lo_mm, hi_mm) = match element.kind {
-            crate::gcode::ElementKind::Line => (element.end_mm, element.end_mm),
-            crate::gcode::ElementKind::Arc { .. } => element.bounds_mm(),
-        };
-        for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
-            let axis = machine.axes.iter().find(|a| a.name.starts_with(letter));
-            let moves = element.end_mm[i] != element.start_mm[i] || hi_mm[i] > lo_mm[i];
-            match axis {
-                None if moves => {
-                    return Err(GatewayError::NoSuchAxis {
-                        file: name.to_string(),
-                        line: element.line,
-                        axis: letter,
-                        machine: machine.name.clone(),
-                    });
-                }
-                Some(a)
-                    if !(a.min_mm..=a.max_mm).contains(&lo_mm[i])
-                        || !(a.min_mm..=a.max_mm).contains(&hi_mm[i]) =>
-                {
-                    let target_mm = if lo_mm[i] < a.min_mm || lo_mm[i].is_nan() {
-                        lo_mm[i]
-                    } else {
-                        hi_mm[i]
-                    };
-                    return Err(GatewayError::OutOfTravel {
-                        file: name.to_string(),
-                        line: element.line,
-                        axis: a.name.clone(),
-                        target_mm,
-                        min_mm: a.min_mm,
-                        max_mm: a.max_mm,
-                    });
-                }
-                _ => {}
-            }
+            _ => {}
         }
     }
     crate::planner::plan(&program, &limits(machine)).map_err(|source| GatewayError::Plan {
         file: name.to_string(),
         source,
     })
+}
+
+/// Checks one element of the tool-centre path against the machine: every axis it moves exists
+/// and stays within its travel (an arc over its whole extent, not only its end points).
+pub fn check_element(
+    machine: &Machine,
+    name: &str,
+    element: &crate::gcode::Element,
+) -> Result<(), GatewayError> {
+    if element.comp != crate::gcode::CompState::Off {
+        return Err(GatewayError::Program(crate::gcode::Error {
+            file: name.to_string(),
+            line: element.line,
+            col: element.col,
+            kind: crate::gcode::ErrorKind::Unsupported {
+                what: "G41/G42".to_string(),
+                reason: "cutter radius compensation is not applied on this path yet",
+            },
+        }));
+    }
+    // A line is checked at its end (its start was checked as the previous end); an arc can
+    // leave the box of its end points, so its whole extent is checked.
+    let (lo_mm, hi_mm) = match element.kind {
+        crate::gcode::ElementKind::Line => (element.end_mm, element.end_mm),
+        crate::gcode::ElementKind::Arc { .. } => element.bounds_mm(),
+    };
+    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+        let axis = machine.axes.iter().find(|a| a.name.starts_with(letter));
+        let moves = element.end_mm[i] != element.start_mm[i] || hi_mm[i] > lo_mm[i];
+        match axis {
+            None if moves => {
+                return Err(GatewayError::NoSuchAxis {
+                    file: name.to_string(),
+                    line: element.line,
+                    axis: letter,
+                    machine: machine.name.clone(),
+                });
+            }
+            Some(a)
+                if !(a.min_mm..=a.max_mm).contains(&lo_mm[i])
+                    || !(a.min_mm..=a.max_mm).contains(&hi_mm[i]) =>
+            {
+                let target_mm = if lo_mm[i] < a.min_mm || lo_mm[i].is_nan() {
+                    lo_mm[i]
+                } else {
+                    hi_mm[i]
+                };
+                return Err(GatewayError::OutOfTravel {
+                    file: name.to_string(),
+                    line: element.line,
+                    axis: a.name.clone(),
+                    target_mm,
+                    min_mm: a.min_mm,
+                    max_mm: a.max_mm,
+                });
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// CSV header: `cycle,t_s`, then `<axis>_cmd_mm` for each axis, then `_act_mm`, then `_ferr_mm`.
@@ -557,7 +578,7 @@ async fn run_async(
     }
     let final_counts = master.final_counts();
     Ok(Summary {
-        program_s: master.motion().map_or(0.0, |m| m.plan().duration_s()),
+        program_s: master.motion().map_or(0.0, |m| m.duration_s()),
         streaming_cycles: master.streaming_cycles,
         cycles: timing.cycles,
         axes: machine.axes.iter().map(|a| a.name.clone()).collect(),

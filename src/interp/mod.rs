@@ -1,4 +1,5 @@
-//! Cyclic interpolator: samples a [`Plan`] once per control period (the CANopen SYNC period).
+//! Cyclic interpolator: samples planned segments once per control period (the CANopen SYNC
+//! period).
 //!
 //! Third stage of the pipeline (`gcode → planner → interp → setpoints`). Shaped like Ruckig:
 //! constructed with the cycle time, then [`Interpolator::update`] once per cycle, which never
@@ -6,14 +7,26 @@
 //! plan's position at `t = k · period_s`, computed from `k` (not by adding periods) so there is
 //! no drift however long the program runs.
 //!
-//! The first sample whose time reaches the plan's end is exactly the plan's final point (bit
-//! for bit) and comes with [`Status::Finished`]; every later call returns that point again.
+//! Segments sit in a queue: either a whole [`Plan`] given at construction
+//! ([`Interpolator::new`]), or segments pushed as the planner settles them
+//! ([`Interpolator::streaming`], [`Interpolator::push`], then [`Interpolator::close`]), so a
+//! program of any length is sampled with bounded memory. The queue's capacity grows only while
+//! a producer pushes faster than the samples consume; `update` itself only pops.
+//!
+//! The first sample whose time reaches the end of a closed queue is exactly the last segment's
+//! end point (bit for bit) and comes with [`Status::Finished`]; every later call returns that
+//! point again. A sample that falls beyond the queued segments of a queue still open is a
+//! producer underrun: [`Status::Starved`], the previous sample again, and time does not advance
+//! (the planner keeps every settled segment ending at a speed it can stop from, so that holding
+//! is a planning failure to report, never a normal event).
 //!
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
+use std::collections::VecDeque;
+
 use nalgebra::Vector3;
 
-use crate::planner::Plan;
+use crate::planner::{Plan, Segment};
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
 /// that rounding in `k · period_s` never adds one extra period of standing still.
@@ -27,11 +40,14 @@ pub enum Status {
         /// 1-based source line of the segment being executed.
         line: usize,
     },
+    /// The queue is open and ran dry before this sample's time: the previous sample again,
+    /// time held (see the module documentation).
+    Starved,
     /// The sample is the plan's final point (this call and every later one).
     Finished,
 }
 
-/// Why an interpolator could not be built.
+/// Why an interpolator could not be built or fed.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum InterpError {
     /// The period is not finite or not positive.
@@ -40,71 +56,134 @@ pub enum InterpError {
         /// The offending period.
         period_s: f64,
     },
+    /// A pushed segment does not continue the queue (in place or in time), or the queue is
+    /// closed.
+    #[error(
+        "segment of line {line} does not continue the queued motion (it must start where and when the previous one ended, before close)"
+    )]
+    Discontinuous {
+        /// The segment's source line.
+        line: usize,
+    },
 }
 
-/// Samples a plan at a fixed period. See the module documentation.
+/// Samples planned segments at a fixed period. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct Interpolator {
-    plan: Plan,
+    queue: VecDeque<Segment>,
     period_s: f64,
-    /// Number of samples produced so far.
+    /// End point and end time of the last segment queued (the start before any).
+    queued_end_mm: Vector3<f64>,
+    queued_end_s: f64,
+    /// No more segments will come.
+    closed: bool,
+    /// Number of samples produced so far (starved calls do not count).
     samples: u64,
-    /// Segment of the latest sample; only moves forward.
-    segment: usize,
+    /// The latest sample.
+    last_mm: Vector3<f64>,
+    /// Source line of the segment of the latest sample (or of the first queued before any).
+    line: Option<usize>,
     finished: bool,
 }
 
 impl Interpolator {
-    /// Prepares to sample `plan` every `period_s` seconds, starting at the plan's start.
+    /// Prepares to sample a whole `plan` every `period_s` seconds, starting at its start.
     pub fn new(plan: Plan, period_s: f64) -> Result<Interpolator, InterpError> {
+        let mut interp = Interpolator::streaming(plan.start_mm(), period_s)?;
+        interp.queue.extend(plan.segments().iter().copied());
+        interp.queued_end_mm = plan.end_mm();
+        interp.queued_end_s = plan.duration_s();
+        interp.line = plan.segments().first().map(|s| s.line);
+        interp.closed = true;
+        Ok(interp)
+    }
+
+    /// Prepares to sample segments pushed later, from `start_mm` at time 0.
+    pub fn streaming(start_mm: Vector3<f64>, period_s: f64) -> Result<Interpolator, InterpError> {
         if !(period_s > 0.0 && period_s.is_finite()) {
             return Err(InterpError::InvalidPeriod { period_s });
         }
         Ok(Interpolator {
-            plan,
+            queue: VecDeque::new(),
             period_s,
+            queued_end_mm: start_mm,
+            queued_end_s: 0.0,
+            closed: false,
             samples: 0,
-            segment: 0,
+            last_mm: start_mm,
+            line: None,
             finished: false,
         })
+    }
+
+    /// Queues the next segment: it must start exactly where and when the last queued one ended
+    /// (`start_mm` bit for bit; `start_time_s` within a nanosecond), on a queue not closed.
+    pub fn push(&mut self, segment: Segment) -> Result<(), InterpError> {
+        let continuous = segment.start_mm == self.queued_end_mm
+            && (segment.start_time_s - self.queued_end_s).abs() <= 1e-9;
+        if self.closed || !continuous {
+            return Err(InterpError::Discontinuous { line: segment.line });
+        }
+        self.queued_end_mm = segment.end_mm;
+        self.queued_end_s = segment.end_time_s();
+        if self.line.is_none() {
+            self.line = Some(segment.line);
+        }
+        self.queue.push_back(segment);
+        Ok(())
+    }
+
+    /// No more segments: the sample that reaches the end of the queue finishes.
+    pub fn close(&mut self) {
+        self.closed = true;
+    }
+
+    /// Whether the next sample's time lies beyond the queued segments of an open queue: the
+    /// producer must push (or close) before the next [`update`](Self::update).
+    pub fn needs_segments(&self) -> bool {
+        !self.closed && self.next_time_s() >= self.queued_end_s - END_SNAP_PERIODS * self.period_s
     }
 
     /// Produces the next sample into `out_mm`: the position one period after the previous
     /// sample (the first call gives the position at `period_s`). No allocation, no panic.
     pub fn update(&mut self, out_mm: &mut Vector3<f64>) -> Status {
-        self.samples = self.samples.saturating_add(1);
-        if !self.finished {
-            // Exact for any realistic count (< 2^53 samples).
-            let t_s = self.samples as f64 * self.period_s;
-            let end_s = self.plan.duration_s();
-            if t_s < end_s - END_SNAP_PERIODS * self.period_s {
-                let segments = self.plan.segments();
-                while segments
-                    .get(self.segment + 1)
-                    .is_some_and(|next| next.start_time_s <= t_s)
-                {
-                    self.segment += 1;
-                }
-                if let Some(seg) = segments.get(self.segment) {
-                    *out_mm = seg.position_at(t_s - seg.start_time_s);
-                    return Status::Working { line: seg.line };
-                }
-            }
-            self.finished = true;
-            self.segment = self.plan.segments().len().saturating_sub(1);
+        if self.finished {
+            *out_mm = self.last_mm;
+            return Status::Finished;
         }
-        *out_mm = self.plan.end_mm();
-        Status::Finished
+        // Exact for any realistic count (< 2^53 samples).
+        let t_s = self.next_time_s();
+        let snap_s = END_SNAP_PERIODS * self.period_s;
+        while let Some(seg) = self.queue.front() {
+            // The last segment of an open queue is kept: it is what a starved call holds to.
+            if t_s < seg.end_time_s() - snap_s {
+                self.samples = self.samples.saturating_add(1);
+                self.line = Some(seg.line);
+                self.last_mm = seg.position_at(t_s - seg.start_time_s);
+                *out_mm = self.last_mm;
+                return Status::Working { line: seg.line };
+            }
+            self.line = Some(seg.line);
+            self.queue.pop_front();
+        }
+        if self.closed {
+            self.samples = self.samples.saturating_add(1);
+            self.finished = true;
+            self.last_mm = self.queued_end_mm;
+            *out_mm = self.last_mm;
+            return Status::Finished;
+        }
+        *out_mm = self.last_mm;
+        Status::Starved
     }
 
     /// Source line of the segment of the latest sample (the first segment's before any
-    /// sample, the last one's once finished); `None` for a plan without motion.
+    /// sample, the last one's once finished); `None` before any segment.
     pub fn current_line(&self) -> Option<usize> {
-        self.plan.segments().get(self.segment).map(|s| s.line)
+        self.line
     }
 
-    /// Time of the latest sample since the start: `k · period_s` after `k` calls to
-    /// [`update`](Self::update) (it keeps counting after the end).
+    /// Time of the latest sample since the start: `k · period_s` after `k` samples.
     pub fn elapsed_s(&self) -> f64 {
         self.samples as f64 * self.period_s
     }
@@ -119,18 +198,27 @@ impl Interpolator {
         self.period_s
     }
 
-    /// The plan being sampled.
-    pub fn plan(&self) -> &Plan {
-        &self.plan
+    /// End time of the queued motion (the whole program's duration once closed).
+    pub fn duration_s(&self) -> f64 {
+        self.queued_end_s
+    }
+
+    /// Segments queued and not yet passed.
+    pub fn queued(&self) -> usize {
+        self.queue.len()
     }
 
     /// Number of calls to [`update`](Self::update) needed to reach [`Status::Finished`]
-    /// from the start (1 for a plan without motion).
+    /// from the start (1 for a plan without motion), once the queue is closed.
     pub fn total_samples(&self) -> u64 {
-        let periods = self.plan.duration_s() / self.period_s;
+        let periods = self.queued_end_s / self.period_s;
         let k = (periods - END_SNAP_PERIODS).ceil().max(1.0);
         // Saturating float-to-int cast: a plan too long to count is "forever".
         k as u64
+    }
+
+    fn next_time_s(&self) -> f64 {
+        self.samples.saturating_add(1) as f64 * self.period_s
     }
 }
 
@@ -255,12 +343,78 @@ mod tests {
             .iter()
             .filter_map(|(_, s)| match s {
                 Status::Working { line } => Some(*line),
-                Status::Finished => None,
+                Status::Finished | Status::Starved => None,
             })
             .collect();
         lines.dedup();
         assert_eq!(lines, vec![1, 5]);
         assert_eq!(interp.current_line(), Some(5));
+    }
+
+    #[test]
+    fn streaming_gives_the_samples_of_the_whole_plan_and_holds_time_when_starved() {
+        let moves = [
+            feed(1, v(3.0, 0.0, 0.0), 20.0),
+            feed(2, v(3.0, 2.0, 1.0), 15.0),
+            feed(3, v(0.0, 0.0, 0.0), 30.0),
+        ];
+        let plan = plan_moves(Vector3::zeros(), &moves, &limits()).unwrap();
+        let whole = run(&mut Interpolator::new(plan.clone(), 0.001).unwrap());
+
+        let mut interp = Interpolator::streaming(Vector3::zeros(), 0.001).unwrap();
+        let mut pending = plan.segments().iter().copied();
+        let mut streamed = Vec::new();
+        let mut starved = 0;
+        let mut out = Vector3::zeros();
+        loop {
+            // Starve the sampler once per segment before feeding it.
+            if interp.needs_segments() {
+                let held = interp.elapsed_s();
+                assert_eq!(interp.update(&mut out), Status::Starved);
+                assert_eq!(
+                    interp.elapsed_s(),
+                    held,
+                    "a starved call must not advance time"
+                );
+                starved += 1;
+                match pending.next() {
+                    Some(seg) => interp.push(seg).unwrap(),
+                    None => interp.close(),
+                }
+                continue;
+            }
+            let status = interp.update(&mut out);
+            streamed.push((out, status));
+            if status == Status::Finished {
+                break;
+            }
+        }
+        assert_eq!(streamed, whole, "bit for bit the samples of the whole plan");
+        assert_eq!(starved, plan.segments().len() + 1);
+        assert_eq!(interp.queued(), 0);
+    }
+
+    #[test]
+    fn a_segment_that_does_not_continue_the_queue_is_refused() {
+        let moves = [
+            feed(1, v(3.0, 0.0, 0.0), 20.0),
+            feed(2, v(3.0, 2.0, 0.0), 20.0),
+        ];
+        let plan = plan_moves(Vector3::zeros(), &moves, &limits()).unwrap();
+        let segs = plan.segments();
+        let mut interp = Interpolator::streaming(Vector3::zeros(), 0.001).unwrap();
+        assert_eq!(
+            interp.push(segs[1]),
+            Err(InterpError::Discontinuous { line: 2 }),
+            "the second segment cannot come first"
+        );
+        interp.push(segs[0]).unwrap();
+        let mut late = segs[1];
+        late.start_time_s += 0.01;
+        assert!(interp.push(late).is_err(), "a gap in time is refused");
+        interp.push(segs[1]).unwrap();
+        interp.close();
+        assert!(interp.push(segs[1]).is_err(), "nothing after close");
     }
 
     #[test]

@@ -409,27 +409,69 @@ pub fn plan(program: &Program, limits: &Limits) -> Result<Plan, PlanError> {
     plan_items(program.start_mm, &program.items, limits)
 }
 
-/// Plans `items` (elements, dwells, stops; notes and the end are ignored) from `start_mm`:
-/// one exact-stop trapezoid per element, zero-length lines skipped. Each element must start
-/// where the previous one ended.
+/// Plans `items` (elements, dwells, stops; notes and the end are ignored) from `start_mm`
+/// into one [`Plan`]: [`Planner`] run over all of them.
 pub fn plan_items<'a>(
     start_mm: Vector3<f64>,
     items: impl IntoIterator<Item = &'a Item>,
     limits: &Limits,
 ) -> Result<Plan, PlanError> {
-    limits.validate()?;
-    if !start_mm.iter().all(|c| c.is_finite()) {
-        return Err(PlanError::NonFiniteStart);
-    }
+    let mut planner = Planner::new(start_mm, limits)?;
     let mut segments = Vec::new();
-    let mut position_mm = start_mm;
-    let mut time_s = 0.0;
     for item in items {
+        planner.push(item)?;
+        segments.extend(planner.drain());
+    }
+    planner.finish();
+    segments.extend(planner.drain());
+    Ok(Plan {
+        start_mm,
+        segments,
+        duration_s: planner.time_s(),
+    })
+}
+
+/// The streaming planner: items in with [`push`](Planner::push), settled segments out with
+/// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
+/// bounded by the look-ahead window, whatever the program's length.
+///
+/// This planner stops exactly at every block end: every element settles as soon as it is
+/// pushed (one exact-stop trapezoid, zero-length lines skipped). Each element must start where
+/// the previous one ended.
+#[derive(Debug, Clone)]
+pub struct Planner {
+    limits: Limits,
+    position_mm: Vector3<f64>,
+    time_s: f64,
+    ready: std::collections::VecDeque<Segment>,
+    finished: bool,
+}
+
+impl Planner {
+    /// A planner at rest at `start_mm`, at time 0.
+    pub fn new(start_mm: Vector3<f64>, limits: &Limits) -> Result<Planner, PlanError> {
+        limits.validate()?;
+        if !start_mm.iter().all(|c| c.is_finite()) {
+            return Err(PlanError::NonFiniteStart);
+        }
+        Ok(Planner {
+            limits: *limits,
+            position_mm: start_mm,
+            time_s: 0.0,
+            ready: std::collections::VecDeque::new(),
+            finished: false,
+        })
+    }
+
+    /// Adds the next item of the program (notes and the end are ignored).
+    pub fn push(&mut self, item: &Item) -> Result<(), PlanError> {
         let segment = match item {
-            Item::Motion(e) => match plan_element(e, position_mm, time_s, limits)? {
-                Some(s) => s,
-                None => continue,
-            },
+            Item::Motion(e) => {
+                match plan_element(e, self.position_mm, self.time_s, &self.limits)? {
+                    Some(s) => s,
+                    None => return Ok(()),
+                }
+            }
             Item::Dwell(d) => {
                 if !(d.seconds >= 0.0 && d.seconds.is_finite()) {
                     return Err(PlanError::InvalidDwell {
@@ -438,33 +480,66 @@ pub fn plan_items<'a>(
                     });
                 }
                 if d.seconds == 0.0 {
-                    continue;
+                    return Ok(());
                 }
-                still(d.line, position_mm, SegmentPath::Dwell, d.seconds, time_s)
+                still(
+                    d.line,
+                    self.position_mm,
+                    SegmentPath::Dwell,
+                    d.seconds,
+                    self.time_s,
+                )
             }
             Item::Stop(s) => still(
                 s.line,
-                position_mm,
+                self.position_mm,
                 SegmentPath::Stop {
                     optional: s.optional,
                 },
                 0.0,
-                time_s,
+                self.time_s,
             ),
-            Item::Note(_) | Item::End(_) => continue,
+            Item::Note(_) | Item::End(_) => return Ok(()),
         };
-        time_s = segment.end_time_s();
-        if !time_s.is_finite() {
+        let end_s = segment.end_time_s();
+        if !end_s.is_finite() {
             return Err(PlanError::Overflow { line: segment.line });
         }
-        position_mm = segment.end_mm;
-        segments.push(segment);
+        self.time_s = end_s;
+        self.position_mm = segment.end_mm;
+        self.ready.push_back(segment);
+        Ok(())
     }
-    Ok(Plan {
-        start_mm,
-        segments,
-        duration_s: time_s,
-    })
+
+    /// The program ended: everything pushed settles (the motion ends at rest).
+    pub fn finish(&mut self) {
+        self.finished = true;
+    }
+
+    /// The next settled segment, in time order.
+    pub fn pop(&mut self) -> Option<Segment> {
+        self.ready.pop_front()
+    }
+
+    /// Every settled segment, in time order.
+    pub fn drain(&mut self) -> impl Iterator<Item = Segment> + '_ {
+        self.ready.drain(..)
+    }
+
+    /// End time of everything pushed so far.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Where everything pushed so far ends.
+    pub fn position_mm(&self) -> Vector3<f64> {
+        self.position_mm
+    }
+
+    /// Whether [`finish`](Self::finish) was called.
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
 }
 
 /// A segment without motion.

@@ -1,0 +1,451 @@
+//! Offline planning, `canmotion plan`: the whole pipeline up to the setpoints, with no bus.
+//!
+//! The program streams through the stages (`gcode → compensation → planner → interp`) one item
+//! at a time, so memory is bounded by the look-ahead windows whatever the file's size. What
+//! comes out is a [`PlanSummary`] and, on request, the tool-centre path (JSON Lines) and the
+//! setpoints `run` would stream (CSV, one row per cycle).
+//!
+//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_s` seconds.
+
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::config::Machine;
+use crate::gateway::{GatewayError, check_element, limits};
+use crate::gcode::{Element, ElementKind, Interpreter, Item};
+use crate::interp::{Interpolator, Status};
+use crate::planner::{Planner, Segment, SegmentPath};
+
+/// What to write besides the summary.
+#[derive(Debug, Clone, Default)]
+pub struct PlanOptions {
+    /// The compensated tool-centre path, one JSON object per element per line.
+    pub path_out: Option<PathBuf>,
+    /// The interpolated setpoints, one CSV row per cycle.
+    pub setpoints_out: Option<PathBuf>,
+}
+
+/// What a plan amounts to.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanSummary {
+    /// Motion elements of the tool-centre path (lines and arcs, rapids included).
+    pub elements: u64,
+    /// Of which rapids (G0, G28/G30 moves).
+    pub rapids: u64,
+    /// Of which arcs and helices.
+    pub arcs: u64,
+    /// Path length of all elements.
+    pub length_mm: f64,
+    /// Path length of the feed moves only.
+    pub feed_length_mm: f64,
+    /// Time the program takes (motion, dwells), from the plan.
+    pub program_s: f64,
+    /// Highest path speed of a feed move in the plan.
+    pub max_feed_mm_s: f64,
+    /// Highest path speed of a rapid in the plan.
+    pub max_rapid_mm_s: f64,
+    /// Dwells (G4) and program stops (M0/M1).
+    pub dwells: u64,
+    /// See `dwells`.
+    pub stops: u64,
+    /// Words accepted without a motion effect (spindle, coolant, tools).
+    pub notes: u64,
+    /// Smallest and largest machine coordinates the tool centre reaches.
+    pub bounds_mm: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// Setpoint rows written (cycles), when setpoints were asked for.
+    pub cycles: Option<u64>,
+}
+
+/// Why `plan` failed: the program (with its place), the machine, or an output file.
+#[derive(Debug, thiserror::Error)]
+pub enum OfflineError {
+    /// The program or the machine refused it (parse error, travel, planning).
+    #[error(transparent)]
+    Gateway(#[from] GatewayError),
+    /// An output file could not be written.
+    #[error("{}: cannot write: {source}", file.display())]
+    Write {
+        /// The file.
+        file: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A planned segment did not continue the motion (a planner bug, reported, never sampled).
+    #[error("{file}: {source}")]
+    Sampling {
+        /// Program file.
+        file: String,
+        /// Why.
+        source: crate::interp::InterpError,
+    },
+}
+
+/// One line of the `--path` output.
+#[derive(Serialize)]
+struct PathRecord {
+    line: usize,
+    kind: &'static str,
+    rapid: bool,
+    start: [f64; 3],
+    end: [f64; 3],
+    #[serde(skip_serializing_if = "Option::is_none")]
+    center: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    normal: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    cw: Option<bool>,
+    feed_mm_s: f64,
+}
+
+fn xyz(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// A file written through a buffer, named in its errors. It is written as `FILE.partial` and
+/// renamed to `FILE` only when complete, so a failed plan never leaves a truncated output that
+/// looks whole (the partial file is removed).
+struct Out {
+    file: PathBuf,
+    partial: PathBuf,
+    w: Option<std::io::BufWriter<std::fs::File>>,
+}
+
+impl Out {
+    fn create(file: &Path) -> Result<Out, OfflineError> {
+        let mut partial = file.as_os_str().to_owned();
+        partial.push(".partial");
+        let partial = PathBuf::from(partial);
+        let f = std::fs::File::create(&partial).map_err(|source| OfflineError::Write {
+            file: partial.clone(),
+            source,
+        })?;
+        Ok(Out {
+            file: file.to_path_buf(),
+            partial,
+            w: Some(std::io::BufWriter::new(f)),
+        })
+    }
+
+    fn err(&self, source: std::io::Error) -> OfflineError {
+        OfflineError::Write {
+            file: self.file.clone(),
+            source,
+        }
+    }
+
+    fn write_all(&mut self, bytes: &[u8]) -> Result<(), OfflineError> {
+        match self.w.as_mut() {
+            Some(w) => w.write_all(bytes).map_err(|e| self.err(e)),
+            None => Ok(()),
+        }
+    }
+
+    fn finish(mut self) -> Result<(), OfflineError> {
+        if let Some(mut w) = self.w.take() {
+            w.flush().map_err(|e| self.err(e))?;
+        }
+        std::fs::rename(&self.partial, &self.file).map_err(|e| self.err(e))
+    }
+}
+
+impl Drop for Out {
+    fn drop(&mut self) {
+        if self.w.take().is_some() {
+            // Not finished: an error stopped the plan.
+            let _ = std::fs::remove_file(&self.partial);
+        }
+    }
+}
+
+/// Plans `reader` (named `name` in messages) on `machine` from `start_mm`, streaming, and writes
+/// what `opts` asks for. Nothing is written past the first error, which names the file, line
+/// and column.
+pub fn plan_stream<R: BufRead>(
+    machine: &Machine,
+    reader: R,
+    name: &str,
+    start_mm: Vector3<f64>,
+    opts: &PlanOptions,
+) -> Result<PlanSummary, OfflineError> {
+    let setup = machine.setup(start_mm);
+    let interpreter = Interpreter::new(reader, name, setup);
+    let mut planner =
+        Planner::new(start_mm, &limits(machine)).map_err(|source| GatewayError::Plan {
+            file: name.to_string(),
+            source,
+        })?;
+    let mut path_out = opts.path_out.as_deref().map(Out::create).transpose()?;
+    let mut setpoints = match opts.setpoints_out.as_deref() {
+        Some(file) => Some(Setpoints::new(machine, file, start_mm, name)?),
+        None => None,
+    };
+    let mut summary = PlanSummary {
+        elements: 0,
+        rapids: 0,
+        arcs: 0,
+        length_mm: 0.0,
+        feed_length_mm: 0.0,
+        program_s: 0.0,
+        max_feed_mm_s: 0.0,
+        max_rapid_mm_s: 0.0,
+        dwells: 0,
+        stops: 0,
+        notes: 0,
+        bounds_mm: None,
+        cycles: None,
+    };
+    for item in interpreter {
+        let item = item.map_err(GatewayError::from)?;
+        match &item {
+            Item::Motion(e) => {
+                check_element(machine, name, e)?;
+                summary.add_element(e);
+                if let Some(out) = path_out.as_mut() {
+                    write_path_record(out, e)?;
+                }
+            }
+            Item::Dwell(_) => summary.dwells += 1,
+            Item::Stop(_) => summary.stops += 1,
+            Item::Note(_) => summary.notes += 1,
+            Item::End(_) => planner.finish(),
+        }
+        planner.push(&item).map_err(|source| GatewayError::Plan {
+            file: name.to_string(),
+            source,
+        })?;
+        while let Some(seg) = planner.pop() {
+            summary.add_segment(&seg);
+            if let Some(sp) = setpoints.as_mut() {
+                sp.push(seg)?;
+            }
+        }
+    }
+    planner.finish();
+    while let Some(seg) = planner.pop() {
+        summary.add_segment(&seg);
+        if let Some(sp) = setpoints.as_mut() {
+            sp.push(seg)?;
+        }
+    }
+    summary.program_s = planner.time_s();
+    if let Some(sp) = setpoints {
+        summary.cycles = Some(sp.finish()?);
+    }
+    if let Some(out) = path_out {
+        out.finish()?;
+    }
+    Ok(summary)
+}
+
+/// Plans a program file; see [`plan_stream`].
+pub fn plan_file(
+    machine: &Machine,
+    program: &Path,
+    start_mm: Vector3<f64>,
+    opts: &PlanOptions,
+) -> Result<PlanSummary, OfflineError> {
+    let name = program.display().to_string();
+    let file = std::fs::File::open(program).map_err(|e| {
+        GatewayError::Program(crate::gcode::Error {
+            file: name.clone(),
+            line: 0,
+            col: 0,
+            kind: crate::gcode::ErrorKind::Read {
+                message: e.to_string(),
+            },
+        })
+    })?;
+    plan_stream(
+        machine,
+        std::io::BufReader::with_capacity(1 << 16, file),
+        &name,
+        start_mm,
+        opts,
+    )
+}
+
+fn write_path_record(out: &mut Out, e: &Element) -> Result<(), OfflineError> {
+    let (kind, center, normal, cw) = match e.kind {
+        ElementKind::Line => ("line", None, None, None),
+        ElementKind::Arc {
+            center_mm,
+            normal,
+            cw,
+            ..
+        } => ("arc", Some(xyz(&center_mm)), Some(xyz(&normal)), Some(cw)),
+    };
+    let record = PathRecord {
+        line: e.line,
+        kind,
+        rapid: e.rapid,
+        start: xyz(&e.start_mm),
+        end: xyz(&e.end_mm),
+        center,
+        normal,
+        cw,
+        // Rapids have no programmed feed: 0 in the file, the planner uses the machine's.
+        feed_mm_s: e.feed_mm_s.unwrap_or(0.0),
+    };
+    let mut line = serde_json::to_vec(&record).map_err(|e| out.err(e.into()))?;
+    line.push(b'\n');
+    out.write_all(&line)
+}
+
+impl PlanSummary {
+    /// The summary as `plan` prints it.
+    pub fn report(&self, machine: &Machine) -> String {
+        let mut s = format!(
+            "elements      {} ({} rapids, {} arcs), {} dwells, {} program stops, {} notes\n",
+            self.elements, self.rapids, self.arcs, self.dwells, self.stops, self.notes
+        );
+        s += &format!(
+            "length        {:.3} mm ({:.3} mm at feed)\n",
+            self.length_mm, self.feed_length_mm
+        );
+        s += &format!("program time  {:.3} s\n", self.program_s);
+        s += &format!(
+            "max feed      {:.3} mm/s ({:.0} mm/min); rapids up to {:.3} mm/s\n",
+            self.max_feed_mm_s,
+            self.max_feed_mm_s * 60.0,
+            self.max_rapid_mm_s
+        );
+        if let Some((lo, hi)) = self.bounds_mm {
+            s += "extent       ";
+            for (i, letter) in ["X", "Y", "Z"].iter().enumerate() {
+                s += &format!(" {letter} [{:.3}, {:.3}]", lo[i], hi[i]);
+            }
+            s += " mm\n";
+        }
+        if let Some(cycles) = self.cycles {
+            s += &format!("setpoints     {cycles} cycles of {} µs\n", machine.cycle_us);
+        }
+        s
+    }
+
+    fn add_element(&mut self, e: &Element) {
+        let length_mm = e.length_mm();
+        self.elements += 1;
+        self.length_mm += length_mm;
+        if e.rapid {
+            self.rapids += 1;
+        } else {
+            self.feed_length_mm += length_mm;
+        }
+        if matches!(e.kind, ElementKind::Arc { .. }) {
+            self.arcs += 1;
+        }
+        let (lo, hi) = e.bounds_mm();
+        let (lo, hi) = (lo.inf(&e.start_mm), hi.sup(&e.start_mm));
+        self.bounds_mm = Some(match self.bounds_mm {
+            Some((l, h)) => (l.inf(&lo), h.sup(&hi)),
+            None => (lo, hi),
+        });
+    }
+
+    fn add_segment(&mut self, s: &Segment) {
+        if matches!(s.path, SegmentPath::Line { .. } | SegmentPath::Arc(_)) {
+            let max = if s.rapid {
+                &mut self.max_rapid_mm_s
+            } else {
+                &mut self.max_feed_mm_s
+            };
+            *max = max.max(s.v_peak_mm_s);
+        }
+    }
+}
+
+/// The `--setpoints` writer: samples segments as they settle, one row per cycle.
+struct Setpoints {
+    out: Out,
+    interp: Interpolator,
+    /// For each machine axis, its X/Y/Z index (`None`: held at its start).
+    axes: Vec<Option<usize>>,
+    held_mm: Vec<f64>,
+    period_s: f64,
+    cycle: u64,
+    name: String,
+}
+
+impl Setpoints {
+    fn new(
+        machine: &Machine,
+        file: &Path,
+        start_mm: Vector3<f64>,
+        name: &str,
+    ) -> Result<Setpoints, OfflineError> {
+        let mut out = Out::create(file)?;
+        let period_s = machine.cycle_s();
+        let interp = Interpolator::streaming(start_mm, period_s).map_err(|source| {
+            OfflineError::Sampling {
+                file: name.to_string(),
+                source,
+            }
+        })?;
+        let mut header = String::from("cycle,t_s");
+        for a in &machine.axes {
+            header.push_str(&format!(",{}_mm", a.name));
+        }
+        header.push('\n');
+        out.write_all(header.as_bytes())?;
+        let mut sp = Setpoints {
+            out,
+            interp,
+            axes: machine.axes.iter().map(|a| a.xyz()).collect(),
+            held_mm: vec![0.0; machine.axes.len()],
+            period_s,
+            cycle: 0,
+            name: name.to_string(),
+        };
+        // Row 0: where the machine is when the motion starts.
+        sp.row(start_mm)?;
+        Ok(sp)
+    }
+
+    fn push(&mut self, seg: Segment) -> Result<(), OfflineError> {
+        self.interp
+            .push(seg)
+            .map_err(|source| OfflineError::Sampling {
+                file: self.name.clone(),
+                source,
+            })?;
+        self.drain()
+    }
+
+    /// Samples every cycle that the queued segments cover.
+    fn drain(&mut self) -> Result<(), OfflineError> {
+        let mut p = Vector3::zeros();
+        while !self.interp.needs_segments() {
+            match self.interp.update(&mut p) {
+                Status::Working { .. } => self.row(p)?,
+                Status::Finished => {
+                    self.row(p)?;
+                    break;
+                }
+                Status::Starved => break,
+            }
+        }
+        Ok(())
+    }
+
+    fn row(&mut self, p: Vector3<f64>) -> Result<(), OfflineError> {
+        let mut s = format!("{},{:.6}", self.cycle, self.cycle as f64 * self.period_s);
+        for (i, axis) in self.axes.iter().enumerate() {
+            let v = axis.map_or(self.held_mm[i], |k| p[k]);
+            s.push_str(&format!(",{v:.6}"));
+        }
+        s.push('\n');
+        self.cycle += 1;
+        self.out.write_all(s.as_bytes())
+    }
+
+    fn finish(mut self) -> Result<u64, OfflineError> {
+        self.interp.close();
+        self.drain()?;
+        let cycles = self.cycle;
+        self.out.finish()?;
+        Ok(cycles)
+    }
+}

@@ -1,0 +1,239 @@
+//! `canmotion plan`: the offline pipeline as a user runs it, through the binary.
+//!
+//! What a user relies on: the path file is the tool-centre path, element after element with
+//! no gap; the setpoints are what `run` would stream (one row per cycle, within the axis
+//! limits, ending exactly at the program's end); a program that does not parse leaves no
+//! output that looks whole, and the error names the file, line and column.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use canmotion::config::Machine;
+
+fn canmotion() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_canmotion"))
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A machine file like the demo's, written into `dir` with absolute dictionary paths and
+/// `program_table` in place of the demo's `[program]` table.
+fn machine_file(dir: &Path, program_table: &str) -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries");
+    let demo = std::fs::read_to_string(root.join("machines/demo-xyz.toml")).unwrap();
+    let start = demo.find("[program]").expect("demo has a [program] table");
+    let end = start + demo[start..].find("[[axis]]").unwrap();
+    let text = format!("{}{program_table}\n\n{}", &demo[..start], &demo[end..]).replace(
+        "../drives/cia402-servo.toml",
+        &root.join("drives/cia402-servo.toml").display().to_string(),
+    );
+    write(dir, "machine.toml", &text)
+}
+
+const PROGRAM: &str = "\
+(lines, a full circle, a helix, a dwell)
+G21 G90 G17 F1200
+G0 X10 Y10
+G1 Z-1 F300
+G1 X30 F1500
+G2 X30 Y10 I0 J5
+G3 X40 Y20 Z-2 R10
+G4 P0.25
+G1 X12.5 Y17.25 Z-0.5 F900
+G0 Z2
+M2
+";
+
+#[test]
+fn plan_writes_a_continuous_path_and_setpoints_within_the_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(dir.path(), "p.ngc", PROGRAM);
+    let path = dir.path().join("path.jsonl");
+    let setpoints = dir.path().join("sp.csv");
+    let out = canmotion()
+        .arg("plan")
+        .arg(&program)
+        .arg("--path")
+        .arg(&path)
+        .arg("--setpoints")
+        .arg(&setpoints)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("elements      7 (2 rapids, 2 arcs), 1 dwells"),
+        "{stdout}"
+    );
+
+    // The path: one JSON object per element, each starting where the previous ended.
+    let text = std::fs::read_to_string(&path).unwrap();
+    let records: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(records.len(), 7);
+    let point = |v: &serde_json::Value| -> [f64; 3] {
+        let a = v.as_array().unwrap();
+        [0, 1, 2].map(|i| a[i].as_f64().unwrap())
+    };
+    let mut at = [0.0; 3];
+    for r in &records {
+        assert_eq!(point(&r["start"]), at, "gap before line {}", r["line"]);
+        at = point(&r["end"]);
+        let arc = r["kind"] == "arc";
+        assert_eq!(r.get("center").is_some(), arc, "{r}");
+        assert_eq!(r.get("normal").is_some(), arc, "{r}");
+        assert_eq!(r.get("cw").is_some(), arc, "{r}");
+    }
+    let circle = &records[3];
+    assert_eq!(
+        (circle["line"].as_u64(), circle["kind"].as_str()),
+        (Some(6), Some("arc"))
+    );
+    assert_eq!(point(&circle["center"]), [30.0, 15.0, -1.0]);
+    assert_eq!(
+        point(&circle["normal"]),
+        [0.0, 0.0, -1.0],
+        "G2 turns about -Z"
+    );
+    assert_eq!(circle["cw"], true);
+    assert_eq!(circle["feed_mm_s"].as_f64(), Some(25.0), "F1500 mm/min");
+    assert_eq!(records[0]["rapid"], true);
+    assert_eq!(at, [12.5, 17.25, 2.0]);
+
+    // The setpoints: every cycle, within the limits, from the start to the exact end.
+    let machine = Machine::demo();
+    let period_s = machine.cycle_s();
+    let text = std::fs::read_to_string(&setpoints).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("cycle,t_s,X_mm,Y_mm,Z_mm"));
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(&rows[0][2..], &[0.0, 0.0, 0.0]);
+    assert_eq!(&rows.last().unwrap()[2..], &[12.5, 17.25, 2.0]);
+    let cycles: u64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("setpoints"))
+        .and_then(|l| l.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .expect("summary names the cycles");
+    assert_eq!(rows.len() as u64, cycles);
+    // 6 decimals in the file: allow their rounding in the differences.
+    let round_mm = 2e-6;
+    let mut dwell_rows = 0;
+    for (k, w) in rows.windows(3).enumerate() {
+        assert_eq!(w[0][0], k as f64);
+        assert!((w[0][1] - k as f64 * period_s).abs() < 1e-9);
+        for (i, axis) in machine.axes.iter().enumerate() {
+            let step = (w[1][2 + i] - w[0][2 + i]).abs();
+            assert!(
+                step <= axis.max_vel_mm_s * period_s + round_mm,
+                "cycle {k}: axis {} steps {step} mm",
+                axis.name
+            );
+            let acc = (w[2][2 + i] - 2.0 * w[1][2 + i] + w[0][2 + i]).abs();
+            assert!(
+                acc <= axis.max_acc_mm_s2 * period_s * period_s * 1.01 + 2.0 * round_mm,
+                "cycle {k}: axis {} accelerates {} mm/s²",
+                axis.name,
+                acc / (period_s * period_s)
+            );
+        }
+        if w[1][2..] == w[0][2..] && w[1][2..] == [40.0, 20.0, -2.0] {
+            dwell_rows += 1;
+        }
+    }
+    // G4 P0.25 at 4 ms holds for 62 or 63 cycles (the samples straddle its ends).
+    assert!(
+        (61..=64).contains(&dwell_rows),
+        "dwell held {dwell_rows} cycles"
+    );
+}
+
+#[test]
+fn a_program_that_does_not_parse_names_its_place_and_leaves_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(
+        dir.path(),
+        "bad.ngc",
+        "G21 G90 F600\nG1 X10\nG1 X20 Y1..5\nG1 X30\n",
+    );
+    let path = dir.path().join("path.jsonl");
+    let setpoints = dir.path().join("sp.csv");
+    let out = canmotion()
+        .arg("plan")
+        .arg(&program)
+        .arg("--path")
+        .arg(&path)
+        .arg("--setpoints")
+        .arg(&setpoints)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(stderr.contains("bad.ngc:3:"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left, vec!["bad.ngc".to_string()], "outputs left behind");
+}
+
+#[test]
+fn the_machine_files_offsets_and_g28_position_apply() {
+    let dir = tempfile::tempdir().unwrap();
+    let machine = machine_file(
+        dir.path(),
+        "[program]\ng28_mm = [7.0, 8.0, -9.0]\nwork_offsets_mm = { G54 = [10.0, 20.0, -30.0], G55 = [100.0, 0.0, 0.0] }",
+    );
+    let program = write(
+        dir.path(),
+        "p.ngc",
+        "G21 G90\nG0 X1 Y2 Z3\nG55 G0 X1\nG28\nM2\n",
+    );
+    let path = dir.path().join("path.jsonl");
+    let out = canmotion()
+        .arg("plan")
+        .arg(&program)
+        .arg("--machine")
+        .arg(&machine)
+        .arg("--path")
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let ends: Vec<[f64; 3]> = std::fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            let a = v["end"].as_array().unwrap();
+            [0, 1, 2].map(|i| a[i].as_f64().unwrap())
+        })
+        .collect();
+    assert_eq!(ends[0], [11.0, 22.0, -27.0], "G54 origin (10, 20, -30)");
+    assert_eq!(
+        ends[1],
+        [101.0, 22.0, -27.0],
+        "G55 origin (100, 0, 0): X1 there"
+    );
+    assert_eq!(
+        *ends.last().unwrap(),
+        [7.0, 8.0, -9.0],
+        "the configured G28 position"
+    );
+}
