@@ -16,7 +16,7 @@
 //! | phase | 0 | 1 | 2 | 3 | 4 | 5 | 6 |
 //! |-------|---|---|---|---|---|---|---|
 //! | jerk  | +σ₁J | 0 | −σ₁J | 0 | +σ₂J | 0 | −σ₂J |
-//! | what  | jerk up | constant acceleration | jerk down | cruise at `vc` | jerk up | constant acceleration | jerk down |
+//! | what  | jerk | constant acceleration | jerk | cruise at `vc` | jerk | constant acceleration | jerk |
 //!
 //! i.e. a *transition* from `v0` to the cruise speed `vc`, a cruise, and a transition from `vc`
 //! to `v1` (σ is the sign of each transition: `vc ≥ v0, v1` in a time-optimal profile, anything
@@ -45,8 +45,11 @@
 //! its duration is `t = 2Tj + Ta` and, its acceleration being symmetric in time, its length is
 //! `d(va, vb) = (va + vb)/2 · t` ([`transition_length_mm`]; symmetric in `va`, `vb`).
 //!
-//! **Plan** ([`plan`]): the profile exists iff `d(v0, v1) ≤ L` (so that is the only reason for
-//! `None` on valid inputs). The total length `D(vp) = d(v0, vp) + d(vp, v1)` of the two
+//! **Plan** ([`plan`]): a profile of the family of 001 (speed up to a peak `vp ≥ max(v0, v1)`,
+//! cruise, speed down) exists iff `d(v0, v1) ≤ L`, the only reason for `None` on valid inputs.
+//! (Stopping first and starting again can fit in less length than a slow start, e.g.
+//! `d(0.1·v, 0) + d(0, v) < d(0.1·v, v)` below `amax`; such profiles are outside the family, and
+//! the look-ahead's passes never need them.) The total length `D(vp) = d(v0, vp) + d(vp, v1)` of the two
 //! transitions through a peak `vp ≥ max(v0, v1)` increases strictly with `vp`, and the duration
 //! `T(vp) = t(v0,vp) + t(vp,v1) + (L − D(vp))/vp` decreases wherever `D(vp) ≤ L` (its derivative
 //! is `−(L − D)/vp² − Σ(d′ − vp·t′)/vp` and `d′ ≥ vp·t′` in every regime), so the time-optimal
@@ -80,12 +83,16 @@
 //! **Integer periods** (000, [`SpeedProfile::stretch_to_period`]): the duration is rounded up to
 //! a whole number of periods by lowering the cruise speed `vc` (the transitions stay
 //! time-optimal, so no limit is exceeded, and the cruise absorbs the length exactly); `T(vc)`
-//! decreases with `vc`, so this is a bisection on `vc`. A profile without slack (e.g. a segment
-//! that accelerates over its whole length to `max_end_speed`) cannot be stretched: the error says
-//! so and the look-ahead must lower a boundary speed.
+//! decreases with `vc` wherever the transitions fit, so this is a bisection on `vc`, from the
+//! time-optimal `vc` down to 0, then, if that ends on the edge of the feasible set, in the
+//! highest of 256 slices of `(0, vc]` that brackets a root. `vc` may fall below a boundary
+//! speed (a dip: a segment cruising through at `v0 = v1` can only be stretched so). A profile
+//! without slack (e.g. a segment that accelerates over its whole length to `max_end_speed`, or
+//! nearly so) cannot be stretched: the error says so and the look-ahead must lower a boundary
+//! speed.
 //!
 //! **Evaluation** ([`SpeedProfile::at`]): the start state of each phase is stored, so a sample is
-//! a scan over seven phase ends and one polynomial (plus one `sin_cos` inside a cosine pulse):
+//! a scan over seven phase ends and one polynomial (plus two sines inside a cosine pulse):
 //! no allocation, no solving. At the start of a phase the stored state is returned exactly, the
 //! second transition is anchored at the end (`s = L − d(vc, v1)`), and at and after the end the
 //! sample is exactly `(L, v1, 0, 0)`.
