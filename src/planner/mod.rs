@@ -36,6 +36,7 @@
 use nalgebra::Vector3;
 
 use crate::gcode::{ArcGeometry, Element, ElementKind, Item, Program};
+pub mod profile;
 
 /// Largest value accepted for any machine limit; keeps squares and products of limits and
 /// lengths finite.
