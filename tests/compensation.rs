@@ -5,9 +5,10 @@
 use std::f64::consts::TAU;
 use std::path::Path;
 
-use canmotion::compensation::{CompOptions, Compensator, OutsideCorners};
+use canmotion::compensation::{CompOptions, Compensator, OutsideCorners, compensate_program};
 use canmotion::gcode::{
-    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Setup, ToolTable,
+    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup,
+    ToolTable, parse_program_with,
 };
 use nalgebra::{Vector2, Vector3};
 use proptest::prelude::*;
@@ -435,6 +436,23 @@ fn tool_0_and_g40_programs_pass_through_unchanged() {
             .unwrap();
         assert_eq!(compensate(text).unwrap(), plain);
     }
+}
+
+#[test]
+fn whole_programs_too() {
+    // The same square through Program: the items compensated, notes and end kept.
+    let text = square("G41", true);
+    let program = parse_program_with(&text, FILE, setup()).unwrap();
+    let done: Program = compensate_program(&program, CompOptions::default()).unwrap();
+    assert_eq!(done.end, program.end);
+    assert_eq!(done.notes, program.notes);
+    assert_eq!(done.start_mm, program.start_mm);
+    let streamed = compensate(&text).unwrap();
+    let streamed: Vec<Item> = streamed
+        .into_iter()
+        .filter(|i| !matches!(i, Item::Note(_) | Item::End(_)))
+        .collect();
+    assert_eq!(done.items, streamed);
 }
 
 /// The signed distance of `p` left of the line through `a` along unit `t`.

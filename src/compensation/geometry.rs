@@ -348,10 +348,9 @@ mod tests {
 
     #[test]
     fn line_into_inside_arc_meets_the_offset_circle() {
-        // Line +X to (10,0), then a counter-clockwise arc about (10,10) of radius 10 (curving
-        // left). G42 (tool right, d = −2): the arc turns away from the tool... take G41
-        // instead, the tool left, toward the centre: offset radius 8, line offset y = 2; the
-        // corner is tangent, so a line turning left by 30° into the arc makes it inside.
+        // A line heading 30° below +X into (10,0), then a counter-clockwise arc about (10,10)
+        // (R 10) leaving along +X: a left turn of 30°, inside under G41 (d = 2). The arc turns
+        // toward the tool: offset circle radius 8, offset start (10,2).
         let t1 = v(30f64.to_radians().cos(), -(30f64.to_radians().sin()));
         let e1 = line_end(v(10.0, 0.0) + left(t1) * 2.0, t1);
         let e2 = End {

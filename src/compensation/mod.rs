@@ -5,7 +5,10 @@
 //! under G41/G42 moved to the tool centre: one tool radius left (G41) or right (G42) of the
 //! programmed path, looking along the direction of travel in the compensation plane (G17 XY,
 //! G18 ZX; the interpreter refuses G19). Pure: no I/O, no clock, no panic; memory is bounded
-//! by [`MAX_HELD_ITEMS`].
+//! by [`MAX_HELD_ITEMS`]. [`compensate_program`] does the same for a whole [`Program`].
+//!
+//! Units in names: `_mm` millimetres, `_rad` radians; geometry is 2-D in the plane's own axes
+//! (first, second: X Y under G17, Z X under G18) with the normal axis carried along.
 //!
 //! # Method (C-type, after the textbook chapter in `shared/seeds` 004)
 //!
@@ -39,9 +42,9 @@
 //! figure 3-41); the cancel move mirrors it and ends at the programmed point. A move with no
 //! motion in the plane (a Z plunge under G17) keeps the offset and is looked past: the corner
 //! joins the elements on either side of it, and join connectors come after it, right before the
-//! next element in the plane (as LinuxCNC queues them). A change of radius or side without a
-//! move in between (G40 G41 D2 on one line) ends one run at the last element's plain offset
-//! end point and starts a new one from there.
+//! next element in the plane (as LinuxCNC queues them). A change of radius or side with no
+//! move in the plane in between (G40, then G42 before the next move) ends one run at the last
+//! element's plain offset end point and starts a new one from there.
 //!
 //! # Choices where the source is silent
 //!
@@ -70,14 +73,16 @@ mod geometry;
 
 use std::collections::VecDeque;
 use std::f64::consts::TAU;
+use std::iter::FusedIterator;
 
 use nalgebra::Vector3;
 use serde::Deserialize;
 
 use crate::gcode::{
     ArcGeometry, CompState, Element, ElementKind, Error, ErrorKind, Item, MIN_ARC_RADIUS_MM, Plane,
+    Program,
 };
-use geometry::{Conn, Curve, End, V2, left};
+use geometry::{Conn, Curve, End, Join, V2, left};
 pub use geometry::{NEAR_MISS_MM, TANGENT_GAP_MM};
 
 /// Items held while compensation waits for the next element in the plane (moves along the
@@ -144,6 +149,8 @@ enum Geo {
         ccw: bool,
         /// Angle turned (extra turns included).
         sweep: f64,
+        /// The element's axis (unit, ± the plane's normal).
+        normal: Vector3<f64>,
     },
 }
 
@@ -187,6 +194,7 @@ impl Geo {
                     u1: (p1 - center) / r1,
                     ccw: g.normal[n] > 0.0,
                     sweep: g.sweep_rad,
+                    normal: g.normal,
                 })
             }
         }
@@ -434,21 +442,7 @@ where
         let key = open.key;
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
         let (start, end) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
-        let corner = plane_point(&e.start_mm, key.plane);
-        let join = geometry::join(
-            &open.end,
-            &start,
-            corner,
-            key.d,
-            self.options.outside_corners == OutsideCorners::Arc,
-        )
-        .ok_or_else(|| {
-            self.gouge(
-                &e,
-                key.d,
-                "the tool-centre paths of the inside corner where this element begins do not meet",
-            )
-        })?;
+        let join = self.join(&open, &start, &e)?;
         self.emit_open(&open, join.end1)?;
         self.release(key.plane)?;
         self.connect(&e, key.plane, &join.conns)?;
@@ -484,21 +478,7 @@ where
         let key = open.key;
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
         let (start, _) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
-        let corner = plane_point(&e.start_mm, key.plane);
-        let join = geometry::join(
-            &open.end,
-            &start,
-            corner,
-            key.d,
-            self.options.outside_corners == OutsideCorners::Arc,
-        )
-        .ok_or_else(|| {
-            self.gouge(
-                &e,
-                key.d,
-                "the tool-centre paths of the inside corner where this cancel move begins do not meet",
-            )
-        })?;
+        let join = self.join(&open, &start, &e)?;
         self.emit_open(&open, join.end1)?;
         self.release(key.plane)?;
         self.connect(&e, key.plane, &join.conns)?;
@@ -513,6 +493,20 @@ where
         self.push(Element {
             start_mm: self.pos(),
             ..e
+        })
+    }
+
+    /// The join of the open element's end to the start `start` of `e`'s offset, at the
+    /// programmed corner (where `e` begins).
+    fn join(&self, open: &Open, start: &End, e: &Element) -> Result<Join, Error> {
+        let corner = plane_point(&e.start_mm, open.key.plane);
+        let arcs = self.options.outside_corners == OutsideCorners::Arc;
+        geometry::join(&open.end, start, corner, open.key.d, arcs).ok_or_else(|| {
+            self.gouge(
+                e,
+                open.key.d,
+                "the tool-centre paths of the inside corner where this move begins do not meet",
+            )
         })
     }
 
@@ -555,6 +549,7 @@ where
                 u1,
                 ccw,
                 sweep,
+                normal,
                 ..
             } => {
                 let sweep = sweep - open.start_trim - trim_end(center, u1, ccw, end);
@@ -567,9 +562,6 @@ where
                         "this arc is shorter than its corners take (its tool-centre arc would run backwards)",
                     ));
                 }
-                let ElementKind::Arc { normal, cw, .. } = e.kind else {
-                    return Err(self.geometry_error(e, "an arc that is not an arc"));
-                };
                 let center_mm = plane_to_3d(center, start_mm[n], open.key.plane);
                 let arc = (sweep * radius_mm > MIN_ARC_LENGTH_MM)
                     .then(|| ArcGeometry::new(start_mm, end_mm, center_mm, normal, 0))
@@ -578,7 +570,7 @@ where
                     Some(g) => ElementKind::Arc {
                         center_mm,
                         normal,
-                        cw,
+                        cw: !ccw,
                         // The end points give the angle modulo a turn; the sweep says how many.
                         turns: ((sweep - g.sweep_rad) / TAU).round().max(0.0) as u32,
                         radius_mm,
@@ -601,7 +593,7 @@ where
         for conn in conns {
             let start_mm = self.pos();
             let z = start_mm[n];
-            let kind = match *conn {
+            let (kind, end_mm) = match *conn {
                 Conn::Line { to } => (ElementKind::Line, plane_to_3d(to, z, plane)),
                 Conn::Arc { center, to, ccw } => {
                     let mut normal = Vector3::zeros();
@@ -623,9 +615,9 @@ where
                 }
             };
             self.push(Element {
-                kind: kind.0,
+                kind,
                 start_mm,
-                end_mm: kind.1,
+                end_mm,
                 ..*e
             })?;
         }
@@ -720,6 +712,26 @@ where
             }
         }
     }
+}
+
+impl<I> FusedIterator for Compensator<I> where I: Iterator<Item = Result<Item, Error>> {}
+
+/// Compensates a whole [`Program`] (its items; notes, end, file and start are kept): for
+/// callers that interpret a program before planning it.
+pub fn compensate_program(program: &Program, options: CompOptions) -> Result<Program, Error> {
+    let items = Compensator::new(
+        program.items.iter().cloned().map(Ok),
+        program.file.clone(),
+        options,
+    )
+    .collect::<Result<Vec<_>, _>>()?;
+    Ok(Program {
+        file: program.file.clone(),
+        start_mm: program.start_mm,
+        items,
+        notes: program.notes.clone(),
+        end: program.end,
+    })
 }
 
 fn finite(v: &Vector3<f64>) -> bool {

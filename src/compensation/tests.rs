@@ -624,3 +624,206 @@ fn hand_made_degenerate_input_is_an_error_or_passes_never_a_panic() {
     let out: Vec<_> = Compensator::new(stream.into_iter(), "h", CompOptions::default()).collect();
     assert_continuous(&out);
 }
+
+mod random {
+    //! Random element streams (lines, arcs, helices, moves along Z, dwells, comp changes):
+    //! never a panic, a NaN or a discontinuity; every offset arc concentric at R ∓ r.
+
+    use std::f64::consts::TAU;
+
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::gcode::{BlendMode, Dwell};
+
+    #[derive(Debug, Clone)]
+    enum Step {
+        Line(f64, f64),
+        Arc {
+            cx: f64,
+            cy: f64,
+            to_rad: f64,
+            ccw: bool,
+            turns: u32,
+            dz: f64,
+        },
+        Plunge(f64),
+        Dwell,
+        Comp(u8),
+    }
+
+    fn step() -> impl Strategy<Value = Step> {
+        prop_oneof![
+            5 => (-40.0..40.0f64, -40.0..40.0f64).prop_map(|(x, y)| Step::Line(x, y)),
+            3 => (-20.0..20.0f64, -20.0..20.0f64, 0.0..TAU, any::<bool>(), 0u32..2,
+                  prop_oneof![Just(0.0), -3.0..3.0f64])
+                .prop_map(|(cx, cy, to_rad, ccw, turns, dz)| Step::Arc { cx, cy, to_rad, ccw, turns, dz }),
+            1 => (-5.0..5.0f64).prop_map(Step::Plunge),
+            1 => Just(Step::Dwell),
+            1 => (0u8..6).prop_map(Step::Comp),
+        ]
+    }
+
+    fn comp(k: u8) -> CompState {
+        let (left, radius_mm) = match k {
+            1 => (true, 2.0),
+            2 => (false, 2.0),
+            3 => (true, 0.5),
+            4 => (false, 0.5),
+            5 => (true, 0.0),
+            _ => return CompState::Off,
+        };
+        if left {
+            CompState::Left {
+                tool: Some(1),
+                radius_mm,
+            }
+        } else {
+            CompState::Right {
+                tool: Some(1),
+                radius_mm,
+            }
+        }
+    }
+
+    fn program(steps: &[Step]) -> Vec<Item> {
+        let mut pos = Vector3::zeros();
+        let mut state = CompState::Off;
+        let mut items = Vec::new();
+        for (i, s) in steps.iter().enumerate() {
+            let line = i + 1;
+            let mut e = Element {
+                line,
+                col: 1,
+                kind: ElementKind::Line,
+                rapid: false,
+                start_mm: pos,
+                end_mm: pos,
+                feed_mm_s: Some(10.0),
+                blend: BlendMode::ExactStop,
+                comp: state,
+                plane: Plane::Xy,
+            };
+            match *s {
+                Step::Line(x, y) => e.end_mm = v(x, y, pos.z),
+                Step::Plunge(z) => e.end_mm = v(pos.x, pos.y, z),
+                Step::Arc {
+                    cx,
+                    cy,
+                    to_rad,
+                    ccw,
+                    turns,
+                    dz,
+                } => {
+                    let r = cx.hypot(cy);
+                    if r < 0.01 {
+                        continue;
+                    }
+                    let center = pos + v(cx, cy, 0.0);
+                    e.end_mm = center + v(r * to_rad.cos(), r * to_rad.sin(), dz);
+                    e.kind = ElementKind::Arc {
+                        center_mm: center,
+                        normal: v(0.0, 0.0, if ccw { 1.0 } else { -1.0 }),
+                        cw: !ccw,
+                        turns,
+                        radius_mm: r,
+                    };
+                    if e.arc().is_none() {
+                        continue;
+                    }
+                }
+                Step::Dwell => {
+                    items.push(Item::Dwell(Dwell {
+                        line,
+                        col: 1,
+                        seconds: 0.5,
+                    }));
+                    continue;
+                }
+                Step::Comp(k) => {
+                    state = comp(k);
+                    continue;
+                }
+            }
+            if e.end_mm == e.start_mm {
+                continue;
+            }
+            pos = e.end_mm;
+            items.push(Item::Motion(e));
+        }
+        items
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(1024))]
+
+        #[test]
+        fn random_streams(steps in proptest::collection::vec(step(), 1..40), arcs in any::<bool>()) {
+            let input = program(&steps);
+            let options = CompOptions {
+                outside_corners: if arcs { OutsideCorners::Arc } else { OutsideCorners::Lines },
+            };
+            let out: Vec<_> =
+                Compensator::new(input.iter().cloned().map(Ok), "r", options).collect();
+            assert_continuous(&out);
+            // At most one error, last.
+            let errors = out.iter().filter(|i| i.is_err()).count();
+            prop_assert!(errors <= 1);
+            if errors == 1 {
+                prop_assert!(out.last().unwrap().is_err());
+                return Ok(());
+            }
+            let out: Vec<Item> = out.into_iter().map(Result::unwrap).collect();
+            // The first element starts where the program does; dwells all come through.
+            let first = |items: &[Item]| motions_all(items).first().map(|e| e.start_mm);
+            if let (Some(a), Some(b)) = (first(&input), first(&out)) {
+                prop_assert_eq!(a, b);
+            }
+            let dwells = |items: &[Item]| items.iter().filter(|i| matches!(i, Item::Dwell(_))).count();
+            prop_assert_eq!(dwells(&input), dwells(&out));
+            // An output arc about a programmed arc's centre, on its line, is its offset:
+            // radius R − r turning toward the tool, R + r turning away.
+            for o in motions_all(&out) {
+                let ElementKind::Arc { center_mm, .. } = o.kind else { continue };
+                let Some(p) = motions_all(&input).into_iter().find(|p| p.line == o.line) else {
+                    continue;
+                };
+                let ElementKind::Arc { center_mm: pc, radius_mm: pr, cw, .. } = p.kind else {
+                    continue;
+                };
+                if (v(center_mm.x, center_mm.y, 0.0) - v(pc.x, pc.y, 0.0)).norm() > 1e-12 {
+                    continue;
+                }
+                let d = match p.comp {
+                    CompState::Off => 0.0,
+                    CompState::Left { radius_mm, .. } => radius_mm,
+                    CompState::Right { radius_mm, .. } => -radius_mm,
+                };
+                let want = if cw { pr + d } else { pr - d };
+                let g = o.arc().unwrap();
+                prop_assert!((g.start_radius_mm - want).abs() < 1e-6, "{} vs {}", g.start_radius_mm, want);
+                prop_assert!((g.end_radius_mm - want).abs() < 1e-6, "{} vs {}", g.end_radius_mm, want);
+                // Joins only ever trim an arc (outside corners extend along tangents), but for
+                // the snap of a tangent join.
+                let programmed = p.arc().unwrap();
+                let snap_rad = TANGENT_GAP_MM / want;
+                prop_assert!(
+                    g.sweep_rad <= programmed.sweep_rad + snap_rad,
+                    "{} > {}",
+                    g.sweep_rad,
+                    programmed.sweep_rad
+                );
+            }
+        }
+    }
+
+    fn motions_all(items: &[Item]) -> Vec<Element> {
+        items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Motion(e) => Some(*e),
+                _ => None,
+            })
+            .collect()
+    }
+}
