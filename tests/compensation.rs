@@ -439,6 +439,68 @@ fn tool_0_and_g40_programs_pass_through_unchanged() {
 }
 
 #[test]
+fn pocket_with_fillets_cam_style() {
+    // A 60 × 30 pocket with 5 mm corner fillets, counter-clockwise with G41 (tool inside),
+    // plunged before the start-up, entered from below the bottom edge. All joins but the
+    // start-up and cancel are tangent: sides on x = 2, 58 and y = 2, 28, fillets about their
+    // own centres with radius 5 − 2 = 3. The start-up (+Y into +X: outside for the tool,
+    // α = 90°) ends at (28,2); the cancel (+X into −Y, outside) leaves from (32,2).
+    let text = "G21 G17 G90 G94\nG0 Z5\nG0 X30 Y-10\nG1 Z-1 F300\nG41 D1\nG1 X30 Y0 F600\n\
+                X55\nG3 X60 Y5 I0 J5\nG1 Y25\nG3 X55 Y30 I-5 J0\nG1 X5\nG3 X0 Y25 I0 J-5\n\
+                G1 Y5\nG3 X5 Y0 I5 J0\nG1 X30\nG40 Y-10\nG0 Z5\nM2\n";
+    let path = comp_path(text, CompOptions::default());
+    let z = -1.0;
+    let p = |x: f64, y: f64| Vector3::new(x, y, z);
+    let want_lines = [
+        (6, p(30.0, -10.0), p(28.0, 2.0)),
+        (7, p(28.0, 2.0), p(55.0, 2.0)),
+        (9, p(58.0, 5.0), p(58.0, 25.0)),
+        (11, p(55.0, 28.0), p(5.0, 28.0)),
+        (13, p(2.0, 25.0), p(2.0, 5.0)),
+        (15, p(5.0, 2.0), p(32.0, 2.0)),
+        (16, p(32.0, 2.0), p(30.0, -10.0)),
+    ];
+    let want_arcs = [
+        (8, p(55.0, 5.0), p(55.0, 2.0), p(58.0, 5.0)),
+        (10, p(55.0, 25.0), p(58.0, 25.0), p(55.0, 28.0)),
+        (12, p(5.0, 25.0), p(5.0, 28.0), p(2.0, 25.0)),
+        (14, p(5.0, 5.0), p(2.0, 5.0), p(5.0, 2.0)),
+    ];
+    assert_eq!(
+        path.len(),
+        want_lines.len() + want_arcs.len() + 1,
+        "{path:#?}"
+    );
+    for (line, a, b) in want_lines {
+        let e = path.iter().find(|e| e.line == line).unwrap();
+        assert_eq!(e.kind, ElementKind::Line);
+        assert!(
+            close(e.start_mm, a) && close(e.end_mm, b),
+            "line {line}: {e:?}"
+        );
+    }
+    for (line, c, a, b) in want_arcs {
+        let e = path.iter().find(|e| e.line == line).unwrap();
+        let g = e.arc().expect("arc");
+        assert!(close(g.center_mm, c), "line {line}: {e:?}");
+        assert!((g.start_radius_mm - 3.0).abs() < 1e-9 && (g.end_radius_mm - 3.0).abs() < 1e-9);
+        assert!(
+            (g.sweep_rad - TAU / 4.0).abs() < 1e-9,
+            "line {line}: a quarter"
+        );
+        assert!(
+            close(e.start_mm, a) && close(e.end_mm, b),
+            "line {line}: {e:?}"
+        );
+    }
+    // The retract after the cancel, from the programmed exit point.
+    let last = path.last().unwrap();
+    assert_eq!(last.line, 17);
+    assert!(close(last.start_mm, p(30.0, -10.0)));
+    assert!(close(last.end_mm, Vector3::new(30.0, -10.0, 5.0)));
+}
+
+#[test]
 fn whole_programs_too() {
     // The same square through Program: the items compensated, notes and end kept.
     let text = square("G41", true);

@@ -58,6 +58,10 @@
 //!   what LinuxCNC does); under G93 the feed is the one the interpreter computed from the
 //!   programmed length. Connectors take the feed, rapid flag, blend, comp state, line and
 //!   column of the element after the corner (the corner is where that element begins).
+//! - Axial motion (the plane's normal axis: Z under G17) belongs to the elements: a trimmed or
+//!   extended line or helix still runs its whole programmed rise, from the height where it
+//!   begins to the height where it ends; connectors are level, at the height where the element
+//!   after the corner begins.
 //! - An arc whose offset radius would be below [`MIN_ARC_RADIUS_MM`] (the interpreter's
 //!   smallest arc) is an error: the tool is too big for that inside arc.
 //! - Gouges: an element whose offset would run backwards once its corners are joined (it is
