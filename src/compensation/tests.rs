@@ -754,67 +754,123 @@ mod random {
         items
     }
 
+    /// The invariants of one random stream.
+    fn check(steps: &[Step], arcs: bool) -> Result<(), TestCaseError> {
+        let input = program(steps);
+        let options = CompOptions {
+            outside_corners: if arcs {
+                OutsideCorners::Arc
+            } else {
+                OutsideCorners::Lines
+            },
+        };
+        let out: Vec<_> = Compensator::new(input.iter().cloned().map(Ok), "r", options).collect();
+        assert_continuous(&out);
+        // At most one error, last.
+        let errors = out.iter().filter(|i| i.is_err()).count();
+        prop_assert!(errors <= 1);
+        if errors == 1 {
+            prop_assert!(out.last().unwrap().is_err());
+            return Ok(());
+        }
+        let out: Vec<Item> = out.into_iter().map(Result::unwrap).collect();
+        // The first element starts where the program does; dwells all come through.
+        let first = |items: &[Item]| motions_all(items).first().map(|e| e.start_mm);
+        if let (Some(a), Some(b)) = (first(&input), first(&out)) {
+            prop_assert_eq!(a, b);
+        }
+        let dwells = |items: &[Item]| items.iter().filter(|i| matches!(i, Item::Dwell(_))).count();
+        prop_assert_eq!(dwells(&input), dwells(&out));
+        // An output arc about a programmed arc's centre, on its line, is its offset:
+        // radius R − r turning toward the tool, R + r turning away.
+        for o in motions_all(&out) {
+            let ElementKind::Arc { center_mm, .. } = o.kind else {
+                continue;
+            };
+            let Some(p) = motions_all(&input).into_iter().find(|p| p.line == o.line) else {
+                continue;
+            };
+            let ElementKind::Arc {
+                center_mm: pc,
+                radius_mm: pr,
+                cw,
+                ..
+            } = p.kind
+            else {
+                continue;
+            };
+            if (v(center_mm.x, center_mm.y, 0.0) - v(pc.x, pc.y, 0.0)).norm() > 1e-12 {
+                continue;
+            }
+            let d = match p.comp {
+                CompState::Off => 0.0,
+                CompState::Left { radius_mm, .. } => radius_mm,
+                CompState::Right { radius_mm, .. } => -radius_mm,
+            };
+            let want = if cw { pr + d } else { pr - d };
+            let g = o.arc().unwrap();
+            prop_assert!(
+                (g.start_radius_mm - want).abs() < 1e-6,
+                "{} vs {}",
+                g.start_radius_mm,
+                want
+            );
+            prop_assert!(
+                (g.end_radius_mm - want).abs() < 1e-6,
+                "{} vs {}",
+                g.end_radius_mm,
+                want
+            );
+            // Joins only ever trim an arc (outside corners extend along tangents), but for
+            // the snap of a tangent join.
+            let programmed = p.arc().unwrap();
+            let snap_rad = TANGENT_GAP_MM / want;
+            prop_assert!(
+                g.sweep_rad <= programmed.sweep_rad + snap_rad,
+                "{} > {}",
+                g.sweep_rad,
+                programmed.sweep_rad
+            );
+        }
+        Ok(())
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(1024))]
 
         #[test]
         fn random_streams(steps in proptest::collection::vec(step(), 1..40), arcs in any::<bool>()) {
-            let input = program(&steps);
-            let options = CompOptions {
-                outside_corners: if arcs { OutsideCorners::Arc } else { OutsideCorners::Lines },
-            };
-            let out: Vec<_> =
-                Compensator::new(input.iter().cloned().map(Ok), "r", options).collect();
-            assert_continuous(&out);
-            // At most one error, last.
-            let errors = out.iter().filter(|i| i.is_err()).count();
-            prop_assert!(errors <= 1);
-            if errors == 1 {
-                prop_assert!(out.last().unwrap().is_err());
-                return Ok(());
-            }
-            let out: Vec<Item> = out.into_iter().map(Result::unwrap).collect();
-            // The first element starts where the program does; dwells all come through.
-            let first = |items: &[Item]| motions_all(items).first().map(|e| e.start_mm);
-            if let (Some(a), Some(b)) = (first(&input), first(&out)) {
-                prop_assert_eq!(a, b);
-            }
-            let dwells = |items: &[Item]| items.iter().filter(|i| matches!(i, Item::Dwell(_))).count();
-            prop_assert_eq!(dwells(&input), dwells(&out));
-            // An output arc about a programmed arc's centre, on its line, is its offset:
-            // radius R − r turning toward the tool, R + r turning away.
-            for o in motions_all(&out) {
-                let ElementKind::Arc { center_mm, .. } = o.kind else { continue };
-                let Some(p) = motions_all(&input).into_iter().find(|p| p.line == o.line) else {
-                    continue;
-                };
-                let ElementKind::Arc { center_mm: pc, radius_mm: pr, cw, .. } = p.kind else {
-                    continue;
-                };
-                if (v(center_mm.x, center_mm.y, 0.0) - v(pc.x, pc.y, 0.0)).norm() > 1e-12 {
-                    continue;
-                }
-                let d = match p.comp {
-                    CompState::Off => 0.0,
-                    CompState::Left { radius_mm, .. } => radius_mm,
-                    CompState::Right { radius_mm, .. } => -radius_mm,
-                };
-                let want = if cw { pr + d } else { pr - d };
-                let g = o.arc().unwrap();
-                prop_assert!((g.start_radius_mm - want).abs() < 1e-6, "{} vs {}", g.start_radius_mm, want);
-                prop_assert!((g.end_radius_mm - want).abs() < 1e-6, "{} vs {}", g.end_radius_mm, want);
-                // Joins only ever trim an arc (outside corners extend along tangents), but for
-                // the snap of a tangent join.
-                let programmed = p.arc().unwrap();
-                let snap_rad = TANGENT_GAP_MM / want;
-                prop_assert!(
-                    g.sweep_rad <= programmed.sweep_rad + snap_rad,
-                    "{} > {}",
-                    g.sweep_rad,
-                    programmed.sweep_rad
-                );
-            }
+            check(&steps, arcs)?;
         }
+    }
+
+    /// Found by `random_streams`: two clockwise arcs meeting almost tangentially; the snap
+    /// starts the second offset arc a little before its own offset start.
+    #[test]
+    fn near_tangent_arcs_snap() {
+        let steps = [
+            Step::Comp(3),
+            Step::Line(0.0, -31.725225332697484),
+            Step::Arc {
+                cx: 0.0,
+                cy: 3.300677153369468,
+                to_rad: 2.221749098457228,
+                ccw: false,
+                turns: 0,
+                dz: 0.0,
+            },
+            Step::Arc {
+                cx: 11.337565262974008,
+                cy: -14.886199763488841,
+                to_rad: 0.0,
+                ccw: false,
+                turns: 0,
+                dz: 0.0,
+            },
+            Step::Plunge(0.0),
+            Step::Line(0.0, 0.0),
+        ];
+        check(&steps, false).unwrap();
     }
 
     fn motions_all(items: &[Item]) -> Vec<Element> {
