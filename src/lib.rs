@@ -13,8 +13,9 @@
 //!    the whole of it is interpreted before anything moves; the line becomes a
 //!    [`gcode::Element`], a straight move with absolute start and end points in machine
 //!    millimetres and a feed of 20 mm/s. An error names `file:line:col`.
-//! 2. `compensation` (tool radius and length) comes with the full G-code front end; this
-//!    foundation has none, so the move passes through unchanged.
+//! 2. [`compensation::Compensator`] wraps the interpreter's stream and moves elements under
+//!    G41/G42 to the tool centre (C-type cutter radius compensation, one element of
+//!    look-ahead); under G40, as here, the element passes through unchanged.
 //! 3. [`gateway::plan_program`] checks the target against the axes' travel, then
 //!    [`planner::plan`] turns the element into a [`planner::Segment`]: a trapezoid (or triangle)
 //!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
@@ -48,6 +49,7 @@
 pub mod bus;
 pub mod canopen;
 pub mod cia402;
+pub mod compensation;
 pub mod config;
 pub mod eds;
 pub mod gateway;

@@ -579,6 +579,58 @@ pub enum ErrorKind {
         /// The code.
         code: String,
     },
+    /// Cutter compensation: the tool is too big for an inside arc (its tool-centre arc would
+    /// have a radius below [`MIN_ARC_RADIUS_MM`]).
+    #[error(
+        "tool radius {tool_radius_mm:.4} mm is too big for this arc of radius {arc_radius_mm:.4} mm: the tool-centre arc would have radius {offset_radius_mm:.4} mm (use a smaller tool or a larger arc)"
+    )]
+    CompensationArcTooSmall {
+        /// The programmed radius.
+        arc_radius_mm: f64,
+        /// The tool radius.
+        tool_radius_mm: f64,
+        /// The offset radius it would take (≤ 0 or below the smallest arc).
+        offset_radius_mm: f64,
+    },
+    /// Cutter compensation would cut into the part.
+    #[error("cutter compensation with tool radius {tool_radius_mm:.4} mm would gouge: {what}")]
+    CompensationGouge {
+        /// The tool radius.
+        tool_radius_mm: f64,
+        /// What happens, e.g. the element is shorter than its corners take.
+        what: &'static str,
+    },
+    /// An arc as the start-up move of cutter compensation.
+    #[error(
+        "{code} cannot start cutter compensation: the first move in the plane after G41/G42 must be a straight G0 or G1 move"
+    )]
+    CompensationStartOnArc {
+        /// G2 or G3.
+        code: &'static str,
+    },
+    /// An arc as the cancel move of cutter compensation.
+    #[error(
+        "{code} cannot end cutter compensation: the first move in the plane after G40 must be a straight G0 or G1 move"
+    )]
+    CompensationEndOnArc {
+        /// G2 or G3.
+        code: &'static str,
+    },
+    /// Too many items after an element under cutter compensation before the next move in the
+    /// plane (which the corner needs).
+    #[error(
+        "cutter compensation needs the next move in the plane after this one, and {max} items came without one (moves along the tool axis, dwells, stops, notes)"
+    )]
+    CompensationLookAhead {
+        /// The limit.
+        max: usize,
+    },
+    /// An element cutter compensation cannot use (not finite, an arc about another axis).
+    #[error("cutter compensation cannot use this move: {what}")]
+    CompensationGeometry {
+        /// What is wrong.
+        what: &'static str,
+    },
     /// A position beyond [`MAX_POSITION_MM`].
     #[error("position out of range (more than 1e12 mm from machine zero)")]
     PositionOutOfRange,

@@ -1,0 +1,663 @@
+//! Cutter radius compensation end to end: G-code text → interpreter → compensator, with the
+//! demo tool table (T1: radius 2 mm). Every expected point is worked out by hand from the
+//! programmed shape, never copied from the output.
+
+use std::f64::consts::TAU;
+use std::path::Path;
+
+use canmotion::compensation::{CompOptions, Compensator, OutsideCorners, compensate_program};
+use canmotion::gcode::{
+    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup,
+    ToolTable, parse_program_with,
+};
+use nalgebra::{Vector2, Vector3};
+use proptest::prelude::*;
+
+const FILE: &str = "part.ngc";
+
+fn demo_tools() -> ToolTable {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries/tools/demo-tools.toml");
+    ToolTable::load(&path).expect("demo tool table loads")
+}
+
+fn setup() -> Setup {
+    let mut s = Setup::new(Vector3::zeros());
+    s.tools = demo_tools();
+    s
+}
+
+/// The interpreter's elements (the programmed path).
+fn programmed(text: &str) -> Vec<Element> {
+    Interpreter::new(text.as_bytes(), FILE, setup())
+        .filter_map(|i| match i.expect("the program interprets") {
+            Item::Motion(e) => Some(e),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The compensated items; checks continuity (bit for bit) and finiteness on the way.
+fn compensate_with(text: &str, options: CompOptions) -> Result<Vec<Item>, Error> {
+    let interp = Interpreter::new(text.as_bytes(), FILE, setup());
+    let items: Vec<Item> = Compensator::new(interp, FILE, options).collect::<Result<_, _>>()?;
+    let mut last: Option<Vector3<f64>> = None;
+    for e in motions(&items) {
+        assert!(
+            e.start_mm
+                .iter()
+                .chain(e.end_mm.iter())
+                .all(|c| c.is_finite()),
+            "{e:?}"
+        );
+        if let Some(last) = last {
+            assert_eq!(e.start_mm, last, "discontinuity before line {}", e.line);
+        }
+        last = Some(e.end_mm);
+    }
+    Ok(items)
+}
+
+fn compensate(text: &str) -> Result<Vec<Item>, Error> {
+    compensate_with(text, CompOptions::default())
+}
+
+fn motions(items: &[Item]) -> Vec<Element> {
+    items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Motion(e) => Some(*e),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The compensated elements from the start-up move on.
+fn comp_path(text: &str, options: CompOptions) -> Vec<Element> {
+    let items = compensate_with(text, options).unwrap_or_else(|e| panic!("{e}"));
+    motions(&items)
+        .into_iter()
+        .skip_while(|e| e.comp == CompState::Off)
+        .collect()
+}
+
+fn close(a: Vector3<f64>, b: Vector3<f64>) -> bool {
+    (a - b).norm() < 1e-9
+}
+
+/// Asserts a chain of straight elements through the XY points `points` (z = 0).
+#[track_caller]
+fn assert_polyline(path: &[Element], points: &[(f64, f64)]) {
+    assert_eq!(path.len() + 1, points.len(), "{path:#?}");
+    for (e, w) in path.iter().zip(points.windows(2)) {
+        assert_eq!(e.kind, ElementKind::Line, "{e:?}");
+        let (a, b) = (
+            Vector3::new(w[0].0, w[0].1, 0.0),
+            Vector3::new(w[1].0, w[1].1, 0.0),
+        );
+        assert!(
+            close(e.start_mm, a) && close(e.end_mm, b),
+            "line {}: {} -> {}, want {a} -> {b}",
+            e.line,
+            e.start_mm,
+            e.end_mm
+        );
+    }
+}
+
+/// A 20 mm square with corners (0,0) and (20,20), entered from (−10,10) along +X onto the
+/// middle of its left side and left the same way, clockwise (up the left side first) or
+/// counter-clockwise (down first), under `code` (G41 or G42) with D1.
+fn square(code: &str, clockwise: bool) -> String {
+    let sides = if clockwise {
+        "Y20\nX20\nY0\nX0\nY10\n"
+    } else {
+        "Y0\nX20\nY20\nX0\nY10\n"
+    };
+    format!("G21 G17 G90\nG0 X-10 Y10\n{code} D1\nG1 X0 Y10 F600\n{sides}G40 X-10\nM2\n")
+}
+
+#[test]
+fn square_clockwise_with_g41_lies_2_mm_outside() {
+    // Tool left of a clockwise path: outside. Each side on its offset line (x = −2, y = 22,
+    // x = 22, y = −2); the right-angle corners (α = 90°) extended by the radius. Start-up:
+    // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2; the cancel
+    // (+Y then −X, inside) leaves from x = −2, y = 8.
+    let path = comp_path(&square("G41", true), CompOptions::default());
+    assert_polyline(
+        &path,
+        &[
+            (-10.0, 10.0),
+            (-2.0, 12.0),
+            (-2.0, 22.0),
+            (22.0, 22.0),
+            (22.0, -2.0),
+            (-2.0, -2.0),
+            (-2.0, 8.0),
+            (-10.0, 10.0),
+        ],
+    );
+    // Line numbers and the comp state as programmed: the start-up is line 4, the cancel 10.
+    let lines: Vec<usize> = path.iter().map(|e| e.line).collect();
+    assert_eq!(lines, [4, 5, 6, 7, 8, 9, 10]);
+    assert!(
+        matches!(path[1].comp, CompState::Left { tool: Some(1), radius_mm } if radius_mm == 2.0)
+    );
+    assert_eq!(path[6].comp, CompState::Off);
+}
+
+#[test]
+fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
+    // Tool left of a counter-clockwise path: inside, on x = 2, y = 2, x = 18, y = 18, every
+    // corner shortened to the intersection. The start-up (+X then −Y) and the cancel (−Y
+    // then −X) are outside corners for the tool: extended by the radius.
+    let path = comp_path(&square("G41", false), CompOptions::default());
+    assert_polyline(
+        &path,
+        &[
+            (-10.0, 10.0),
+            (2.0, 12.0),
+            (2.0, 2.0),
+            (18.0, 2.0),
+            (18.0, 18.0),
+            (2.0, 18.0),
+            (2.0, 8.0),
+            (-10.0, 10.0),
+        ],
+    );
+}
+
+#[test]
+fn square_with_g42_mirrors() {
+    // Clockwise with the tool right: inside.
+    let path = comp_path(&square("G42", true), CompOptions::default());
+    assert_polyline(
+        &path,
+        &[
+            (-10.0, 10.0),
+            (2.0, 8.0),
+            (2.0, 18.0),
+            (18.0, 18.0),
+            (18.0, 2.0),
+            (2.0, 2.0),
+            (2.0, 12.0),
+            (-10.0, 10.0),
+        ],
+    );
+    // Counter-clockwise with the tool right: outside.
+    let path = comp_path(&square("G42", false), CompOptions::default());
+    assert_polyline(
+        &path,
+        &[
+            (-10.0, 10.0),
+            (-2.0, 8.0),
+            (-2.0, -2.0),
+            (22.0, -2.0),
+            (22.0, 22.0),
+            (-2.0, 22.0),
+            (-2.0, 12.0),
+            (-10.0, 10.0),
+        ],
+    );
+}
+
+#[test]
+fn square_outside_with_corner_arcs() {
+    // OutsideCorners::Arc: the sides keep their programmed length on the offset lines and each
+    // outside corner is a clockwise quarter of radius 2 about the programmed corner.
+    let path = comp_path(
+        &square("G41", true),
+        CompOptions {
+            outside_corners: OutsideCorners::Arc,
+        },
+    );
+    let corners = [(0.0, 20.0), (20.0, 20.0), (20.0, 0.0)];
+    let arcs: Vec<&Element> = path
+        .iter()
+        .filter(|e| matches!(e.kind, ElementKind::Arc { .. }))
+        .collect();
+    // The fourth corner (0,0) too; the start-up and cancel corners are inside ones.
+    assert_eq!(arcs.len(), 4, "{path:#?}");
+    for (arc, (cx, cy)) in arcs.iter().zip(corners.iter().chain([(0.0, 0.0)].iter())) {
+        let ElementKind::Arc {
+            center_mm,
+            cw,
+            radius_mm,
+            ..
+        } = arc.kind
+        else {
+            unreachable!()
+        };
+        assert!(close(center_mm, Vector3::new(*cx, *cy, 0.0)), "{arc:?}");
+        assert!(cw && (radius_mm - 2.0).abs() < 1e-12);
+        let g = arc.arc().unwrap();
+        assert!((g.sweep_rad - TAU / 4.0).abs() < 1e-12);
+        for k in 0..=8 {
+            let p = g.point_at(f64::from(k) / 8.0);
+            assert!(((p - center_mm).norm() - 2.0).abs() < 1e-9);
+        }
+    }
+    // The first side: from the start-up's end (−2,12) up to (−2,20), then the arc to (0,22).
+    assert!(close(path[1].end_mm, Vector3::new(-2.0, 20.0, 0.0)));
+    assert!(close(path[2].end_mm, Vector3::new(0.0, 22.0, 0.0)));
+    assert!(close(path[3].end_mm, Vector3::new(20.0, 22.0, 0.0)));
+}
+
+/// A full clockwise circle about (10,0), radius 10, entered and left tangentially along +Y at
+/// (0,0).
+fn circle(code: &str) -> String {
+    format!("G0 X0 Y-10\n{code} D1\nG1 X0 Y0 F600\nG2 X0 Y0 I10 J0\nG40 G1 X0 Y10\n")
+}
+
+#[test]
+fn circle_offsets_concentric() {
+    // Clockwise: G41 puts the tool outside (radius 12), G42 inside (radius 8).
+    for (code, radius, x) in [("G41", 12.0, -2.0), ("G42", 8.0, 2.0)] {
+        let path = comp_path(&circle(code), CompOptions::default());
+        assert_eq!(path.len(), 3, "{path:#?}");
+        let start = Vector3::new(x, 0.0, 0.0);
+        assert!(close(path[0].end_mm, start), "{code}: {}", path[0].end_mm);
+        let ElementKind::Arc {
+            center_mm,
+            cw,
+            radius_mm,
+            turns,
+            ..
+        } = path[1].kind
+        else {
+            panic!("{code}: not an arc: {:?}", path[1]);
+        };
+        assert!(cw && turns == 0);
+        assert!(close(center_mm, Vector3::new(10.0, 0.0, 0.0)));
+        assert!((radius_mm - radius).abs() < 1e-12);
+        let g = path[1].arc().unwrap();
+        assert!((g.sweep_rad - TAU).abs() < 1e-12, "{code}: full circle");
+        for k in 0..=32 {
+            let p = g.point_at(f64::from(k) / 32.0);
+            assert!(((p - center_mm).norm() - radius).abs() < 1e-9);
+        }
+        assert!(close(path[2].start_mm, start));
+        assert!(close(path[2].end_mm, Vector3::new(0.0, 10.0, 0.0)));
+    }
+}
+
+/// A "D": up the left edge (0,5)→(0,20), clockwise half circle about (0,10) to (0,0), up to
+/// (0,5); entered and left along X at y = 5.
+fn d_shape(code: &str) -> String {
+    format!("G0 X-10 Y5\n{code} D1\nG1 X0 Y5 F600\nY20\nG2 X0 Y0 I0 J-10\nG1 Y5\nG40 X-10\n")
+}
+
+#[test]
+fn line_arc_joins_outside_are_extended_along_the_tangent() {
+    // G41 on the clockwise D: outside. Edge on x = −2, arc radius 12. The corners turn right
+    // by 90° (α = 90°): the edge extends 2 mm to (−2,22), a straight connector along the
+    // arc's tangent reaches the arc's offset start (0,22); at the bottom the arc ends at
+    // (0,−2), a connector to (−2,−2), the edge from there.
+    let path = comp_path(&d_shape("G41"), CompOptions::default());
+    assert_eq!(path.len(), 7, "{path:#?}");
+    assert_polyline(
+        &path[..3],
+        &[(-10.0, 5.0), (-2.0, 7.0), (-2.0, 22.0), (0.0, 22.0)],
+    );
+    assert_eq!(path[2].line, 5, "the connector belongs to the arc's corner");
+    let g = path[3].arc().expect("arc");
+    assert!(close(g.center_mm, Vector3::new(0.0, 10.0, 0.0)));
+    assert!((g.start_radius_mm - 12.0).abs() < 1e-12 && (g.end_radius_mm - 12.0).abs() < 1e-12);
+    assert!((g.sweep_rad - TAU / 2.0).abs() < 1e-12);
+    assert!(close(path[3].end_mm, Vector3::new(0.0, -2.0, 0.0)));
+    assert_polyline(
+        &path[4..],
+        &[(0.0, -2.0), (-2.0, -2.0), (-2.0, 3.0), (-10.0, 5.0)],
+    );
+
+    // The same with corner arcs: radius 2 about (0,20) and (0,0).
+    let path = comp_path(
+        &d_shape("G41"),
+        CompOptions {
+            outside_corners: OutsideCorners::Arc,
+        },
+    );
+    assert_eq!(path.len(), 7, "{path:#?}");
+    assert!(close(path[1].end_mm, Vector3::new(-2.0, 20.0, 0.0)));
+    let corner = path[2].arc().expect("corner arc");
+    assert!(close(corner.center_mm, Vector3::new(0.0, 20.0, 0.0)));
+    assert!((corner.start_radius_mm - 2.0).abs() < 1e-12);
+    assert!(close(path[2].end_mm, Vector3::new(0.0, 22.0, 0.0)));
+    let corner = path[4].arc().expect("corner arc");
+    assert!(close(corner.center_mm, Vector3::new(0.0, 0.0, 0.0)));
+    assert!(close(path[4].end_mm, Vector3::new(-2.0, 0.0, 0.0)));
+}
+
+#[test]
+fn line_arc_joins_inside_meet_on_the_offset_circle() {
+    // G42 on the clockwise D: inside. Edge on x = 2, arc radius 8 about (0,10); they meet
+    // where x = 2 cuts that circle: y = 10 ± √60. Start-up and cancel corners are outside
+    // for the tool (extended by the radius).
+    let path = comp_path(&d_shape("G42"), CompOptions::default());
+    assert_eq!(path.len(), 5, "{path:#?}");
+    let r60 = 60f64.sqrt();
+    assert_polyline(&path[..2], &[(-10.0, 5.0), (2.0, 3.0), (2.0, 10.0 + r60)]);
+    let g = path[2].arc().expect("arc");
+    assert!(close(g.center_mm, Vector3::new(0.0, 10.0, 0.0)));
+    assert!((g.start_radius_mm - 8.0).abs() < 1e-12);
+    // Clockwise from atan2(√60, 2) to −atan2(√60, 2).
+    assert!((g.sweep_rad - 2.0 * r60.atan2(2.0)).abs() < 1e-12);
+    assert_polyline(&path[3..], &[(2.0, 10.0 - r60), (2.0, 7.0), (-10.0, 5.0)]);
+}
+
+/// A lens: the arc of the circle about (−6,0) from (0,−8) to (0,8) and the arc of the circle
+/// about (6,0) back, both radius 10, counter-clockwise; entered along the first arc's tangent
+/// (0.8, 0.6) and left along its end tangent (−0.8, 0.6) after a second lap of the first arc.
+fn lens(code: &str) -> String {
+    format!(
+        "G0 X-8 Y-14\n{code} D1\nG1 X0 Y-8 F600\nG3 X0 Y8 I-6 J8\nG3 X0 Y-8 I6 J-8\n\
+         G3 X0 Y8 I-6 J8\nG40 G1 X-8 Y14\n"
+    )
+}
+
+#[test]
+fn arc_arc_joins() {
+    // G41: the tool inside, both arcs radius 8. The corners (turning left by 73.7°) are
+    // inside: the circles of radius 8 about (±6,0) meet at (0, ±√28).
+    let path = comp_path(&lens("G41"), CompOptions::default());
+    assert_eq!(path.len(), 5, "{path:#?}");
+    let r28 = 28f64.sqrt();
+    let pts = [
+        Vector3::new(-1.2, -6.4, 0.0),
+        Vector3::new(0.0, r28, 0.0),
+        Vector3::new(0.0, -r28, 0.0),
+        Vector3::new(-1.2, 6.4, 0.0),
+    ];
+    assert!(close(path[0].end_mm, pts[0]), "{}", path[0].end_mm);
+    for (k, center) in [(1, -6.0), (2, 6.0), (3, -6.0)] {
+        let g = path[k].arc().expect("arc");
+        assert!(close(g.center_mm, Vector3::new(center, 0.0, 0.0)));
+        assert!((g.start_radius_mm - 8.0).abs() < 1e-12);
+        assert!((g.end_radius_mm - 8.0).abs() < 1e-12);
+        assert!(close(path[k].start_mm, pts[k - 1]) && close(path[k].end_mm, pts[k]));
+    }
+
+    // G42: the tool outside, radius 12; the corners are outside with α = 106.3°, extended by
+    // 2·tan(36.87°) = 1.5 along both tangents: from (1.2,9.6) to (0,10.5) to (−1.2,9.6).
+    let path = comp_path(&lens("G42"), CompOptions::default());
+    let conns: Vec<&Element> = path
+        .iter()
+        .filter(|e| e.kind == ElementKind::Line && e.comp != CompState::Off && e.line != 3)
+        .collect();
+    assert_eq!(conns.len(), 4, "{path:#?}");
+    assert!(close(conns[0].start_mm, Vector3::new(1.2, 9.6, 0.0)));
+    assert!(close(conns[0].end_mm, Vector3::new(0.0, 10.5, 0.0)));
+    assert!(close(conns[1].end_mm, Vector3::new(-1.2, 9.6, 0.0)));
+    assert!(close(conns[2].end_mm, Vector3::new(0.0, -10.5, 0.0)));
+    assert!(close(conns[3].end_mm, Vector3::new(1.2, -9.6, 0.0)));
+}
+
+#[test]
+fn errors_name_file_line_and_column() {
+    // The tool (radius 2) in a counter-clockwise inside arc of radius 2 under G41.
+    let text = "G0 X-10 Y0\nG41 D1\nG1 X0 Y0 F600\nX10\n  G3 X14 Y0 I2 J0\nG40 G1 X20\n";
+    let e = compensate(text).unwrap_err();
+    assert!(matches!(e.kind, ErrorKind::CompensationArcTooSmall { .. }));
+    assert_eq!(
+        e.to_string(),
+        "part.ngc:5:3: tool radius 2.0000 mm is too big for this arc of radius 2.0000 mm: the tool-centre arc would have radius 0.0000 mm (use a smaller tool or a larger arc)"
+    );
+    // A 3 mm wide slot bottom between two inside corners: each takes 2 mm of it.
+    let text = "G0 X-10 Y0\nG41 D1\nG1 X0 Y0 F600\nX10\nY3\nX0\nG40 X-10\n";
+    let e = compensate(text).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "part.ngc:5:1: cutter compensation with tool radius 2.0000 mm would gouge: this element is shorter than its corners take (its tool-centre path would run backwards)"
+    );
+    // Start-up on an arc.
+    let e = compensate("G0 X-10 Y0\nG42 D1\nG2 X10 Y0 R10 F600\n").unwrap_err();
+    assert_eq!((e.line, e.col), (3, 1));
+    assert!(matches!(
+        e.kind,
+        ErrorKind::CompensationStartOnArc { code: "G2" }
+    ));
+    // Cancel on an arc.
+    let text = "G0 X-10 Y0\nG41 D1\nG1 X0 Y0 F600\nX10\nG40 G3 X20 Y0 R5\n";
+    let e = compensate(text).unwrap_err();
+    assert_eq!((e.line, e.col), (5, 5));
+    assert!(matches!(
+        e.kind,
+        ErrorKind::CompensationEndOnArc { code: "G3" }
+    ));
+}
+
+#[test]
+fn tool_0_and_g40_programs_pass_through_unchanged() {
+    for text in [
+        "G0 X-10 Y0\nG41 D0\nG1 X0 Y0 F600\nX10\nG2 X20 Y0 R5\nG40 G1 X30\n",
+        "G0 X-10 Y0 Z5\nG1 X0 Y0 Z0 F600\nG3 X0 Y0 I5 J0 Z-1\nM2\n",
+    ] {
+        let plain: Vec<Item> = Interpreter::new(text.as_bytes(), FILE, setup())
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(compensate(text).unwrap(), plain);
+    }
+}
+
+#[test]
+fn pocket_with_fillets_cam_style() {
+    // A 60 × 30 pocket with 5 mm corner fillets, counter-clockwise with G41 (tool inside),
+    // plunged before the start-up, entered from below the bottom edge. All joins but the
+    // start-up and cancel are tangent: sides on x = 2, 58 and y = 2, 28, fillets about their
+    // own centres with radius 5 − 2 = 3. The start-up (+Y into +X: outside for the tool,
+    // α = 90°) ends at (28,2); the cancel (+X into −Y, outside) leaves from (32,2).
+    let text = "G21 G17 G90 G94\nG0 Z5\nG0 X30 Y-10\nG1 Z-1 F300\nG41 D1\nG1 X30 Y0 F600\n\
+                X55\nG3 X60 Y5 I0 J5\nG1 Y25\nG3 X55 Y30 I-5 J0\nG1 X5\nG3 X0 Y25 I0 J-5\n\
+                G1 Y5\nG3 X5 Y0 I5 J0\nG1 X30\nG40 Y-10\nG0 Z5\nM2\n";
+    let path = comp_path(text, CompOptions::default());
+    let z = -1.0;
+    let p = |x: f64, y: f64| Vector3::new(x, y, z);
+    let want_lines = [
+        (6, p(30.0, -10.0), p(28.0, 2.0)),
+        (7, p(28.0, 2.0), p(55.0, 2.0)),
+        (9, p(58.0, 5.0), p(58.0, 25.0)),
+        (11, p(55.0, 28.0), p(5.0, 28.0)),
+        (13, p(2.0, 25.0), p(2.0, 5.0)),
+        (15, p(5.0, 2.0), p(32.0, 2.0)),
+        (16, p(32.0, 2.0), p(30.0, -10.0)),
+    ];
+    let want_arcs = [
+        (8, p(55.0, 5.0), p(55.0, 2.0), p(58.0, 5.0)),
+        (10, p(55.0, 25.0), p(58.0, 25.0), p(55.0, 28.0)),
+        (12, p(5.0, 25.0), p(5.0, 28.0), p(2.0, 25.0)),
+        (14, p(5.0, 5.0), p(2.0, 5.0), p(5.0, 2.0)),
+    ];
+    assert_eq!(
+        path.len(),
+        want_lines.len() + want_arcs.len() + 1,
+        "{path:#?}"
+    );
+    for (line, a, b) in want_lines {
+        let e = path.iter().find(|e| e.line == line).unwrap();
+        assert_eq!(e.kind, ElementKind::Line);
+        assert!(
+            close(e.start_mm, a) && close(e.end_mm, b),
+            "line {line}: {e:?}"
+        );
+    }
+    for (line, c, a, b) in want_arcs {
+        let e = path.iter().find(|e| e.line == line).unwrap();
+        let g = e.arc().expect("arc");
+        assert!(close(g.center_mm, c), "line {line}: {e:?}");
+        assert!((g.start_radius_mm - 3.0).abs() < 1e-9 && (g.end_radius_mm - 3.0).abs() < 1e-9);
+        assert!(
+            (g.sweep_rad - TAU / 4.0).abs() < 1e-9,
+            "line {line}: a quarter"
+        );
+        assert!(
+            close(e.start_mm, a) && close(e.end_mm, b),
+            "line {line}: {e:?}"
+        );
+    }
+    // The retract after the cancel, from the programmed exit point.
+    let last = path.last().unwrap();
+    assert_eq!(last.line, 17);
+    assert!(close(last.start_mm, p(30.0, -10.0)));
+    assert!(close(last.end_mm, Vector3::new(30.0, -10.0, 5.0)));
+}
+
+#[test]
+fn whole_programs_too() {
+    // The same square through Program: the items compensated, notes and end kept.
+    let text = square("G41", true);
+    let program = parse_program_with(&text, FILE, setup()).unwrap();
+    let done: Program = compensate_program(&program, CompOptions::default()).unwrap();
+    assert_eq!(done.end, program.end);
+    assert_eq!(done.notes, program.notes);
+    assert_eq!(done.start_mm, program.start_mm);
+    let streamed = compensate(&text).unwrap();
+    let streamed: Vec<Item> = streamed
+        .into_iter()
+        .filter(|i| !matches!(i, Item::Note(_) | Item::End(_)))
+        .collect();
+    assert_eq!(done.items, streamed);
+}
+
+/// The signed distance of `p` left of the line through `a` along unit `t`.
+fn left_distance(p: Vector2<f64>, a: Vector2<f64>, t: Vector2<f64>) -> f64 {
+    t.x * (p.y - a.y) - t.y * (p.x - a.x)
+}
+
+fn xy(v: &Vector3<f64>) -> Vector2<f64> {
+    Vector2::new(v.x, v.y)
+}
+
+/// A convex polygon: `n` vertices on a circle, at increasing angles, counter-clockwise.
+fn polygon(n: usize, radius: f64, center: (f64, f64), gaps: &[f64]) -> Vec<(f64, f64)> {
+    let total: f64 = gaps.iter().take(n).sum();
+    let mut angle = 0.0f64;
+    (0..n)
+        .map(|i| {
+            let p = (
+                center.0 + radius * angle.cos(),
+                center.1 + radius * angle.sin(),
+            );
+            angle += TAU * gaps[i] / total;
+            p
+        })
+        .collect()
+}
+
+/// Traverses the polygon with `code` (G41.1/G42.1 with the diameter), entering along the first
+/// side's line, going once round and along the first side again, leaving along its line.
+fn polygon_program(vertices: &[(f64, f64)], code: &str, diameter: f64) -> String {
+    let (x0, y0) = vertices[0];
+    let (x1, y1) = vertices[1];
+    let len = (x1 - x0).hypot(y1 - y0);
+    let (tx, ty) = ((x1 - x0) / len, (y1 - y0) / len);
+    let mut text = format!(
+        "G0 X{} Y{}\n{code} D{diameter}\nG1 X{x0} Y{y0} F600\n",
+        x0 - 10.0 * tx,
+        y0 - 10.0 * ty
+    );
+    for &(x, y) in vertices[1..]
+        .iter()
+        .chain([vertices[0], vertices[1]].iter())
+    {
+        text.push_str(&format!("X{x} Y{y}\n"));
+    }
+    text.push_str(&format!("G40 X{} Y{}\n", x1 + 10.0 * tx, y1 + 10.0 * ty));
+    text
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Random convex polygons, either direction, either side: every offset side lies exactly
+    /// one radius from its programmed side on the tool's side, consecutive offsets meet where
+    /// the hand formula puts the corner, the output is continuous and finite.
+    #[test]
+    fn convex_polygons(
+        n in 3usize..10,
+        gaps in proptest::collection::vec(0.3f64..1.0, 10),
+        radius in 10.0f64..80.0,
+        cx in -50.0f64..50.0,
+        cy in -50.0f64..50.0,
+        tool_r in 0.25f64..4.0,
+        clockwise in any::<bool>(),
+        left in any::<bool>(),
+        arcs in any::<bool>(),
+    ) {
+        let mut vertices = polygon(n, radius, (cx, cy), &gaps);
+        if clockwise {
+            vertices.reverse();
+        }
+        let code = if left { "G41.1" } else { "G42.1" };
+        let text = polygon_program(&vertices, code, 2.0 * tool_r);
+        // The programmed sides as the interpreter reads them (after the positioning G0 and the
+        // start-up: n sides plus the first again, then the cancel).
+        let prog = programmed(&text);
+        prop_assert_eq!(prog.len(), n + 4);
+        let sides = &prog[2..prog.len() - 1];
+        let r = prog[2].comp;
+        let d = match r {
+            CompState::Left { radius_mm, .. } => radius_mm,
+            CompState::Right { radius_mm, .. } => -radius_mm,
+            CompState::Off => unreachable!(),
+        };
+        let dir = |e: &Element| (xy(&e.end_mm) - xy(&e.start_mm)).normalize();
+        // Inside (tool toward the polygon's interior): skip the rare polygon whose short side
+        // cannot hold both corners (a gouge, tested elsewhere).
+        let inside = left != clockwise;
+        if inside {
+            for k in 0..sides.len() {
+                let len = (xy(&sides[k].end_mm) - xy(&sides[k].start_mm)).norm();
+                let take = |a: &Element, b: &Element| {
+                    let (ta, tb) = (dir(a), dir(b));
+                    let turn = (ta.x * tb.y - ta.y * tb.x).atan2(ta.dot(&tb)).abs();
+                    tool_r * (turn / 2.0).tan()
+                };
+                let before = if k == 0 { 0.0 } else { take(&sides[k - 1], &sides[k]) };
+                let after = if k + 1 == sides.len() { 0.0 } else { take(&sides[k], &sides[k + 1]) };
+                prop_assume!(len > before + after + 1e-6);
+            }
+        }
+        let options = CompOptions {
+            outside_corners: if arcs { OutsideCorners::Arc } else { OutsideCorners::Lines },
+        };
+        let out = compensate_with(&text, options).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        let out = motions(&out);
+        // Every output element of a side's line: its offset (parallel, at d) or a connector
+        // of the corner where it begins (no nearer the corner than the radius).
+        for (k, side) in sides.iter().enumerate() {
+            let t = dir(side);
+            let a = xy(&side.start_mm);
+            let of_side: Vec<&Element> = out.iter().filter(|e| e.line == side.line).collect();
+            let parallel: Vec<&&Element> = of_side
+                .iter()
+                .filter(|e| {
+                    e.kind == ElementKind::Line
+                        && (xy(&e.end_mm) - xy(&e.start_mm)).normalize().dot(&t) > 1.0 - 1e-9
+                })
+                .collect();
+            prop_assert_eq!(parallel.len(), 1, "side {} of\n{}\n{:#?}", k, text, of_side);
+            let off = parallel[0];
+            for p in [xy(&off.start_mm), xy(&off.end_mm)] {
+                prop_assert!((left_distance(p, a, t) - d).abs() < 1e-9);
+            }
+            for conn in of_side.iter().filter(|e| !std::ptr::eq(**e, *parallel[0])) {
+                for p in [xy(&conn.start_mm), xy(&conn.end_mm)] {
+                    prop_assert!((p - a).norm() >= tool_r - 1e-9);
+                }
+                if let Some(g) = conn.arc() {
+                    prop_assert!(arcs && !inside);
+                    prop_assert!((g.start_radius_mm - tool_r).abs() < 1e-9);
+                    prop_assert!((xy(&g.center_mm) - a).norm() < 1e-9);
+                }
+            }
+            // Where the previous side's offset meets this one (no connector between): the
+            // offset lines' intersection, vertex + d (n1 + n2) / (1 + t1·t2).
+            if k > 0 && of_side.len() == 1 {
+                let t1 = dir(&sides[k - 1]);
+                let n1 = Vector2::new(-t1.y, t1.x);
+                let n2 = Vector2::new(-t.y, t.x);
+                let want = a + (n1 + n2) * (d / (1.0 + t1.dot(&t)));
+                prop_assert!((xy(&off.start_mm) - want).norm() < 1e-9);
+            }
+        }
+    }
+}
