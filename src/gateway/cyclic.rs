@@ -257,6 +257,10 @@ impl CyclicMaster {
     pub fn completed_line(&self) -> Option<usize> {
         self.completed_line
     }
+    /// Start with `line` as the last completed program line (a resumed program's).
+    pub fn set_completed_line(&mut self, line: Option<usize>) {
+        self.completed_line = line;
+    }
     /// Nodes whose drive reset during the run (a boot-up message was seen).
     pub fn reset_nodes(&self) -> Vec<u8> {
         self.axes

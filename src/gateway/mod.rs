@@ -509,6 +509,10 @@ pub trait MotionSource {
     ) -> Result<(), GatewayError>;
     /// The motion from `armed_mm`, where the drives were enabled and armed (position actual).
     fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError>;
+    /// The last program line completed before this motion starts (a resumed program's).
+    fn completed_line(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// The program of [`RunOptions`], from its start.
@@ -626,9 +630,20 @@ async fn run_async(
         )
         .collect();
     let mut port = bus.open(&tpdo_filters)?;
+    let completed = source.completed_line();
     let cyc = std::thread::Builder::new()
         .name("canmotion-cyclic".into())
-        .spawn(move || cyclic_thread(&m, port.as_mut(), &health, plan_rx, armed_tx, log_tx))
+        .spawn(move || {
+            cyclic_thread(
+                &m,
+                port.as_mut(),
+                &health,
+                plan_rx,
+                armed_tx,
+                log_tx,
+                completed,
+            )
+        })
         .expect("spawn cyclic thread");
 
     // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
@@ -714,9 +729,11 @@ fn cyclic_thread(
     plan_rx: mpsc::Receiver<Interpolator>,
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+    completed_line: Option<usize>,
 ) -> CyclicResult {
     let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
+    master.set_completed_line(completed_line);
     let mut ticker = Ticker::new(Duration::from_micros(u64::from(machine.cycle_us)));
     let mut out: Vec<Frame> = Vec::with_capacity(machine.axes.len() + 1);
     let mut armed_tx = Some(armed_tx);

@@ -369,6 +369,8 @@ struct Motion {
     plan: Option<(Vector3<f64>, Plan)>,
     /// The position of the run's start in the original program (for a stop in the approach).
     start: Position,
+    /// The last line completed before the run's start (0: none).
+    completed_before: usize,
 }
 
 impl Motion {
@@ -422,9 +424,10 @@ impl Motion {
             Some(Item::Motion(e)) => (e.line, point_on(e, p.fraction)?),
             Some(Item::Dwell(d)) => (d.line, self.start_of(p.item)),
             Some(Item::Stop(s)) => (s.line, self.start_of(p.item)),
-            Some(Item::Note(_) | Item::End(_)) | None => {
-                (stop.completed_line.unwrap_or(0), self.start_of(p.item))
-            }
+            Some(Item::Note(_) | Item::End(_)) | None => (
+                stop.completed_line.unwrap_or(self.completed_before),
+                self.start_of(p.item),
+            ),
         };
         Some(ResumeState {
             version: STATE_VERSION,
@@ -440,7 +443,7 @@ impl Motion {
             line,
             fraction: p.fraction,
             stop_point_mm: point.into(),
-            completed_line: stop.completed_line.unwrap_or(0),
+            completed_line: stop.completed_line.unwrap_or(self.completed_before),
             axis: machine
                 .axes
                 .iter()
@@ -517,6 +520,7 @@ impl MotionSource for FromStartRecorded<'_> {
                 item: 0,
                 fraction: 0.0,
             },
+            completed_before: 0,
         });
         Ok(plan)
     }
@@ -775,6 +779,10 @@ impl MotionSource for Resumption<'_> {
         self.motion.plan = Some((armed_mm, plan.clone()));
         Ok(plan)
     }
+
+    fn completed_line(&self) -> Option<usize> {
+        (self.state.completed_line > 0).then_some(self.state.completed_line)
+    }
 }
 
 /// Prepare the motion of a resume: the program interpreted and checked against the state.
@@ -855,6 +863,7 @@ fn prepare(machine: &Machine, opts: &RunOptions, state: &ResumeState) -> Result<
             item: state.item,
             fraction: state.fraction,
         },
+        completed_before: state.completed_line,
     })
 }
 

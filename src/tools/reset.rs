@@ -132,8 +132,8 @@ impl fmt::Display for ResetReport {
             }
             ResetOutcome::Cleared { after: t } => write!(
                 f,
-                "node {n}: fault cleared {} ms after the reset and still clear; was {before}; now {after}",
-                t.as_millis()
+                "node {n}: fault cleared {:.1} ms after the reset and still clear; was {before}; now {after}",
+                t.as_secs_f64() * 1e3
             ),
             ResetOutcome::NotCleared => write!(
                 f,
@@ -144,8 +144,8 @@ impl fmt::Display for ResetReport {
                 let e = emcy.map_or(String::new(), |c| format!(" with EMCY {}", code(c)));
                 write!(
                     f,
-                    "node {n}: fault came back {} ms after the reset{e}: now {after} (was 0x603F = {}); its cause persists",
-                    t.as_millis(),
+                    "node {n}: fault came back {:.1} ms after the reset{e}: now {after} (was 0x603F = {}); its cause persists",
+                    t.as_secs_f64() * 1e3,
                     code(self.error_before)
                 )
             }
