@@ -7,8 +7,8 @@ use clap::{Parser, Subcommand};
 
 use canmotion::bus::Bus;
 use canmotion::config::{DriveDictionary, Machine};
-use canmotion::gateway::RunOptions;
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState};
+use canmotion::gateway::{self, RunOptions};
 use canmotion::sim::{SimDrive, runner};
 
 /// The demo program run when `canmotion run` is given no program.
@@ -316,6 +316,19 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                             Err(se) => format!("\nno resume point saved: {se}"),
                         },
                         (Some(_), None) => "\nno resume point saved: give --state FILE for a program from standard input".to_string(),
+                        // A resumed motion moved and stopped where no resume point could be
+                        // recorded: the old one no longer describes the machine.
+                        (None, Some(path))
+                            if resume && matches!(&e, gateway::GatewayError::Motion(f) if f.stop.is_some()) =>
+                        {
+                            match std::fs::remove_file(path) {
+                                Ok(()) => format!(
+                                    "\nno resume point could be recorded; the old one ({}) was removed: run the program from the start",
+                                    path.display()
+                                ),
+                                Err(_) => String::new(),
+                            }
+                        }
                         _ => String::new(),
                     };
                     return Err(format!("{e}{hint}").into());
