@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 
 use canmotion::bus::Bus;
 use canmotion::config::{DriveDictionary, Machine};
+use canmotion::gateway::resume::{self, ResumePreview, ResumeState};
 use canmotion::gateway::{self, RunOptions};
 use canmotion::sim::{SimDrive, runner};
 
@@ -40,6 +41,32 @@ enum Command {
         /// Write one CSV row per cycle to this file.
         #[arg(long)]
         log: Option<PathBuf>,
+        /// Continue the program from where an earlier run stopped (its resume point, see
+        /// --state): every node is configured again, and nothing moves before a confirmation.
+        #[arg(long)]
+        resume: bool,
+        /// Confirm the resume without asking (for scripts).
+        #[arg(long, requires = "resume")]
+        yes: bool,
+        /// The resume point: written when the motion stops before the end of the program, read
+        /// by --resume. Default: PROGRAM.resume beside the program file.
+        #[arg(long, value_name = "FILE")]
+        state: Option<PathBuf>,
+    },
+    /// CiA 402 fault reset (controlword bit 7), verified: the statusword must leave Fault and
+    /// stay out; reports 0x603F before and after. Exit status 1 if a fault did not clear.
+    Reset {
+        /// SocketCAN interface (vcan0, can0).
+        iface: String,
+        /// Node id 1-127, or `all` (every CiA 402 drive a scan finds).
+        #[arg(value_name = "NODE|all")]
+        target: canmotion::tools::NmtTarget,
+        /// How long the drive has to leave Fault after the reset.
+        #[arg(long, value_name = "MS", default_value_t = 1000)]
+        timeout_ms: u64,
+        /// How long it must then stay out of Fault.
+        #[arg(long, value_name = "MS", default_value_t = 500)]
+        observe_ms: u64,
     },
     /// Plan a program offline (no bus): summary, tool-centre path, setpoints.
     Plan {
@@ -190,6 +217,29 @@ fn main() -> ExitCode {
     }
 }
 
+/// Ask the operator to confirm a resume on the terminal (`--yes`: confirmed without asking).
+/// Without a terminal on standard input there is nobody to ask: no.
+fn confirm(preview: &ResumePreview, yes: bool) -> bool {
+    use std::io::IsTerminal;
+    if yes {
+        println!("{preview}");
+        println!("confirmed by --yes");
+        return true;
+    }
+    if !std::io::stdin().is_terminal() {
+        println!("{preview}");
+        eprintln!(
+            "canmotion: standard input is not a terminal, nobody to confirm the resume: use --yes from a script"
+        );
+        return false;
+    }
+    resume::ask(
+        preview,
+        &mut std::io::stdin().lock(),
+        &mut std::io::stderr(),
+    )
+}
+
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     match Cli::parse().command {
         Command::Plan {
@@ -226,7 +276,19 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             machine,
             bus,
             log,
+            resume,
+            yes,
+            state,
         } => {
+            let state_given = state.is_some();
+            let state = state.or_else(|| match &program {
+                Some(p) if p.as_os_str() != "-" => {
+                    let mut s = p.as_os_str().to_owned();
+                    s.push(".resume");
+                    Some(PathBuf::from(s))
+                }
+                _ => None,
+            });
             let machine = match machine {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
@@ -264,21 +326,113 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     ""
                 }
             );
-            let summary = gateway::run(
-                &machine,
-                &bus,
-                &RunOptions {
-                    program_name: name,
-                    program_text: text,
-                    log: log.clone(),
-                    simulate,
-                },
-            )?;
+            let opts = RunOptions {
+                program_name: name,
+                program_text: text,
+                log: log.clone(),
+                simulate,
+            };
+            let outcome = if resume {
+                let path = state.as_deref().ok_or(
+                    "--resume needs --state FILE when the program comes from standard input or is the embedded demo",
+                )?;
+                let st = ResumeState::load(path)?;
+                resume::resume_program(&machine, &bus, &opts, &st, &mut |p| confirm(p, yes))
+            } else {
+                resume::run_program(&machine, &bus, &opts)
+            };
+            let summary = match outcome.result {
+                Ok(s) => s,
+                Err(e) => {
+                    let hint = match (outcome.resume, &state) {
+                        (Some(st), Some(path)) => match st.save(path) {
+                            Ok(()) => format!(
+                                "\nresume point saved in {}: line {} at X{:.4} Y{:.4} Z{:.4} mm; once the cause is fixed, `canmotion run {} --resume{}` continues from there",
+                                path.display(),
+                                st.line,
+                                st.stop_point_mm[0],
+                                st.stop_point_mm[1],
+                                st.stop_point_mm[2],
+                                st.program,
+                                if state_given { format!(" --state {}", path.display()) } else { String::new() },
+                            ),
+                            Err(se) => format!("\nno resume point saved: {se}"),
+                        },
+                        (Some(_), None) => "\nno resume point saved: give --state FILE for a program from standard input".to_string(),
+                        // A resumed motion moved and stopped where no resume point could be
+                        // recorded: the old one no longer describes the machine.
+                        (None, Some(path))
+                            if resume && matches!(&e, gateway::GatewayError::Motion(f) if f.stop.is_some()) =>
+                        {
+                            match std::fs::remove_file(path) {
+                                Ok(()) => format!(
+                                    "\nno resume point could be recorded; the old one ({}) was removed: run the program from the start",
+                                    path.display()
+                                ),
+                                Err(_) => String::new(),
+                            }
+                        }
+                        _ => String::new(),
+                    };
+                    return Err(format!("{e}{hint}").into());
+                }
+            };
             println!("{summary}");
             if let Some(l) = log {
                 println!("log               {}", l.display());
             }
+            // The program ran to its end: a resume point of it is done with.
+            if let Some(path) = &state
+                && ResumeState::load(path).is_ok_and(|st| {
+                    st.program_hash == resume::fnv1a64(opts.program_text.as_bytes())
+                })
+            {
+                std::fs::remove_file(path)
+                    .map_err(|e| format!("{}: cannot remove: {e}", path.display()))?;
+                println!(
+                    "resume point      {} removed (the program completed)",
+                    path.display()
+                );
+            }
             Ok(())
+        }
+        Command::Reset {
+            iface,
+            target,
+            timeout_ms,
+            observe_ms,
+        } => {
+            use canmotion::tools::reset;
+            let bus = Bus::from_arg(&iface);
+            let nodes = match target {
+                canmotion::tools::NmtTarget::Node(n) => vec![n.0],
+                canmotion::tools::NmtTarget::All => {
+                    let found = reset::drives_on(&bus)?;
+                    if found.is_empty() {
+                        return Err(format!("no CiA 402 drive answered on {}", bus.name()).into());
+                    }
+                    found
+                }
+            };
+            let opts = reset::ResetOptions {
+                deadline: std::time::Duration::from_millis(timeout_ms),
+                observe: std::time::Duration::from_millis(observe_ms),
+                ..reset::ResetOptions::default()
+            };
+            let reports = reset::reset(&bus, &nodes, &opts)?;
+            let mut failed = Vec::new();
+            for r in &reports {
+                if r.ok() {
+                    println!("{r}");
+                } else {
+                    failed.push(r.to_string());
+                }
+            }
+            if failed.is_empty() {
+                Ok(())
+            } else {
+                Err(failed.join("\ncanmotion: error: ").into())
+            }
         }
         Command::Simdrive {
             bus,

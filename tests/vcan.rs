@@ -3,6 +3,8 @@
 //! where vcan0 exists (inside User-Mode Linux on kernels without CAN).
 
 mod common;
+#[path = "vcan/recovery.rs"]
+mod recovery;
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};

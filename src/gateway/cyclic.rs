@@ -17,6 +17,9 @@
 //! Any alarm (drive fault bit, EMCY, lost heartbeat, unexpected boot-up, missing process data)
 //! freezes the axis it concerns and stops the others along their current direction within their
 //! acceleration limits, then disables; the outcome is a failure naming the axis and the cause.
+//! A drive that sent a boot-up message (0x700 + node, data 0x00) has reset: from that cycle on
+//! it gets no RPDO at all, so it can never act on a stale setpoint, whatever NMT state it
+//! reaches by itself.
 
 use nalgebra::Vector3;
 
@@ -173,6 +176,10 @@ pub struct CyclicMaster {
     stop_vel: Vec<f64>,
     stop_acc: Vec<f64>,
     frozen: Vec<bool>,
+    /// Axes whose drive reset (boot-up seen): no RPDO goes to them any more.
+    reset: Vec<bool>,
+    /// The last program line whose motion was completed.
+    completed_line: Option<usize>,
     failure: Option<String>,
     /// The cycle in which the failure was detected.
     pub failure_cycle: Option<u64>,
@@ -207,6 +214,8 @@ impl CyclicMaster {
             stop_vel: vec![0.0; n],
             stop_acc: vec![0.0; n],
             frozen: vec![false; n],
+            reset: vec![false; n],
+            completed_line: None,
             failure: None,
             failure_cycle: None,
             bit12_cycle: None,
@@ -246,6 +255,57 @@ impl CyclicMaster {
     pub fn motion(&self) -> Option<&Interpolator> {
         self.motion.as_ref()
     }
+    /// The last program line whose motion was completed (the line before the one in execution,
+    /// or the last line once the motion finished).
+    pub fn completed_line(&self) -> Option<usize> {
+        self.completed_line
+    }
+    /// Start with `line` as the last completed program line (a resumed program's).
+    pub fn set_completed_line(&mut self, line: Option<usize>) {
+        self.completed_line = line;
+    }
+    /// Nodes whose drive reset during the run (a boot-up message was seen).
+    pub fn reset_nodes(&self) -> Vec<u8> {
+        self.axes
+            .iter()
+            .zip(&self.reset)
+            .filter(|(_, r)| **r)
+            .map(|(a, _)| a.node)
+            .collect()
+    }
+    /// Nodes of the axes an alarm froze.
+    pub fn frozen_nodes(&self) -> Vec<u8> {
+        self.axes
+            .iter()
+            .zip(&self.frozen)
+            .filter(|(_, f)| **f)
+            .map(|(a, _)| a.node)
+            .collect()
+    }
+
+    /// A boot-up message from `node`: its drive reset (CiA 301: boot-up, then Pre-operational,
+    /// power stage off, its configuration back to defaults). The axis freezes, the group stops,
+    /// and the node gets no further RPDO. Repeated boot-ups change nothing.
+    pub fn node_reset(&mut self, node: u8) {
+        let Some(i) = self.axes.iter().position(|a| a.node == node) else {
+            return;
+        };
+        if self.reset[i] {
+            return;
+        }
+        self.reset[i] = true;
+        self.frozen[i] = true;
+        let a = &self.axes[i];
+        let completed = match self.completed_line {
+            Some(l) => format!("last completed program line {l}"),
+            None => "no program line completed".to_string(),
+        };
+        let msg = format!(
+            "axis {} (node {}): boot-up during the run: the drive reset; no further setpoints to node {}; {completed}",
+            a.name, a.node, a.node
+        );
+        self.fail(msg);
+    }
 
     /// Last position actual per axis (counts; 0 when none arrived).
     pub fn final_counts(&self) -> Vec<i32> {
@@ -253,6 +313,11 @@ impl CyclicMaster {
             .iter()
             .map(|f| f.map_or(0, |f| f.position))
             .collect()
+    }
+
+    /// Last setpoint per axis (mm).
+    pub fn setpoint_mm(&self) -> Vec<f64> {
+        self.sp_mm.iter().map(|h| h[0]).collect()
     }
 
     /// Last setpoint per axis (counts).
@@ -269,8 +334,17 @@ impl CyclicMaster {
         self.motion = Some(interp);
     }
 
-    /// Feed a received frame; TPDOs of our axes update their feedback.
+    /// Feed a received frame; TPDOs of our axes update their feedback, a boot-up message of one
+    /// of our nodes is [`Self::node_reset`].
     pub fn on_frame(&mut self, f: &Frame) {
+        if let Some(node) = f.id().checked_sub(crate::canopen::cob::HEARTBEAT)
+            && f.data() == [crate::canopen::NmtState::BootUp.byte()]
+            && !f.is_remote()
+            && let Ok(node) = u8::try_from(node)
+        {
+            self.node_reset(node);
+            return;
+        }
         for (i, a) in self.axes.iter().enumerate() {
             if f.id() == a.tpdo_cob {
                 let d = f.data();
@@ -532,10 +606,29 @@ impl CyclicMaster {
             self.streaming_cycles += 1;
             let mut p = Vector3::zeros();
             let status = self.motion.as_mut().map(|m| m.update(&mut p));
-            self.line = match status {
-                Some(Status::Working { line }) => Some(line),
-                _ => self.line,
-            };
+            match status {
+                Some(Status::Working { line }) => {
+                    if let Some(prev) = self.line
+                        && prev != line
+                    {
+                        self.completed_line = Some(prev);
+                    }
+                    self.line = Some(line);
+                }
+                Some(Status::Finished) => {
+                    self.completed_line = self
+                        .motion
+                        .as_ref()
+                        .and_then(|m| m.current_line())
+                        .or(self.line);
+                }
+                Some(Status::Starved) => {
+                    // The gateway streams settled plans only; an underrun would hold every
+                    // axis in place mid-path, which is a planning failure to stop on.
+                    self.fail("the motion queue ran dry (planner underrun): stopping".to_string());
+                }
+                None => {}
+            }
             for i in 0..n {
                 let a = &self.axes[i];
                 let target = match a.xyz {
@@ -613,7 +706,10 @@ impl CyclicMaster {
             }
         } else if self.phase == Phase::Disabling {
             let mut all = true;
-            for (e, st) in self.enablers.iter_mut().zip(&states) {
+            for ((e, st), reset) in self.enablers.iter_mut().zip(&states).zip(&self.reset) {
+                if *reset {
+                    continue; // it booted into Switch on disabled, and hears no RPDO of ours
+                }
                 match st {
                     Some(State::Fault) | None => {}
                     Some(s) => {
@@ -666,7 +762,7 @@ impl CyclicMaster {
             for i in 0..n {
                 // No setpoint before the drive has told us where it is: a drive still enabled
                 // from an earlier session (CSP) would take any other value as a target.
-                if self.fb[i].is_none() {
+                if self.fb[i].is_none() || self.reset[i] {
                     continue;
                 }
                 let a = &self.axes[i];
@@ -931,6 +1027,49 @@ mod tests {
             "following error {} mm from stale feedback",
             r.master.max_ferr_mm[0]
         );
+    }
+
+    #[test]
+    fn a_boot_up_freezes_the_axis_at_once_and_its_node_gets_no_further_rpdo() {
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 40);
+        let armed = r.master.armed_mm().unwrap();
+        r.master.supply_motion(motion(
+            armed,
+            "G1 X20 F6000\nG1 X40 Y20 F6000\nG1 X60 Y60 F6000\n",
+        ));
+        // Into the second line.
+        while r.master.line() != Some(2) {
+            r.step();
+        }
+        for _ in 0..20 {
+            r.step();
+        }
+        let before = r.master.setpoint_counts()[0];
+        // Node 1 resets: its boot-up arrives before the next cycle.
+        r.master.on_frame(&Frame::new(0x701, &[0x00]).unwrap());
+        assert_eq!(r.master.phase(), Phase::Stopping);
+        let f = r.master.failure().unwrap().to_string();
+        assert_eq!(
+            f,
+            "axis X (node 1): boot-up during the run: the drive reset; no further setpoints to node 1; last completed program line 1 (last program line 2)"
+        );
+        assert_eq!(r.master.reset_nodes(), vec![1]);
+        let mut cycles = 0;
+        while r.master.phase() != Phase::Done {
+            r.step();
+            cycles += 1;
+            assert!(cycles < 2000, "no end: {:?}", r.master.phase());
+            assert!(
+                r.frames.iter().all(|f| f.id() != 0x201),
+                "an RPDO went to the node that reset: {:?}",
+                r.frames
+            );
+            assert_eq!(r.master.setpoint_counts()[0], before);
+        }
+        // The others still got theirs (disabled in order), and the end did not wait for node 1.
+        assert!(r.drives[1].psm.state() == State::SwitchOnDisabled);
+        assert!(cycles < 500, "{cycles} cycles to stop");
     }
 
     #[test]

@@ -3,6 +3,7 @@
 
 pub mod cyclic;
 pub mod io;
+pub mod resume;
 pub mod startup;
 
 use std::io::Write;
@@ -176,6 +177,10 @@ pub enum GatewayError {
         /// Why.
         source: std::io::Error,
     },
+    /// A resume (`run --resume`) was refused before any motion: changed program, another
+    /// machine, an axis too far from the stop point, no confirmation (see [`resume`]).
+    #[error("{0}")]
+    Resume(String),
 }
 
 /// Why and when the motion stopped.
@@ -194,6 +199,10 @@ pub struct MotionFailure {
     /// Wall-clock time from the cycle that saw statusword bit 12 on every drive to the one that
     /// detected the failure, s.
     pub bit12_to_failure_s: Option<f64>,
+    /// When the cycle that detected the failure ran ([`rt::now_ns`], CLOCK_MONOTONIC).
+    pub detected_ns: Option<u64>,
+    /// Where the program's motion stopped, once it had started (the resume point's source).
+    pub stop: Option<StopPoint>,
 }
 
 impl MotionFailure {
@@ -205,6 +214,51 @@ impl MotionFailure {
             first_motion_cycle: None,
             period_s,
             bit12_to_failure_s: None,
+            detected_ns: None,
+            stop: None,
+        })
+    }
+}
+
+/// Where a run's motion stopped: the last point of the plan streamed before the alarm (the group
+/// then left the path, braking along its direction), and where the axes came to rest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopPoint {
+    /// Time into the plan of the last streamed sample, s (at most the plan's duration).
+    pub plan_time_s: f64,
+    /// The plan's point at that time (X, Y, Z), mm.
+    pub path_mm: Vector3<f64>,
+    /// The program line in execution.
+    pub line: Option<usize>,
+    /// The last program line completed.
+    pub completed_line: Option<usize>,
+    /// Nodes the alarm froze.
+    pub frozen_nodes: Vec<u8>,
+    /// Nodes that reset (boot-up) during the run.
+    pub reset_nodes: Vec<u8>,
+    /// Last setpoint per axis (machine order), mm: where the stop left them.
+    pub rest_setpoint_mm: Vec<f64>,
+    /// Last position actual per axis (machine order), counts.
+    pub rest_actual_counts: Vec<i32>,
+}
+
+impl StopPoint {
+    fn of(master: &CyclicMaster) -> Option<StopPoint> {
+        let interp = master.motion()?;
+        if interp.elapsed_s() == 0.0 {
+            return None; // streaming never started
+        }
+        // The latest sample is the plan's point at that time (its end once finished).
+        let plan_time_s = interp.elapsed_s().min(interp.duration_s());
+        Some(StopPoint {
+            plan_time_s,
+            path_mm: interp.last_mm(),
+            line: master.line(),
+            completed_line: master.completed_line(),
+            frozen_nodes: master.frozen_nodes(),
+            reset_nodes: master.reset_nodes(),
+            rest_setpoint_mm: master.setpoint_mm(),
+            rest_actual_counts: master.final_counts(),
         })
     }
 }
@@ -462,9 +516,68 @@ fn csv_row(r: &CycleRecord, n: usize, period_s: f64) -> String {
     s
 }
 
+/// Where a run's motion comes from: checked once the drives are configured (before any is
+/// enabled), then planned from the position at which the drives were armed. A program run from
+/// its start is [`run`]'s; [`resume`] continues an interrupted one.
+pub trait MotionSource {
+    /// After start-up, before any drive is enabled: `start_mm` is position actual (X, Y, Z),
+    /// `start_counts` per axis in machine order. An error ends the run with every drive sent to
+    /// Pre-operational, nothing enabled.
+    fn check(
+        &mut self,
+        machine: &Machine,
+        start_mm: Vector3<f64>,
+        start_counts: &[i32],
+    ) -> Result<(), GatewayError>;
+    /// The motion from `armed_mm`, where the drives were enabled and armed (position actual).
+    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError>;
+    /// The last program line completed before this motion starts (a resumed program's).
+    fn completed_line(&self) -> Option<usize> {
+        None
+    }
+}
+
+/// The program of [`RunOptions`], from its start.
+struct FromStart<'a>(&'a RunOptions);
+
+impl MotionSource for FromStart<'_> {
+    fn check(
+        &mut self,
+        machine: &Machine,
+        start_mm: Vector3<f64>,
+        _start_counts: &[i32],
+    ) -> Result<(), GatewayError> {
+        plan_program(
+            machine,
+            &self.0.program_name,
+            &self.0.program_text,
+            start_mm,
+        )
+        .map(|_| ())
+    }
+    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
+        plan_program(
+            machine,
+            &self.0.program_name,
+            &self.0.program_text,
+            armed_mm,
+        )
+    }
+}
+
 /// Run a program on a machine over `bus`: start-up, streaming, orderly stop. Returns the summary
 /// when the whole program ran with every drive healthy.
 pub fn run(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, GatewayError> {
+    run_with(machine, bus, opts, &mut FromStart(opts))
+}
+
+/// [`run`] with the motion from `source` (the program of `opts` is still parsed first).
+pub fn run_with(
+    machine: &Machine,
+    bus: &Bus,
+    opts: &RunOptions,
+    source: &mut dyn MotionSource,
+) -> Result<Summary, GatewayError> {
     // The whole program must parse and stay in travel before anything happens on the bus. The
     // start position is not known yet: parse from the origin for the syntax, and plan again from
     // the armed position below.
@@ -486,13 +599,14 @@ pub fn run(machine: &Machine, bus: &Bus, opts: &RunOptions) -> Result<Summary, G
         .enable_all()
         .build()
         .expect("tokio runtime");
-    runtime.block_on(run_async(machine, bus, opts))
+    runtime.block_on(run_async(machine, bus, opts, source))
 }
 
 async fn run_async(
     machine: &Machine,
     bus: &Bus,
     opts: &RunOptions,
+    source: &mut dyn MotionSource,
 ) -> Result<Summary, GatewayError> {
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
@@ -503,8 +617,14 @@ async fn run_async(
             start_mm[i] = a.counts_to_mm(*c);
         }
     }
-    // Check the program against the travel from where the machine is, before any motion.
-    plan_program(machine, &opts.program_name, &opts.program_text, start_mm)?;
+    // Check the program against the travel from where the machine is, before any motion. A
+    // refusal leaves the drives as it found them: disabled, and Pre-operational.
+    if let Err(e) = source.check(machine, start_mm, &start_counts) {
+        for a in &machine.axes {
+            let _ = io.nmt(crate::canopen::nmt::PRE_OPERATIONAL, a.node).await;
+        }
+        return Err(e);
+    }
 
     let (log_tx, log_thread) = match &opts.log {
         Some(path) => {
@@ -519,26 +639,43 @@ async fn run_async(
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
     let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
     let m = machine.clone();
+    // The TPDOs, and the nodes' heartbeats: a boot-up freezes its axis in the cycle that reads it.
     let tpdo_filters: Vec<Filter> = machine
         .axes
         .iter()
         .map(|a| Filter::exact(a.feedback_pdo.cob_id))
+        .chain(
+            machine
+                .axes
+                .iter()
+                .map(|a| Filter::exact(crate::canopen::cob::HEARTBEAT + u16::from(a.node))),
+        )
         .collect();
     let mut port = bus.open(&tpdo_filters)?;
+    let completed = source.completed_line();
     let cyc = std::thread::Builder::new()
         .name("canmotion-cyclic".into())
-        .spawn(move || cyclic_thread(&m, port.as_mut(), &health, plan_rx, armed_tx, log_tx))
+        .spawn(move || {
+            cyclic_thread(
+                &m,
+                port.as_mut(),
+                &health,
+                plan_rx,
+                armed_tx,
+                log_tx,
+                completed,
+            )
+        })
         .expect("spawn cyclic thread");
 
     // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
     let plan_result = match armed_rx.await {
         Ok(armed_mm) => {
-            let r = plan_program(machine, &opts.program_name, &opts.program_text, armed_mm)
-                .and_then(|plan| {
-                    Interpolator::new(plan, machine.cycle_s()).map_err(|e| {
-                        GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
-                    })
-                });
+            let r = source.plan(machine, armed_mm).and_then(|plan| {
+                Interpolator::new(plan, machine.cycle_s()).map_err(|e| {
+                    GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
+                })
+            });
             match r {
                 Ok(interp) => {
                     let _ = plan_tx.send(interp);
@@ -550,7 +687,7 @@ async fn run_async(
         Err(_) => Ok(()), // the cyclic thread ended before arming: its result says why
     };
     drop(plan_tx);
-    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s) =
+    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s, detected_ns) =
         tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
             .await
             .expect("join");
@@ -574,6 +711,8 @@ async fn run_async(
             first_motion_cycle: master.first_motion_cycle,
             period_s: master.period_s(),
             bit12_to_failure_s,
+            detected_ns,
+            stop: StopPoint::of(&master),
         })));
     }
     let final_counts = master.final_counts();
@@ -602,6 +741,7 @@ type CyclicResult = (
     u64,
     Vec<Warning>,
     Option<f64>,
+    Option<u64>,
 );
 
 fn cyclic_thread(
@@ -611,9 +751,11 @@ fn cyclic_thread(
     plan_rx: mpsc::Receiver<Interpolator>,
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+    completed_line: Option<usize>,
 ) -> CyclicResult {
     let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
+    master.set_completed_line(completed_line);
     let mut ticker = Ticker::new(Duration::from_micros(u64::from(machine.cycle_us)));
     let mut out: Vec<Frame> = Vec::with_capacity(machine.axes.len() + 1);
     let mut armed_tx = Some(armed_tx);
@@ -687,13 +829,7 @@ fn cyclic_thread(
                 seen_emcys[i] = h.emcys.len();
                 if h.bootups > bootups_at_start[i] {
                     bootups_at_start[i] = h.bootups;
-                    master.alarm(
-                        a.node,
-                        format!(
-                            "axis {} (node {}): boot-up during the run: the drive reset",
-                            a.name, a.node
-                        ),
-                    );
+                    master.node_reset(a.node);
                 }
                 if let Some((_, at)) = h.last_heartbeat
                     && at.elapsed() > consumer
@@ -701,10 +837,11 @@ fn cyclic_thread(
                     master.alarm(
                         a.node,
                         format!(
-                            "axis {} (node {}): heartbeat lost (none for {} ms)",
+                            "axis {} (node {}): heartbeat lost (none for {} ms, consumer time {} ms)",
                             a.name,
                             a.node,
-                            at.elapsed().as_millis()
+                            at.elapsed().as_millis(),
+                            consumer.as_millis()
                         ),
                     );
                 }
@@ -776,6 +913,7 @@ fn cyclic_thread(
         dropped,
         warnings,
         bit12_to_failure_s,
+        fail_ns,
     )
 }
 

@@ -183,6 +183,11 @@ impl Interpolator {
         self.line
     }
 
+    /// The latest sample (the start point before any).
+    pub fn last_mm(&self) -> Vector3<f64> {
+        self.last_mm
+    }
+
     /// Time of the latest sample since the start: `k · period_s` after `k` samples.
     pub fn elapsed_s(&self) -> f64 {
         self.samples as f64 * self.period_s

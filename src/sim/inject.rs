@@ -1,6 +1,7 @@
 //! Misbehaviours a simulated drive can be told to show, for fault-reaction tests:
 //! `--inject following-error@2.0s`, `--inject silent@1.5s`, `--inject reboot@1.0s`,
-//! `--inject drop-rpdo=5%`, optionally for one node: `--inject 2:silent@1.5s`.
+//! `--inject drop-rpdo=5%`, `--inject no-heartbeat@1s`, `--inject persistent-fault@1s`,
+//! `--inject recurring-fault@1s`, optionally for one node: `--inject 2:silent@1.5s`.
 //!
 //! Times count from the moment the drive starts following setpoints (statusword bit 12 first
 //! set), so a test can place a fault in the middle of a motion whatever the start-up took.
@@ -29,11 +30,47 @@ pub enum Inject {
         /// When, after motion start.
         after: Duration,
     },
+    /// The heartbeat producer stops (a hung communication task) while the process data goes on:
+    /// only a heartbeat consumer notices. Until the next NMT reset.
+    NoHeartbeat {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// The drive faults with EMCY 0x4310 (excess temperature) and the cause stays: a fault
+    /// reset leaves it in Fault (CiA 402 transition 15 needs the cause gone).
+    PersistentFault {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// The drive faults with EMCY 0x2310 (over-current); a fault reset clears it, but the fault
+    /// comes back [`RECURRING_FAULT_DELAY`] after every reset (a short in the motor cable).
+    RecurringFault {
+        /// When, after motion start.
+        after: Duration,
+    },
     /// This fraction of received RPDOs is lost (deterministic pseudo-random choice).
     DropRpdo {
         /// 0–100.
         percent: f64,
     },
+}
+
+/// How long after a fault reset a [`Inject::RecurringFault`] comes back.
+pub const RECURRING_FAULT_DELAY: Duration = Duration::from_millis(50);
+
+impl Inject {
+    /// When a timed injection fires (after motion start); `None` for a rate.
+    pub fn after(&self) -> Option<Duration> {
+        match *self {
+            Inject::FollowingError { after }
+            | Inject::Silent { after }
+            | Inject::Reboot { after }
+            | Inject::NoHeartbeat { after }
+            | Inject::PersistentFault { after }
+            | Inject::RecurringFault { after } => Some(after),
+            Inject::DropRpdo { .. } => None,
+        }
+    }
 }
 
 /// An injection aimed at one node, or at every node of the process.
@@ -83,9 +120,12 @@ impl FromStr for Targeted {
                 "following-error" => Inject::FollowingError { after },
                 "silent" => Inject::Silent { after },
                 "reboot" => Inject::Reboot { after },
+                "no-heartbeat" => Inject::NoHeartbeat { after },
+                "persistent-fault" => Inject::PersistentFault { after },
+                "recurring-fault" => Inject::RecurringFault { after },
                 _ => {
                     return Err(format!(
-                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, drop-rpdo)"
+                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, no-heartbeat, persistent-fault, recurring-fault, drop-rpdo)"
                     ));
                 }
             }
@@ -102,7 +142,7 @@ impl FromStr for Targeted {
             Inject::DropRpdo { percent }
         } else {
             return Err(format!(
-                "{spec:?}: expected following-error@T, silent@T, reboot@T or drop-rpdo=P% (optionally NODE: first)"
+                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T or drop-rpdo=P% (optionally NODE: first)"
             ));
         };
         Ok(Targeted { node, inject })
@@ -144,7 +184,23 @@ mod tests {
                 inject: Inject::DropRpdo { percent: 5.0 }
             })
         );
+        assert_eq!(
+            "3:no-heartbeat@250ms".parse(),
+            Ok(Targeted {
+                node: Some(3),
+                inject: Inject::NoHeartbeat { after: ms(250) }
+            })
+        );
+        assert_eq!(
+            "persistent-fault@1s".parse::<Targeted>().map(|t| t.inject),
+            Ok(Inject::PersistentFault { after: ms(1000) })
+        );
+        assert_eq!(
+            "recurring-fault@0.5s".parse::<Targeted>().map(|t| t.inject),
+            Ok(Inject::RecurringFault { after: ms(500) })
+        );
         for bad in [
+            "no-heartbeat",
             "silent@",
             "silent@2",
             "jam@1s",

@@ -47,6 +47,12 @@ pub enum FaultCause {
     FollowingError,
     /// The heartbeat of a consumed node (0x1016) timed out and 0x6007 says fault.
     HeartbeatLost,
+    /// An injected fault ([`Inject::PersistentFault`], [`Inject::RecurringFault`]) with its
+    /// EMCY code.
+    Injected {
+        /// EMCY code, also in 0x603F.
+        code: u16,
+    },
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -100,6 +106,12 @@ pub struct SimDrive {
     motion_since: Option<Duration>,
     jammed: bool,
     silent: bool,
+    /// The heartbeat producer is stopped ([`Inject::NoHeartbeat`]) until the next boot.
+    heartbeat_off: bool,
+    /// The EMCY code of a fault that comes back after every reset ([`Inject::RecurringFault`]).
+    recurring_fault: Option<u16>,
+    /// When a recurring fault comes back.
+    refault_at: Option<Duration>,
     rng: u64,
     rpdo_dropped: u64,
 }
@@ -151,6 +163,9 @@ impl SimDrive {
             motion_since: None,
             jammed: false,
             silent: false,
+            heartbeat_off: false,
+            recurring_fault: None,
+            refault_at: None,
             rng: 0x9E37_79B9_7F4A_7C15 ^ u64::from(node),
             rpdo_dropped: 0,
         }
@@ -185,12 +200,7 @@ impl SimDrive {
             if fired {
                 continue;
             }
-            let after = match inj {
-                Inject::FollowingError { after }
-                | Inject::Silent { after }
-                | Inject::Reboot { after } => after,
-                Inject::DropRpdo { .. } => continue,
-            };
+            let Some(after) = inj.after() else { continue };
             if now < since + after {
                 continue;
             }
@@ -207,6 +217,19 @@ impl SimDrive {
                     self.boot(now, out);
                     return;
                 }
+                Inject::NoHeartbeat { .. } => self.heartbeat_off = true,
+                Inject::PersistentFault { .. } => {
+                    let code = emcy_code::TEMPERATURE;
+                    self.raise_fault(FaultCause::Injected { code }, now, out, true);
+                    self.power.set_fault_active(true);
+                    self.refresh();
+                }
+                Inject::RecurringFault { .. } => {
+                    let code = emcy_code::OVER_CURRENT;
+                    self.recurring_fault = Some(code);
+                    self.raise_fault(FaultCause::Injected { code }, now, out, true);
+                    self.refresh();
+                }
                 Inject::DropRpdo { .. } => {}
             }
         }
@@ -217,12 +240,7 @@ impl SimDrive {
         self.injects
             .iter()
             .filter(|(_, fired)| !fired)
-            .filter_map(|(i, _)| match i {
-                Inject::FollowingError { after }
-                | Inject::Silent { after }
-                | Inject::Reboot { after } => Some(since + *after),
-                Inject::DropRpdo { .. } => None,
-            })
+            .filter_map(|(i, _)| i.after().map(|a| since + a))
             .min()
     }
 
@@ -286,6 +304,7 @@ impl SimDrive {
         self.sync_missing_reported = false;
         self.consumer = [(None, false); 4];
         self.last_physics = Some(now);
+        self.heartbeat_off = false;
         out.push(Frame::new(cob::HEARTBEAT + u16::from(self.node), &[0x00]).expect("id"));
         self.schedule_heartbeat(now);
         self.refresh();
@@ -359,6 +378,9 @@ impl SimDrive {
         if let Some(i) = self.next_inject_at() {
             t = t.min(i.max(now));
         }
+        if let Some(r) = self.refault_at {
+            t = t.min(r.max(now));
+        }
         t
     }
 
@@ -371,6 +393,16 @@ impl SimDrive {
         self.check_injects(now, out);
         if self.silent {
             return;
+        }
+        if let (Some(at), Some(code)) = (self.refault_at, self.recurring_fault)
+            && now >= at
+        {
+            self.refault_at = None;
+            self.raise_fault(FaultCause::Injected { code }, now, out, true);
+            self.refresh();
+        }
+        if self.heartbeat_off {
+            self.next_heartbeat = None;
         }
         if let Some(h) = self.next_heartbeat
             && now >= h
@@ -386,6 +418,7 @@ impl SimDrive {
             }
             self.next_heartbeat = (ms > 0).then_some(next);
         }
+
         if self.nmt == NmtState::Operational
             && let (Some(last), Some(p)) = (self.last_sync, self.sync_period())
             && !self.sync_missing_reported
@@ -442,6 +475,7 @@ impl SimDrive {
             let code = match cause {
                 FaultCause::FollowingError => emcy_code::FOLLOWING_ERROR,
                 FaultCause::HeartbeatLost => emcy_code::HEARTBEAT,
+                FaultCause::Injected { code } => code,
             };
             self.od.set_int(0x603F, 0, i64::from(code));
             self.ip_active = false;
@@ -797,6 +831,10 @@ impl SimDrive {
             self.od.set_int(0x603F, 0, 0);
             self.emcy(emcy_code::RESET, 0, out);
             self.od.set_int(0x1001, 0, 0);
+            if self.recurring_fault.is_some() {
+                let now = self.last_physics.unwrap_or_default();
+                self.refault_at = Some(now + inject::RECURRING_FAULT_DELAY);
+            }
         }
         // IP: bit 4 enables interpolation (rising edge), clearing it stops it.
         let bit4 = cw & cw_bits::IP_ENABLE != 0;

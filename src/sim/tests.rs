@@ -1370,3 +1370,81 @@ fn rewriting_0x6060_with_the_mode_in_force_does_not_stop_ip() {
         AbortCode::DEVICE_STATE.0
     );
 }
+
+/// A drive following IP setpoints (TPDO1 on every SYNC, heartbeat every 100 ms), with `inject`
+/// armed from its motion start.
+fn injected(inject: crate::sim::Inject) -> Bench {
+    let mut b = Bench::with(SimDrive::new(dict(), NODE).with_inject(inject));
+    b.set(0x1017, 0, 100);
+    b.set(0x1800, 2, 1);
+    b.set(0x1006, 0, PERIOD_US);
+    b.set(0x6060, 0, 7);
+    b.nmt(nmt::START, NODE);
+    b.enable();
+    let actual = b.get(0x6064, 0);
+    b.set(0x60C1, 1, actual);
+    b.cw(0x1F);
+    assert_ne!(b.sw() & sw::OP_MODE_SPECIFIC_12, 0, "IP active");
+    b
+}
+
+#[test]
+fn no_heartbeat_stops_the_heartbeat_but_not_the_process_data() {
+    let mut b = injected(crate::sim::Inject::NoHeartbeat { after: ms(300) });
+    let t0 = b.now;
+    for _ in 0..600 {
+        b.advance(ms(1));
+        b.sync();
+    }
+    let beats: Vec<Duration> = b
+        .heartbeats()
+        .iter()
+        .map(|(t, _)| *t)
+        .filter(|t| *t > t0)
+        .collect();
+    assert!(
+        !beats.is_empty() && beats.iter().all(|t| *t <= t0 + ms(300)),
+        "{beats:?}"
+    );
+    // TPDO1 still goes out on every SYNC after the heartbeat stopped.
+    let late = b.tpdos(1).iter().filter(|(t, _)| *t > t0 + ms(400)).count();
+    assert!(late >= 190, "{late} TPDOs");
+    assert_eq!(b.state(), State::OperationEnabled);
+    // A reset of the communication restarts it.
+    b.nmt(nmt::RESET_COMMUNICATION, NODE);
+    b.set(0x1017, 0, 100);
+    b.clear();
+    b.run_until(b.now + ms(350));
+    assert!(b.heartbeats().len() >= 3, "{:?}", b.heartbeats());
+}
+
+#[test]
+fn a_persistent_fault_survives_the_fault_reset() {
+    let mut b = injected(crate::sim::Inject::PersistentFault { after: ms(50) });
+    b.run_until(b.now + ms(200));
+    assert_eq!(b.state(), State::Fault);
+    assert_eq!(b.emcy_count(0x4310), 1);
+    assert_eq!(b.get(0x603F, 0), 0x4310);
+    b.cw(0x00);
+    b.cw(0x80);
+    b.run_until(b.now + ms(100));
+    assert_eq!(b.state(), State::Fault);
+    assert_eq!(b.get(0x603F, 0), 0x4310);
+}
+
+#[test]
+fn a_recurring_fault_clears_on_reset_and_comes_back() {
+    let mut b = injected(crate::sim::Inject::RecurringFault { after: ms(50) });
+    b.run_until(b.now + ms(200));
+    assert_eq!(b.state(), State::Fault);
+    assert_eq!(b.get(0x603F, 0), 0x2310);
+    b.cw(0x00);
+    b.cw(0x80);
+    assert_eq!(b.state(), State::SwitchOnDisabled);
+    assert_eq!(b.get(0x603F, 0), 0);
+    b.run_until(b.now + ms(30));
+    assert_eq!(b.state(), State::SwitchOnDisabled);
+    b.run_until(b.now + ms(40));
+    assert_eq!(b.state(), State::Fault);
+    assert_eq!(b.emcy_count(0x2310), 2);
+}

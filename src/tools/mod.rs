@@ -8,6 +8,7 @@
 //! | `canmotion sdo write IFACE NODE INDEX[:SUB] TYPE VALUE` | [`sdo::write`] |
 //! | `canmotion nmt IFACE start\|stop\|preop\|reset\|reset-comm NODE\|all` | [`nmt::send`] |
 //! | `canmotion scan IFACE [--timeout-ms N]` | [`scan::scan`] |
+//! | `canmotion reset IFACE NODE\|all` | [`reset::reset`] (fault reset, verified) |
 //!
 //! Every entry point takes a [`Bus`](crate::bus::Bus), so the same code runs on SocketCAN and on
 //! the in-process bus with simulated drives (the tests in `tests/commissioning.rs`). The
@@ -23,6 +24,7 @@ pub mod candump;
 pub mod decode;
 pub mod monitor;
 pub mod nmt;
+pub mod reset;
 pub mod scan;
 pub mod sdo;
 

@@ -135,3 +135,126 @@ pub fn read_csv(path: &Path) -> Vec<Vec<f64>> {
 pub fn ms(n: u64) -> std::time::Duration {
     std::time::Duration::from_millis(n)
 }
+
+/// Every frame on a bus, with when it was received ([`canmotion::rt::now_ns`]), recorded by a
+/// thread of its own until [`Recorder::stop`].
+pub struct Recorder {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<Vec<(u64, canmotion::bus::Frame)>>>,
+}
+
+impl Recorder {
+    /// Start recording (the port is open when this returns).
+    pub fn start(bus: &canmotion::bus::Bus) -> Recorder {
+        let mut port = bus.open(&[]).expect("a port to record on");
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let s = stop.clone();
+        let thread = std::thread::spawn(move || {
+            let mut frames = Vec::new();
+            while !s.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(Some(f)) = port.recv_timeout(std::time::Duration::from_millis(20)) {
+                    frames.push((canmotion::rt::now_ns(), f));
+                }
+            }
+            while let Ok(Some(f)) = port.recv_timeout(std::time::Duration::ZERO) {
+                frames.push((canmotion::rt::now_ns(), f));
+            }
+            frames
+        });
+        Recorder {
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// Stop and hand over the frames, in bus order.
+    pub fn stop(mut self) -> Vec<(u64, canmotion::bus::Frame)> {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.thread.take().unwrap().join().unwrap()
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The recorded frames' index and time of the last one with `id` and `data` before `before_ns`.
+pub fn last_before(
+    frames: &[(u64, canmotion::bus::Frame)],
+    id: u16,
+    before_ns: u64,
+) -> Option<(usize, u64)> {
+    frames
+        .iter()
+        .enumerate()
+        .rfind(|(_, (t, f))| f.id() == id && *t <= before_ns)
+        .map(|(i, (t, _))| (i, *t))
+}
+
+/// The node's RPDOs (`rpdo_cob`) after its boot-up message: only the cycle in progress when it
+/// arrived may still carry one (its SYNC is the first after the boot-up); from the next SYNC on,
+/// none. Returns the boot-up's time and the offending frames' count.
+pub fn rpdos_after_boot_up(
+    frames: &[(u64, canmotion::bus::Frame)],
+    node: u8,
+    rpdo_cob: u16,
+    sync_cob: u16,
+) -> (u64, usize) {
+    // The last one: the first came after the start-up's reset communication.
+    let boot = frames
+        .iter()
+        .rposition(|(_, f)| f.id() == 0x700 + u16::from(node) && f.data() == [0])
+        .expect("a boot-up message during the run");
+    let second_sync = frames[boot..]
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, f))| f.id() == sync_cob)
+        .nth(1)
+        .map_or(frames.len(), |(i, _)| boot + i);
+    let late = frames[second_sync..]
+        .iter()
+        .filter(|(_, f)| f.id() == rpdo_cob)
+        .count();
+    (frames[boot].0, late)
+}
+
+/// The limits held by the setpoints of every axis across a whole log, from the cycle before the
+/// first setpoint that differs from position actual (while enabling, the setpoint is position
+/// actual: before the first feedback both are 0).
+pub fn limits_held_all(machine: &Machine, rows: &[Vec<f64>]) {
+    let n = machine.axes.len();
+    let first = rows
+        .iter()
+        .position(|r| (0..n).any(|i| (r[2 + i] - r[2 + n + i]).abs() > 1e-9))
+        .expect("a setpoint apart from position actual");
+    assert!(
+        first >= 3,
+        "motion from the first rows: {:?}",
+        &rows[..first + 1]
+    );
+    let t = machine.cycle_s();
+    for w in rows[first - 1..].windows(3) {
+        for (i, a) in machine.axes.iter().enumerate() {
+            let cmd = |r: &Vec<f64>| r[2 + i];
+            let v = (cmd(&w[2]) - cmd(&w[1])) / t;
+            let acc = (cmd(&w[2]) - 2.0 * cmd(&w[1]) + cmd(&w[0])) / (t * t);
+            assert!(
+                v.abs() <= a.max_vel_mm_s * 1.01,
+                "axis {} at cycle {}: {v} mm/s",
+                a.name,
+                w[2][0]
+            );
+            assert!(
+                acc.abs() <= a.max_acc_mm_s2 * 1.01,
+                "axis {} at cycle {}: {acc} mm/s²",
+                a.name,
+                w[2][0]
+            );
+        }
+    }
+}

@@ -1,0 +1,390 @@
+//! Recovery on the in-process bus: heartbeat loss on its own, a drive that resets mid-motion
+//! (IP and CSP), `run --resume` after it, and the verified fault reset of `canmotion reset`.
+//! The same scenarios run on vcan0 in tests/vcan/recovery.rs. Each checks the detection time,
+//! the message, and the limits of every healthy axis's setpoints during the stop.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use canmotion::bus::Bus;
+use canmotion::bus::inproc::InProcBus;
+use canmotion::config::Machine;
+use canmotion::gateway::resume::{self, ResumePreview, ResumeState, RunOutcome};
+use canmotion::gateway::{GatewayError, RunOptions};
+use canmotion::sim::{Inject, SimDrive, runner};
+use canmotion::tools::reset::{self, ResetOutcome};
+use common::*;
+
+/// Three lines, so that a stop in the third has a completed line before it.
+const LINES: &str =
+    "G21 G90\nG1 X20 Y20 Z-1 F6000\nG1 X120 Y120 Z-3 F8485\nG1 X150 Y60 F6000\nM2\n";
+/// Where LINES ends, in counts (X, Y at 1000/mm, Z at 2000/mm).
+const LINES_END: [i32; 3] = [150_000, 60_000, -6_000];
+
+/// Scheduling margin on a loaded machine (two cores shared with builds).
+const MARGIN_S: f64 = 0.040;
+
+/// One run at a time: each has a cyclic thread and simulated drives keeping real time, and the
+/// machine has two cores.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+struct Rig {
+    bus: Bus,
+    _sims: runner::SimHandle,
+    dir: tempfile::TempDir,
+}
+
+fn rig(machine: &Machine, inject: &[(u8, Inject)], positions: &[i32]) -> Rig {
+    let bus = Bus::InProc(InProcBus::new());
+    let dict = drive_dict(|t| t);
+    let drives = machine
+        .axes
+        .iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let d = SimDrive::new(dict.clone(), a.node)
+                .with_position(positions.get(i).copied().unwrap_or(0));
+            inject
+                .iter()
+                .filter(|(n, _)| *n == a.node)
+                .fold(d, |d, (_, i)| d.with_inject(*i))
+        })
+        .collect();
+    let sims = runner::spawn(&bus, drives).unwrap();
+    Rig {
+        bus,
+        _sims: sims,
+        dir: tempfile::tempdir().unwrap(),
+    }
+}
+
+fn opts(rig: &Rig, program: &str, log: &str) -> RunOptions {
+    RunOptions {
+        program_name: "recovery.ngc".into(),
+        program_text: program.into(),
+        log: Some(rig.dir.path().join(log)),
+        simulate: false,
+    }
+}
+
+fn outcome(
+    machine: &Machine,
+    rig: &Rig,
+    out: RunOutcome,
+    log: &str,
+) -> (Outcome, Option<ResumeState>) {
+    let path = rig.dir.path().join(log);
+    let rows = if path.exists() {
+        read_csv(&path)
+    } else {
+        Vec::new()
+    };
+    (
+        Outcome {
+            result: out.result,
+            rows,
+            machine: machine.clone(),
+        },
+        out.resume,
+    )
+}
+
+#[test]
+fn heartbeat_loss_alone_is_detected_within_the_consumer_time_plus_one_cycle() {
+    let _one = one_at_a_time();
+    let m = machine(|t| t);
+    let r = rig(&m, &[(3, Inject::NoHeartbeat { after: ms(300) })], &[]);
+    let rec = Recorder::start(&r.bus);
+    let out = resume::run_program(&m, &r.bus, &opts(&r, LONG, "hb.csv"));
+    let frames = rec.stop();
+    let (o, _) = outcome(&m, &r, out, "hb.csv");
+    let f = failure(&o);
+    assert!(
+        f.message
+            .starts_with("axis Z (node 3): heartbeat lost (none for "),
+        "{f}"
+    );
+    assert!(f.message.contains("consumer time 500 ms"), "{f}");
+    // Its process data kept coming until the end: only the heartbeat tells.
+    let detected = f.detected_ns.unwrap();
+    let (_, last_beat) = last_before(&frames, 0x703, detected).expect("heartbeats of node 3");
+    let tpdos_after = frames
+        .iter()
+        .filter(|(t, fr)| fr.id() == 0x183 && *t > last_beat + 200_000_000)
+        .count();
+    assert!(
+        tpdos_after > 20,
+        "{tpdos_after} TPDOs of node 3 after its last heartbeat"
+    );
+    let d = (detected - last_beat) as f64 * 1e-9;
+    let consumer = f64::from(m.heartbeat.gateway_consumer_ms) * 1e-3;
+    assert!(
+        d > consumer - 0.005 && d <= consumer + m.cycle_s() + MARGIN_S,
+        "detected {d} s after the last heartbeat (consumer time {consumer} s)"
+    );
+    frozen_after(&o, 2, f);
+    limits_held(&o, &[0, 1]);
+}
+
+fn reboot_stops_at_once(m: Machine) {
+    let r = rig(&m, &[(1, Inject::Reboot { after: ms(600) })], &[]);
+    let rec = Recorder::start(&r.bus);
+    let out = resume::run_program(&m, &r.bus, &opts(&r, LINES, "reboot.csv"));
+    let frames = rec.stop();
+    let (o, state) = outcome(&m, &r, out, "reboot.csv");
+    let f = failure(&o);
+    assert_eq!(
+        f.message,
+        "axis X (node 1): boot-up during the run: the drive reset; no further setpoints to node 1; last completed program line 2 (last program line 3)"
+    );
+    let (boot_ns, late) = rpdos_after_boot_up(&frames, 1, 0x201, 0x80);
+    assert_eq!(late, 0, "RPDOs to node 1 after its boot-up's cycle");
+    let d = (f.detected_ns.unwrap() as f64 - boot_ns as f64) * 1e-9;
+    assert!(
+        d <= m.cycle_s() + MARGIN_S,
+        "detected {d} s after the boot-up"
+    );
+    frozen_after(&o, 0, f);
+    limits_held(&o, &[1, 2]);
+    let st = state.expect("a resume point");
+    assert_eq!(
+        (st.line, st.completed_line, st.reset_nodes.as_slice()),
+        (3, 2, &[1u8][..])
+    );
+}
+
+#[test]
+fn a_reboot_stops_the_group_at_once_and_the_node_gets_no_further_setpoints() {
+    let _one = one_at_a_time();
+    reboot_stops_at_once(machine(|t| t));
+}
+
+#[test]
+fn a_reboot_in_csp_too() {
+    let _one = one_at_a_time();
+    reboot_stops_at_once(machine(csp));
+}
+
+#[test]
+fn resume_after_a_reboot_completes_the_program_after_a_confirmation() {
+    let _one = one_at_a_time();
+    let m = machine(|t| t);
+    let r = rig(&m, &[(1, Inject::Reboot { after: ms(600) })], &[]);
+    let out = resume::run_program(&m, &r.bus, &opts(&r, LINES, "first.csv"));
+    let (o, state) = outcome(&m, &r, out, "first.csv");
+    failure(&o);
+    let st = state.expect("a resume point");
+    let file = r.dir.path().join("recovery.ngc.resume");
+    st.save(&file).unwrap();
+    let st = ResumeState::load(&file).unwrap();
+    assert_eq!(st.line, 3);
+
+    // A changed program: refused before anything happens on the bus.
+    let changed = LINES.replace("X150 Y60", "X150 Y61");
+    let rec = Recorder::start(&r.bus);
+    let out = resume::resume_program(&m, &r.bus, &opts(&r, &changed, "x.csv"), &st, &mut |_| {
+        panic!("no confirmation is asked for a changed program")
+    });
+    match out.result {
+        Err(GatewayError::Resume(e)) => {
+            assert!(e.contains("recovery.ngc changed since the stop"), "{e}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // No confirmation: nothing enabled, no SYNC, no setpoint.
+    let mut shown: Option<ResumePreview> = None;
+    let out = resume::resume_program(&m, &r.bus, &opts(&r, LINES, "no.csv"), &st, &mut |p| {
+        shown = Some(p.clone());
+        false
+    });
+    match out.result {
+        Err(GatewayError::Resume(e)) => {
+            assert_eq!(
+                e,
+                "resume of recovery.ngc at line 3 not confirmed: nothing moved"
+            )
+        }
+        other => panic!("{other:?}"),
+    }
+    let frames = rec.stop();
+    assert!(
+        frames
+            .iter()
+            .all(|(_, f)| f.id() != 0x80 && !(0x201..=0x203).contains(&f.id())),
+        "SYNC or RPDO without a confirmation"
+    );
+    let p = shown.expect("the operator was asked");
+    assert_eq!(p.line, 3);
+    assert!(p.axes[0].reset && !p.axes[1].reset);
+    let text = p.to_string();
+    assert!(text.contains("resume recovery.ngc at line 3"), "{text}");
+    assert!(text.contains("(line 2 completed)"), "{text}");
+    assert!(text.contains("axis X (node 1)  at "), "{text}");
+
+    // Confirmed: the program completes.
+    let out = resume::resume_program(
+        &m,
+        &r.bus,
+        &opts(&r, LINES, "resumed.csv"),
+        &st,
+        &mut |_| true,
+    );
+    let (o, again) = outcome(&m, &r, out, "resumed.csv");
+    let s = o.result.as_ref().expect("the resumed run completes");
+    assert!(again.is_none());
+    for (i, want) in LINES_END.iter().enumerate() {
+        assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
+    }
+    limits_held_all(&m, &o.rows);
+    // The rows pass through the stop point, then the end of line 3's predecessor is not
+    // revisited: the path continues from where it stopped.
+    let stop = st.stop_point_mm;
+    // (Samples fall within a period of the approach's end, at rest: within 0.05 mm.)
+    let near = o
+        .rows
+        .iter()
+        .any(|row| (0..3).all(|k| (row[2 + k] - stop[k]).abs() < 0.05));
+    assert!(
+        near,
+        "the resumed run never reached the stop point {stop:?}"
+    );
+}
+
+#[test]
+fn resume_refuses_an_axis_that_lost_its_position() {
+    let _one = one_at_a_time();
+    let m = machine(|t| t);
+    let r = rig(&m, &[(1, Inject::Reboot { after: ms(600) })], &[]);
+    let out = resume::run_program(&m, &r.bus, &opts(&r, LINES, "first.csv"));
+    let st = out.resume.expect("a resume point");
+    drop(r);
+    // The drives come back with X at 0: an incremental encoder after a power cycle.
+    let y = (st.stop_point_mm[1] * 1000.0) as i32;
+    let z = (st.stop_point_mm[2] * 2000.0) as i32;
+    let r = rig(&m, &[], &[0, y, z]);
+    let out = resume::resume_program(&m, &r.bus, &opts(&r, LINES, "lost.csv"), &st, &mut |_| {
+        panic!("not asked: the position is lost")
+    });
+    match out.result {
+        Err(GatewayError::Resume(e)) => assert!(
+            e.starts_with("not resuming: axis X (node 1) is at 0.0000 mm")
+                && e.contains("its position was lost"),
+            "{e}"
+        ),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Wait until `node` reports EMCY `code` on `bus`, at most `within`.
+fn wait_emcy(port: &mut dyn canmotion::bus::Port, node: u8, code: u16, within: Duration) {
+    let end = Instant::now() + within;
+    while Instant::now() < end {
+        if let Ok(Some(f)) = port.recv_timeout(Duration::from_millis(20))
+            && f.id() == 0x80 + u16::from(node)
+            && f.data().len() == 8
+            && u16::from_le_bytes([f.data()[0], f.data()[1]]) == code
+        {
+            return;
+        }
+    }
+    panic!("no EMCY 0x{code:04X} from node {node} within {within:?}");
+}
+
+/// Fault node 2 with `inject` in the middle of a run (checking the stop), then wait for the
+/// drives to notice the gateway is gone (EMCY 0x8130), so its heartbeat loss does not fault the
+/// drive again during the reset's observation.
+fn faulted(inject: Inject, causes: &[&str], bound_s: f64) -> Rig {
+    let m = machine(|t| t);
+    let r = rig(&m, &[(2, inject)], &[]);
+    let mut watch = r.bus.open(&[canmotion::bus::Filter::exact(0x82)]).unwrap();
+    let out = resume::run_program(&m, &r.bus, &opts(&r, LONG, "fault.csv"));
+    let (o, _) = outcome(&m, &r, out, "fault.csv");
+    let f = failure(&o);
+    assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
+    assert!(causes.iter().any(|c| f.message.contains(c)), "{f}");
+    let d = detection_s(f, 0.3);
+    assert!(d < bound_s + MARGIN_S, "detected {d} s after the fault");
+    frozen_after(&o, 1, f);
+    limits_held(&o, &[0, 2]);
+    wait_emcy(watch.as_mut(), 2, 0x8130, Duration::from_secs(3));
+    r
+}
+
+#[test]
+fn reset_clears_a_following_error_fault_and_verifies_it() {
+    let _one = one_at_a_time();
+    // The jam: the window (2 mm at 100 mm/s) plus 0x6066 (10 ms) and the PDO round trip.
+    let r = faulted(
+        Inject::FollowingError { after: ms(300) },
+        &["following error", "0x8611"],
+        0.090,
+    );
+    let reports = reset::reset(&r.bus, &[2, 3], &reset::ResetOptions::default()).unwrap();
+    let rep = &reports[0];
+    assert!(matches!(rep.outcome, ResetOutcome::Cleared { .. }), "{rep}");
+    assert_eq!((rep.error_before, rep.error_after), (0x8611, 0));
+    let text = rep.to_string();
+    assert!(
+        text.starts_with("node 2: fault cleared ")
+            && text.contains("was Fault (statusword 0x")
+            && text.contains("0x603F = 0x8611 (following error)")
+            && text.contains("now Switch on disabled"),
+        "{text}"
+    );
+    // Node 3 faulted on the gateway's lost heartbeat: cleared as well.
+    assert_eq!(reports[1].error_before, 0x8130, "{}", reports[1]);
+    assert!(reports[1].ok(), "{}", reports[1]);
+    // A second reset finds nothing to do.
+    let again = reset::reset(&r.bus, &[2], &reset::ResetOptions::default()).unwrap();
+    assert_eq!(again[0].outcome, ResetOutcome::NotFaulted, "{}", again[0]);
+}
+
+#[test]
+fn reset_reports_a_fault_whose_cause_persists() {
+    let _one = one_at_a_time();
+    // A drive fault (statusword bit 3 or its EMCY): the cycle after it, and the PDO round trip.
+    let m = machine(|t| t);
+    let r = faulted(
+        Inject::PersistentFault { after: ms(300) },
+        &["fault (statusword bit 3)", "EMCY 0x4310"],
+        2.0 * m.cycle_s(),
+    );
+    let reports = reset::reset(&r.bus, &[2], &reset::ResetOptions::default()).unwrap();
+    let rep = &reports[0];
+    assert_eq!(rep.outcome, ResetOutcome::NotCleared, "{rep}");
+    assert!(!rep.ok());
+    let text = rep.to_string();
+    assert!(
+        text.starts_with("node 2: fault NOT cleared: still Fault (statusword 0x")
+            && text.contains("0x603F = 0x4310 (excess drive temperature)"),
+        "{text}"
+    );
+}
+
+#[test]
+fn reset_reports_a_fault_that_comes_back() {
+    let _one = one_at_a_time();
+    let m = machine(|t| t);
+    let r = faulted(
+        Inject::RecurringFault { after: ms(300) },
+        &["fault (statusword bit 3)", "EMCY 0x2310"],
+        2.0 * m.cycle_s(),
+    );
+    let reports = reset::reset(&r.bus, &[2], &reset::ResetOptions::default()).unwrap();
+    let rep = &reports[0];
+    assert!(
+        matches!(rep.outcome, ResetOutcome::CameBack { .. }),
+        "{rep}"
+    );
+    let text = rep.to_string();
+    assert!(
+        text.starts_with("node 2: fault came back ")
+            && text.contains("0x603F = 0x2310 (continuous over-current)"),
+        "{text}"
+    );
+}
