@@ -54,7 +54,8 @@ enum Command {
         dictionary: Option<PathBuf>,
         /// Misbehave, for fault tests: following-error@T, silent@T, reboot@T (T after the drive
         /// starts following setpoints, e.g. 1.5s or 200ms) or drop-rpdo=P%; `NODE:` first aims
-        /// it at one node. Repeatable.
+        /// it at one node. bus-off@T and error-passive@T send the error frame the gateway's CAN
+        /// controller would report. Repeatable.
         #[arg(long = "inject", value_name = "SPEC")]
         injects: Vec<canmotion::sim::Targeted>,
     },

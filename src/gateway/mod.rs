@@ -2,6 +2,7 @@
 //! cyclic thread, watch the drives, and bring everything down in order.
 
 pub mod cyclic;
+pub mod cyclic_bus;
 pub mod io;
 pub mod startup;
 
@@ -244,6 +245,9 @@ pub struct Summary {
     pub log_dropped: u64,
     /// Warnings the drives reported (EMCYs after which they kept running).
     pub warnings: Vec<Warning>,
+    /// The bus as the cyclic thread saw it: error frames, frames it could not queue in time,
+    /// SYNC period statistics.
+    pub bus: cyclic_bus::BusReport,
 }
 
 /// An EMCY after which the drive kept running (see [`emcy::is_warning`]), counted.
@@ -296,6 +300,15 @@ impl std::fmt::Display for Summary {
         }
         for w in &self.warnings {
             writeln!(f, "warning           {w}")?;
+        }
+        for w in &self.bus.warnings {
+            writeln!(f, "warning           {w}")?;
+        }
+        if self.bus.tx_loss.cycles > 0 {
+            writeln!(f, "warning           {}", self.bus.tx_loss)?;
+        }
+        if let Some(s) = &self.bus.sync_period {
+            writeln!(f, "SYNC period       {s}")?;
         }
         if self.log_dropped > 0 {
             writeln!(
@@ -504,9 +517,25 @@ async fn run_async(
         .map(|a| Filter::exact(a.feedback_pdo.cob_id))
         .collect();
     let mut port = bus.open(&tpdo_filters)?;
+    let cyc_bus = cyclic_bus::CyclicBus::new(
+        machine,
+        bus.name(),
+        port.as_mut(),
+        bus.sync_tap(machine.sync_cob_id)?,
+    )?;
     let cyc = std::thread::Builder::new()
         .name("canmotion-cyclic".into())
-        .spawn(move || cyclic_thread(&m, port.as_mut(), &health, plan_rx, armed_tx, log_tx))
+        .spawn(move || {
+            cyclic_thread(
+                &m,
+                port.as_mut(),
+                cyc_bus,
+                &health,
+                plan_rx,
+                armed_tx,
+                log_tx,
+            )
+        })
         .expect("spawn cyclic thread");
 
     // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
@@ -529,7 +558,7 @@ async fn run_async(
         Err(_) => Ok(()), // the cyclic thread ended before arming: its result says why
     };
     drop(plan_tx);
-    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s) =
+    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s, bus_report) =
         tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
             .await
             .expect("join");
@@ -542,9 +571,8 @@ async fn run_async(
             })?;
     }
     plan_result?;
-    if let Some(e) = port_err {
-        return Err(GatewayError::Bus(e));
-    }
+    // A failure of the motion first: when the bus failed during it, the failure says so, with
+    // what the motion did about it.
     if let Some(f) = master.failure() {
         return Err(GatewayError::Motion(Box::new(MotionFailure {
             message: f.to_string(),
@@ -554,6 +582,9 @@ async fn run_async(
             period_s: master.period_s(),
             bit12_to_failure_s,
         })));
+    }
+    if let Some(e) = port_err {
+        return Err(GatewayError::Bus(e));
     }
     let final_counts = master.final_counts();
     Ok(Summary {
@@ -570,6 +601,7 @@ async fn run_async(
         rt: rt_setup,
         log_dropped: dropped,
         warnings,
+        bus: bus_report,
     })
 }
 
@@ -581,11 +613,13 @@ type CyclicResult = (
     u64,
     Vec<Warning>,
     Option<f64>,
+    cyclic_bus::BusReport,
 );
 
 fn cyclic_thread(
     machine: &Machine,
     port: &mut dyn crate::bus::Port,
+    mut bus: cyclic_bus::CyclicBus,
     health: &io::Health,
     plan_rx: mpsc::Receiver<Interpolator>,
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
@@ -612,16 +646,9 @@ fn cyclic_thread(
     let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
     loop {
         ticker.wait();
-        // Feedback received since the last cycle.
-        loop {
-            match port.recv_timeout(Duration::ZERO) {
-                Ok(Some(f)) => master.on_frame(&f),
-                Ok(None) => break,
-                Err(e) => {
-                    port_err = Some(e);
-                    break;
-                }
-            }
+        // Feedback and error frames received since the last cycle.
+        if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {
+            port_err.get_or_insert(e);
         }
         if let Some(e) = &port_err {
             master.alarm(0, format!("bus error: {e}"));
@@ -714,13 +741,11 @@ fn cyclic_thread(
         if master.failure_cycle.is_some() && fail_ns.is_none() {
             fail_ns = Some(rt::now_ns());
         }
-        for f in &out {
-            if let Err(e) = port.send(f) {
-                master.alarm(0, format!("bus error: {e}"));
-                port_err.get_or_insert(e);
-                break;
-            }
+        let deadline = ticker.this_deadline_ns();
+        if let Some(e) = bus.send(port, &out, deadline, &mut master, ticker.timing.cycles) {
+            port_err.get_or_insert(e);
         }
+        bus.measure();
         if let Some(tx) = &log_tx
             && tx.try_send(rec).is_err()
         {
@@ -731,8 +756,8 @@ fn cyclic_thread(
         }
     }
     // Orderly end: Pre-operational right after the last SYNC, so no drive waits for a SYNC that
-    // will not come.
-    for a in &machine.axes {
+    // will not come (unless the bus is gone).
+    for a in machine.axes.iter().filter(|_| !bus.lost()) {
         let f = Frame::new(
             crate::canopen::cob::NMT,
             &[crate::canopen::nmt::PRE_OPERATIONAL, a.node],
@@ -755,6 +780,7 @@ fn cyclic_thread(
         dropped,
         warnings,
         bit12_to_failure_s,
+        bus.report(),
     )
 }
 

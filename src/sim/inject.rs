@@ -2,6 +2,12 @@
 //! `--inject following-error@2.0s`, `--inject silent@1.5s`, `--inject reboot@1.0s`,
 //! `--inject drop-rpdo=5%`, optionally for one node: `--inject 2:silent@1.5s`.
 //!
+//! `--inject bus-off@T` and `--inject error-passive@T` stand in for the *gateway's* CAN
+//! controller: at T the drive sends the error frame a controller's driver would report
+//! (`linux/can/error.h`), which every other socket with that class in its error mask receives as
+//! if its own controller had reported it. vcan has no controller, so this is how a bus-off can
+//! be tested on vcan0. The drive itself carries on.
+//!
 //! Times count from the moment the drive starts following setpoints (statusword bit 12 first
 //! set), so a test can place a fault in the middle of a motion whatever the start-up took.
 
@@ -34,6 +40,30 @@ pub enum Inject {
         /// 0–100.
         percent: f64,
     },
+    /// A bus-off error frame is sent (see the module's documentation).
+    BusOff {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// An error-passive error frame (both counters above 127) is sent.
+    ErrorPassive {
+        /// When, after motion start.
+        after: Duration,
+    },
+}
+
+impl Inject {
+    /// When a timed injection fires, after motion start; `None` for a rate.
+    pub fn after(&self) -> Option<Duration> {
+        match *self {
+            Inject::FollowingError { after }
+            | Inject::Silent { after }
+            | Inject::Reboot { after }
+            | Inject::BusOff { after }
+            | Inject::ErrorPassive { after } => Some(after),
+            Inject::DropRpdo { .. } => None,
+        }
+    }
 }
 
 /// An injection aimed at one node, or at every node of the process.
@@ -83,9 +113,11 @@ impl FromStr for Targeted {
                 "following-error" => Inject::FollowingError { after },
                 "silent" => Inject::Silent { after },
                 "reboot" => Inject::Reboot { after },
+                "bus-off" => Inject::BusOff { after },
+                "error-passive" => Inject::ErrorPassive { after },
                 _ => {
                     return Err(format!(
-                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, drop-rpdo)"
+                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, bus-off, error-passive, drop-rpdo)"
                     ));
                 }
             }
@@ -102,7 +134,7 @@ impl FromStr for Targeted {
             Inject::DropRpdo { percent }
         } else {
             return Err(format!(
-                "{spec:?}: expected following-error@T, silent@T, reboot@T or drop-rpdo=P% (optionally NODE: first)"
+                "{spec:?}: expected following-error@T, silent@T, reboot@T, bus-off@T, error-passive@T or drop-rpdo=P% (optionally NODE: first)"
             ));
         };
         Ok(Targeted { node, inject })
@@ -142,6 +174,20 @@ mod tests {
             Ok(Targeted {
                 node: None,
                 inject: Inject::DropRpdo { percent: 5.0 }
+            })
+        );
+        assert_eq!(
+            "bus-off@250ms".parse(),
+            Ok(Targeted {
+                node: None,
+                inject: Inject::BusOff { after: ms(250) }
+            })
+        );
+        assert_eq!(
+            "3:error-passive@0s".parse(),
+            Ok(Targeted {
+                node: Some(3),
+                inject: Inject::ErrorPassive { after: ms(0) }
             })
         );
         for bad in [

@@ -102,6 +102,8 @@ pub struct SimDrive {
     silent: bool,
     rng: u64,
     rpdo_dropped: u64,
+    /// Error frames an injection produced, for the runner to send.
+    bus_errors: Vec<crate::bus::ErrorFrame>,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -153,6 +155,7 @@ impl SimDrive {
             silent: false,
             rng: 0x9E37_79B9_7F4A_7C15 ^ u64::from(node),
             rpdo_dropped: 0,
+            bus_errors: Vec::new(),
         }
     }
 
@@ -185,11 +188,8 @@ impl SimDrive {
             if fired {
                 continue;
             }
-            let after = match inj {
-                Inject::FollowingError { after }
-                | Inject::Silent { after }
-                | Inject::Reboot { after } => after,
-                Inject::DropRpdo { .. } => continue,
+            let Some(after) = inj.after() else {
+                continue;
             };
             if now < since + after {
                 continue;
@@ -207,9 +207,19 @@ impl SimDrive {
                     self.boot(now, out);
                     return;
                 }
+                Inject::BusOff { .. } => self.bus_errors.push(crate::bus::ErrorFrame::bus_off()),
+                Inject::ErrorPassive { .. } => self
+                    .bus_errors
+                    .push(crate::bus::ErrorFrame::error_passive(128, 128)),
                 Inject::DropRpdo { .. } => {}
             }
         }
+    }
+
+    /// Error frames injected since the last call ([`Inject::BusOff`], [`Inject::ErrorPassive`]),
+    /// to send with [`crate::bus::Port::send_error`].
+    pub fn take_bus_errors(&mut self) -> Vec<crate::bus::ErrorFrame> {
+        std::mem::take(&mut self.bus_errors)
     }
 
     fn next_inject_at(&self) -> Option<Duration> {
@@ -217,12 +227,7 @@ impl SimDrive {
         self.injects
             .iter()
             .filter(|(_, fired)| !fired)
-            .filter_map(|(i, _)| match i {
-                Inject::FollowingError { after }
-                | Inject::Silent { after }
-                | Inject::Reboot { after } => Some(since + *after),
-                Inject::DropRpdo { .. } => None,
-            })
+            .filter_map(|(i, _)| i.after().map(|a| since + a))
             .min()
     }
 
