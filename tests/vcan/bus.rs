@@ -25,9 +25,13 @@ fn watch(ids: &[u16]) -> Box<dyn Port> {
     p
 }
 
-/// Two moves: line 2 (X to 20 mm, about 0.25 s) completes before line 3 (a long diagonal, over a
-/// second) is under way.
-const TWO_MOVES: &str = "G21 G90\nG1 X20 F6000\nG1 X150 Y150 Z-4 F8485\nM2\n";
+/// Two moves at half the axes' speed (a stall of User-Mode Linux costs half the following
+/// error): line 2 (X to 10 mm, about 0.25 s) completes before line 3 (a diagonal, X and Y at
+/// 50 mm/s for over a second) is under way.
+const TWO_MOVES: &str = "G21 G90\nG1 X10 F3000\nG1 X70 Y60 Z-2 F4243\nM2\n";
+
+/// One diagonal, X and Y at 50 mm/s for over a second.
+const SLOW: &str = "G21 G90\nG1 X60 Y60 Z-2 F4243\nM2\n";
 
 fn run_in_thread(
     program: &'static str,
@@ -229,7 +233,7 @@ fn vcan0_interface_going_down_stops_the_run_like_a_bus_off() {
     let _g = lock();
     let _drives = simdrive(&[1, 2, 3], None);
     let mut w = watch(&[0x181, 0x182, 0x183]);
-    let (h, dir) = run_in_thread(common::LONG);
+    let (h, dir) = run_in_thread(SLOW);
     until_moving(w.as_mut(), |_| {});
     let _up = LinkUp;
     let ok = std::process::Command::new("ip")
@@ -293,7 +297,7 @@ fn vcan0_a_transmit_queue_held_full_stops_the_run_after_the_tolerated_lost_cycle
     // it); one it cannot queue is not.
     let mut w = watch(&[0x80, 0x181, 0x182, 0x183]);
     let mut syncs = 0u64;
-    let (h, dir) = run_in_thread(common::LONG);
+    let (h, dir) = run_in_thread(SLOW);
     until_moving(w.as_mut(), |f| syncs += u64::from(f.id() == 0x80));
     let plug = Plug::new(160);
     let deadline = Instant::now() + Duration::from_secs(20);
