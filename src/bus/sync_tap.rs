@@ -40,6 +40,30 @@ impl SyncTap {
         })
     }
 
+    /// Let the socket hold about `bytes` of received frames (SO_RCVBUFFORCE where permitted,
+    /// else SO_RCVBUF up to the system's limit): a reader that drains it rarely (a test counting
+    /// SYNCs over a whole run) loses none.
+    pub fn set_receive_buffer(&mut self, bytes: usize) -> Result<(), BusError> {
+        let fd = std::os::fd::AsRawFd::as_raw_fd(&self.sock);
+        let v = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+        let set = |opt| {
+            // SAFETY: a plain setsockopt with an int we own, on the fd we own.
+            unsafe {
+                libc::setsockopt(
+                    fd,
+                    libc::SOL_SOCKET,
+                    opt,
+                    (&v as *const libc::c_int).cast(),
+                    std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+                )
+            }
+        };
+        if set(libc::SO_RCVBUFFORCE) != 0 && set(libc::SO_RCVBUF) != 0 {
+            return Err(io_error(&self.iface, io::Error::last_os_error()));
+        }
+        Ok(())
+    }
+
     /// Hand every SYNC received since the last call to `on`, oldest first, as its kernel receive
     /// time in ns (CLOCK_REALTIME). Never waits. Returns how many there were.
     pub fn drain(&mut self, mut on: impl FnMut(u64)) -> Result<usize, BusError> {
