@@ -104,9 +104,8 @@ fn to_socketcan(frame: &Frame) -> CanFrame {
 /// Convert a received frame; extended-id frames are not CANopen's and are skipped (`None`).
 fn from_socketcan(frame: CanFrame) -> Option<Received> {
     match frame {
-        CanFrame::Error(e) => {
-            ErrorFrame::from_raw(e.error_bits() | error::CAN_ERR_FLAG, e.data()).map(Received::Error)
-        }
+        CanFrame::Error(e) => ErrorFrame::from_raw(e.error_bits() | error::CAN_ERR_FLAG, e.data())
+            .map(Received::Error),
         f if f.is_extended() => None,
         CanFrame::Remote(_) => Frame::remote(f_id(&frame), frame.dlc() as u8).map(Received::Frame),
         CanFrame::Data(_) => Frame::new(f_id(&frame), frame.data()).map(Received::Frame),
@@ -439,7 +438,11 @@ mod tests {
             }
             _ => panic!("a full queue past the deadline must be reported"),
         }
-        match r.step(Err(io::Error::from_raw_os_error(libc::ENETDOWN)), "vcan0", &f) {
+        match r.step(
+            Err(io::Error::from_raw_os_error(libc::ENETDOWN)),
+            "vcan0",
+            &f,
+        ) {
             Step::Finished(Err(BusError::InterfaceDown { .. })) => {}
             _ => panic!("ENETDOWN is the interface going down"),
         }

@@ -71,7 +71,9 @@ impl SyncTap {
         loop {
             match self.sock.read_frame_with_timestamp() {
                 Ok((_, at)) => {
-                    let ns = at.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64);
+                    let ns = at
+                        .duration_since(UNIX_EPOCH)
+                        .map_or(0, |d| d.as_nanos() as u64);
                     on(ns);
                     n += 1;
                 }

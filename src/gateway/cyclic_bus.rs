@@ -186,10 +186,7 @@ impl CycleSender {
             return CycleSent::All;
         };
         let sync = frames[k].id() == sync_cob_id;
-        let setpoints = frames[k..]
-            .iter()
-            .filter(|f| f.id() != sync_cob_id)
-            .count();
+        let setpoints = frames[k..].iter().filter(|f| f.id() != sync_cob_id).count();
         self.run += 1;
         self.loss.cycles += 1;
         self.loss.syncs += u64::from(sync);
@@ -554,10 +551,13 @@ mod tests {
         assert!(matches!(r, CycleSent::All), "{r:?}");
         assert_eq!(port.queued, frames());
         assert_eq!(clock.pauses, 3);
-        assert_eq!(s.loss(), &TxLoss {
-            tolerated_run: 2,
-            ..TxLoss::default()
-        });
+        assert_eq!(
+            s.loss(),
+            &TxLoss {
+                tolerated_run: 2,
+                ..TxLoss::default()
+            }
+        );
     }
 
     #[test]

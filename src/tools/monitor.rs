@@ -100,12 +100,7 @@ impl Sink<'_> {
     }
 
     /// Log and print an error frame; `Ok(false)` when the output was closed.
-    fn put_error(
-        &mut self,
-        ts: Timestamp,
-        iface: &str,
-        e: &ErrorFrame,
-    ) -> Result<bool, ToolError> {
+    fn put_error(&mut self, ts: Timestamp, iface: &str, e: &ErrorFrame) -> Result<bool, ToolError> {
         if let Some((path, w)) = &mut self.log {
             writeln!(w, "({ts}) {iface} {}", e.text()).map_err(|source| ToolError::Io {
                 file: path.clone(),

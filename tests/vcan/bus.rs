@@ -142,7 +142,10 @@ fn vcan0_carries_error_frames_to_the_sockets_whose_mask_has_their_class() {
     );
     // The default mask is bus-off only; recv_timeout reports it as an error.
     match default.recv_timeout(second) {
-        Err(e) => assert_eq!(e.to_string(), "CAN interface 'vcan0': controller is bus-off"),
+        Err(e) => assert_eq!(
+            e.to_string(),
+            "CAN interface 'vcan0': controller is bus-off"
+        ),
         Ok(f) => panic!("expected the bus-off, got {f:?}"),
     }
     assert_eq!(none.recv_any(Duration::ZERO).unwrap(), None);
@@ -199,12 +202,19 @@ fn vcan0_bus_off_stops_the_run_within_a_cycle_and_the_drives_stop_by_their_heart
     // Detected in the cycle after the error frame arrived.
     let d = common::detection_s(f, 0.6);
     let cycle = o.machine.cycle_s();
-    assert!(d <= cycle + UML_MARGIN_S, "detected {d} s after the bus-off");
+    assert!(
+        d <= cycle + UML_MARGIN_S,
+        "detected {d} s after the bus-off"
+    );
     // Setpoints held from the detection on, no step beyond max velocity × period before.
     all_held_after(&o, f);
     steps_within_limits(&o);
     let detected = f.detected_cycle.unwrap() as f64;
-    assert_eq!(o.rows.last().unwrap()[0], detected + 1.0, "cycles after the bus-off");
+    assert_eq!(
+        o.rows.last().unwrap()[0],
+        detected + 1.0,
+        "cycles after the bus-off"
+    );
     // The gateway sent nothing more, so every drive's heartbeat consumer fires: EMCY 0x8130
     // within the consumer time of the gateway's last heartbeat (at most one producer period
     // before the run returned).
@@ -269,23 +279,48 @@ fn vcan0_interface_going_down_stops_the_run_like_a_bus_off() {
     steps_within_limits(&o);
 }
 
-/// Holds vcan0's transmit queue: a `plug` qdisc that releases nothing and takes at most `limit`
-/// bytes (a CAN frame is 16), as a controller whose frames nobody acknowledges; removed on drop.
+/// A `plug` qdisc on vcan0 that takes at most `limit` bytes (a CAN frame is 16): released (it
+/// passes everything) until [`Plug::block`], then it holds every frame and, once full, refuses
+/// the next with ENOBUFS, as a controller whose frames nobody acknowledges. Removed on drop.
+///
+/// It is attached before anything runs: attaching a root qdisc deactivates the device for a
+/// moment, and a send in that moment fails with ENOBUFS too.
 struct Plug;
+
+fn tc(args: &[&str]) {
+    let out = std::process::Command::new("tc")
+        .args(args)
+        .output()
+        .expect("tc (iproute2)");
+    assert!(
+        out.status.success(),
+        "tc {}: {} (is sch_plug loaded? tools/in-vcan.sh loads it)",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
 
 impl Plug {
     fn new(limit_bytes: u32) -> Plug {
-        let out = std::process::Command::new("tc")
-            .args(["qdisc", "add", "dev", IFACE, "root", "plug", "limit"])
-            .arg(limit_bytes.to_string())
-            .output()
-            .expect("tc (iproute2)");
-        assert!(
-            out.status.success(),
-            "tc qdisc add dev vcan0 root plug: {} (is sch_plug loaded? tools/in-vcan.sh loads it)",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        Plug
+        let limit = limit_bytes.to_string();
+        tc(&[
+            "qdisc", "add", "dev", IFACE, "root", "plug", "limit", &limit,
+        ]);
+        let plug = Plug;
+        tc(&[
+            "qdisc",
+            "change",
+            "dev",
+            IFACE,
+            "root",
+            "plug",
+            "release_indefinite",
+        ]);
+        plug
+    }
+
+    fn block(&self) {
+        tc(&["qdisc", "change", "dev", IFACE, "root", "plug", "block"]);
     }
 }
 
@@ -300,6 +335,7 @@ impl Drop for Plug {
 #[test]
 fn vcan0_a_transmit_queue_held_full_stops_the_run_after_the_tolerated_lost_cycles() {
     let _g = lock();
+    let plug = Plug::new(160);
     let _drives = simdrive(&[1, 2, 3], None);
     let mut w = watch(&[0x181, 0x182, 0x183]);
     // Every SYNC the gateway queues reaches this socket through the local loopback (also while
@@ -309,7 +345,7 @@ fn vcan0_a_transmit_queue_held_full_stops_the_run_after_the_tolerated_lost_cycle
     syncs.set_receive_buffer(8 << 20).unwrap();
     let (h, dir) = run_in_thread(SLOW);
     until_moving(w.as_mut());
-    let plug = Plug::new(160);
+    plug.block();
     let deadline = Instant::now() + Duration::from_secs(20);
     while !h.is_finished() {
         assert!(Instant::now() < deadline, "the run did not end");
@@ -334,7 +370,7 @@ fn vcan0_a_transmit_queue_held_full_stops_the_run_after_the_tolerated_lost_cycle
     // Detected in the third cycle in a row that could not queue its frames: of the cycles up
     // to the detection, all but those queued their SYNC (the first lost cycle may have queued
     // its SYNC and lost only setpoints).
-    let lost_syncs = f.detected_cycle.unwrap() - queued;
+    let lost_syncs = f.detected_cycle.unwrap().wrapping_sub(queued);
     assert!(
         (u64::from(tolerated)..=u64::from(tolerated) + 1).contains(&lost_syncs),
         "detected in cycle {:?} with {queued} SYNCs queued: {f}",
@@ -393,7 +429,9 @@ fn vcan0_run_reports_the_sync_period_from_kernel_timestamps() {
     };
     let sync = line("SYNC period");
     assert!(
-        sync.contains("periods of 4000 µs from kernel receive timestamps on vcan0: |deviation| p50 "),
+        sync.contains(
+            "periods of 4000 µs from kernel receive timestamps on vcan0: |deviation| p50 "
+        ),
         "{sync}"
     );
     // One SYNC per cycle but the last (the run ends without one): as many periods as cycles
