@@ -549,7 +549,7 @@ pub fn parse_error_frame(s: &str) -> Option<ErrorFrame> {
     }
     let id = u32::from_str_radix(id, 16).ok()?;
     let hex: Vec<u8> = data.bytes().filter(|&b| b != b'.').collect();
-    if hex.len() % 2 != 0 || hex.len() > 16 {
+    if !hex.len().is_multiple_of(2) || hex.len() > 16 {
         return None;
     }
     let mut d = [0u8; 8];

@@ -478,9 +478,12 @@ mod tests {
 
     /// A port whose transmit queue is full for the frames numbered in `full_at` (counting every
     /// attempt), recording what it queued.
+    /// Whether the queue is full at attempt `n` for this frame.
+    type IsFull = Box<dyn Fn(usize, &Frame) -> bool + Send>;
+
     struct FullQueue {
         attempts: usize,
-        full: Box<dyn Fn(usize, &Frame) -> bool + Send>,
+        full: IsFull,
         queued: Vec<Frame>,
     }
 
