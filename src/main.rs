@@ -222,7 +222,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     ""
                 }
             );
-            let summary = gateway::run(
+            let summary = match gateway::run(
                 &machine,
                 &bus,
                 &RunOptions {
@@ -231,7 +231,18 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     log: log.clone(),
                     simulate,
                 },
-            )?;
+            ) {
+                Ok(s) => s,
+                Err(gateway::GatewayError::Motion(f)) => {
+                    // The cycle and bus figures up to the stop: they matter most when it failed.
+                    eprint!(
+                        "cycles            {} in all ({} overruns)\n{}",
+                        f.timing.cycles, f.timing.overruns, f.bus
+                    );
+                    return Err(gateway::GatewayError::Motion(f).into());
+                }
+                Err(e) => return Err(e.into()),
+            };
             println!("{summary}");
             if let Some(l) = log {
                 println!("log               {}", l.display());

@@ -185,15 +185,16 @@ pub trait Port: Send {
 }
 
 /// [`Port::recv_timeout`] in terms of [`Port::recv_any`]: a bus-off is an error, other error
-/// frames are skipped.
+/// frames are skipped. The clock is read only after a skipped error frame (rare), so the wait
+/// is then bounded by twice `timeout`.
 pub(crate) fn frames_only(
     port: &mut dyn Port,
     iface: &str,
     timeout: Duration,
 ) -> Result<Option<Frame>, BusError> {
-    let deadline = std::time::Instant::now() + timeout;
+    let mut deadline: Option<std::time::Instant> = None;
+    let mut left = timeout;
     loop {
-        let left = deadline.saturating_duration_since(std::time::Instant::now());
         match port.recv_any(left)? {
             Some(Received::Frame(f)) => return Ok(Some(f)),
             Some(Received::Error(e)) if e.is_bus_off() => {
@@ -201,7 +202,12 @@ pub(crate) fn frames_only(
                     iface: iface.to_string(),
                 });
             }
-            Some(Received::Error(_)) => {}
+            Some(Received::Error(_)) => {
+                let now = std::time::Instant::now();
+                left = deadline
+                    .get_or_insert(now + timeout)
+                    .saturating_duration_since(now);
+            }
             None => return Ok(None),
         }
     }

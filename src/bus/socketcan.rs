@@ -288,7 +288,9 @@ impl Port for SocketCanPort {
     }
 
     fn recv_any(&mut self, timeout: Duration) -> Result<Option<Received>, BusError> {
-        let deadline = Instant::now() + timeout;
+        // The clock is read only when there is something to wait for: inside User-Mode Linux
+        // every clock_gettime is a system call, and the cyclic thread polls with a zero timeout.
+        let mut deadline = None;
         loop {
             // The socket is non-blocking: a queued frame costs one system call, an empty queue
             // one more, and only then do we sleep in ppoll (whose nanosecond timeout, unlike
@@ -304,7 +306,13 @@ impl Port for SocketCanPort {
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(e) => return Err(io_error(&self.iface, e)),
             }
-            let left = deadline.saturating_duration_since(Instant::now());
+            if timeout.is_zero() {
+                return Ok(None);
+            }
+            let now = Instant::now();
+            let left = deadline
+                .get_or_insert(now + timeout)
+                .saturating_duration_since(now);
             if left.is_zero() {
                 return Ok(None);
             }

@@ -195,6 +195,10 @@ pub struct MotionFailure {
     /// Wall-clock time from the cycle that saw statusword bit 12 on every drive to the one that
     /// detected the failure, s.
     pub bit12_to_failure_s: Option<f64>,
+    /// The cyclic thread's timing up to the end (cycles, overruns).
+    pub timing: Timing,
+    /// The bus up to the end: error frames, frames not sent, SYNC period statistics.
+    pub bus: cyclic_bus::BusReport,
 }
 
 impl MotionFailure {
@@ -206,6 +210,8 @@ impl MotionFailure {
             first_motion_cycle: None,
             period_s,
             bit12_to_failure_s: None,
+            timing: Timing::default(),
+            bus: cyclic_bus::BusReport::default(),
         })
     }
 }
@@ -301,15 +307,7 @@ impl std::fmt::Display for Summary {
         for w in &self.warnings {
             writeln!(f, "warning           {w}")?;
         }
-        for w in &self.bus.warnings {
-            writeln!(f, "warning           {w}")?;
-        }
-        if self.bus.tx_loss.cycles > 0 {
-            writeln!(f, "warning           {}", self.bus.tx_loss)?;
-        }
-        if let Some(s) = &self.bus.sync_period {
-            writeln!(f, "SYNC period       {s}")?;
-        }
+        write!(f, "{}", self.bus)?;
         if self.log_dropped > 0 {
             writeln!(
                 f,
@@ -581,6 +579,8 @@ async fn run_async(
             first_motion_cycle: master.first_motion_cycle,
             period_s: master.period_s(),
             bit12_to_failure_s,
+            timing: timing.clone(),
+            bus: bus_report.clone(),
         })));
     }
     if let Some(e) = port_err {

@@ -123,7 +123,7 @@ pub fn make_realtime(priority: i32) -> RtSetup {
 }
 
 /// Cycle timing statistics kept by the loop.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Timing {
     /// Cycles run.
     pub cycles: u64,
