@@ -473,7 +473,7 @@ impl CyclicBus {
     /// or two.
     pub fn measure(&mut self) {
         self.measure_calls += 1;
-        if self.measure_calls % TAP_READ_EVERY == 0 {
+        if self.measure_calls.is_multiple_of(TAP_READ_EVERY) {
             self.read_tap();
         }
     }
