@@ -51,10 +51,11 @@ fn bus_off_ends_the_run_in_the_next_cycle_with_every_setpoint_held() {
     let o = run(Some((2, Inject::BusOff { after: ms(600) })), program);
     let f = failure(&o);
     assert!(
-        f.message
-            .starts_with("CAN interface 'sim (in-process)': controller bus-off, detected at t = ")
-            && f.message
-                .contains("each stops by its heartbeat consumer (0x1016)")
+        f.message.starts_with(
+            "CAN interface 'sim (in-process)': controller bus-off, detected in cycle "
+        ) && f
+            .message
+            .contains("each stops by its heartbeat consumer (0x1016)")
             && f.message.contains("last completed program line: line 2")
             && f.message.ends_with("(last program line 3)"),
         "{f}"

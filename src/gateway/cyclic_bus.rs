@@ -392,7 +392,7 @@ impl CyclicBus {
             None => "none".to_string(),
         };
         master.bus_lost(format!(
-            "{what}, detected at t = {t_s:.3} s (cycle {cycle}); nothing more can be sent, so the \
+            "{what}, detected in cycle {cycle}, {t_s:.3} s after the first; nothing more can be sent, so the \
              gateway cannot stop the drives: each stops by its heartbeat consumer (0x1016) once \
              the gateway's heartbeat is missing; setpoints held; last completed program line: \
              {completed}"
@@ -724,8 +724,7 @@ mod tests {
         assert_eq!(master.phase(), Phase::Done);
         let f = master.failure().unwrap();
         assert!(
-            f.starts_with("CAN interface 'can0': controller bus-off, detected at t = ")
-                && f.contains("(cycle 2)")
+            f.starts_with("CAN interface 'can0': controller bus-off, detected in cycle 2, ")
                 && f.contains("heartbeat consumer (0x1016)")
                 && f.contains("last completed program line: none"),
             "{f}"

@@ -188,7 +188,7 @@ fn vcan0_bus_off_stops_the_run_within_a_cycle_and_the_drives_stop_by_their_heart
     let f = common::failure(&o);
     assert!(
         f.message
-            .starts_with("CAN interface 'vcan0': controller bus-off, detected at t = "),
+            .starts_with("CAN interface 'vcan0': controller bus-off, detected in cycle "),
         "{f}"
     );
     assert!(
@@ -266,7 +266,7 @@ fn vcan0_interface_going_down_stops_the_run_like_a_bus_off() {
     let f = common::failure(&o);
     assert!(
         f.message.starts_with(
-            "CAN interface 'vcan0' is down; bring it up: `ip link set up vcan0`, detected at t = "
+            "CAN interface 'vcan0' is down; bring it up: `ip link set up vcan0`, detected in cycle "
         ) && f.message.contains("heartbeat consumer (0x1016)"),
         "{f}"
     );
