@@ -197,27 +197,6 @@ impl SocketCanPort {
             sock,
         })
     }
-
-    /// Shrink the socket's send buffer (SO_SNDBUF) to about `bytes`: with a small buffer, frames
-    /// waiting in the device queue hold it full and a send fails with ENOBUFS, as on a real
-    /// controller nobody acknowledges (tests).
-    pub fn set_send_buffer(&mut self, bytes: usize) -> Result<(), BusError> {
-        let v = bytes as libc::c_int;
-        // SAFETY: a plain setsockopt with an int we own, on the fd we own.
-        let r = unsafe {
-            libc::setsockopt(
-                std::os::fd::AsRawFd::as_raw_fd(&self.sock),
-                libc::SOL_SOCKET,
-                libc::SO_SNDBUF,
-                (&v as *const libc::c_int).cast(),
-                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-            )
-        };
-        if r != 0 {
-            return Err(io_error(&self.iface, io::Error::last_os_error()));
-        }
-        Ok(())
-    }
 }
 
 impl Port for SocketCanPort {
