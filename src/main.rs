@@ -95,7 +95,8 @@ enum Command {
         dictionary: Option<PathBuf>,
         /// Misbehave, for fault tests: following-error@T, silent@T, reboot@T (T after the drive
         /// starts following setpoints, e.g. 1.5s or 200ms) or drop-rpdo=P%; `NODE:` first aims
-        /// it at one node. Repeatable.
+        /// it at one node. bus-off@T and error-passive@T send the error frame the gateway's CAN
+        /// controller would report. Repeatable.
         #[arg(long = "inject", value_name = "SPEC")]
         injects: Vec<canmotion::sim::Targeted>,
     },
@@ -344,6 +345,14 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let summary = match outcome.result {
                 Ok(s) => s,
                 Err(e) => {
+                    if let gateway::GatewayError::Motion(f) = &e {
+                        // The cycle and bus figures up to the stop: they matter most when it
+                        // failed.
+                        eprint!(
+                            "cycles            {} in all ({} overruns)\n{}",
+                            f.timing.cycles, f.timing.overruns, f.bus
+                        );
+                    }
                     let hint = match (outcome.resume, &state) {
                         (Some(st), Some(path)) => match st.save(path) {
                             Ok(()) => format!(

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 use serde::Serialize;
 
+use crate::compensation::Compensator;
 use crate::config::Machine;
 use crate::gateway::{GatewayError, check_element, limits};
 use crate::gcode::{Element, ElementKind, Interpreter, Item};
@@ -171,7 +172,11 @@ pub fn plan_stream<R: BufRead>(
     opts: &PlanOptions,
 ) -> Result<PlanSummary, OfflineError> {
     let setup = machine.setup(start_mm);
-    let interpreter = Interpreter::new(reader, name, setup);
+    let interpreter = Compensator::new(
+        Interpreter::new(reader, name, setup),
+        name,
+        machine.program.compensation,
+    );
     let mut planner =
         Planner::new(start_mm, &limits(machine)).map_err(|source| GatewayError::Plan {
             file: name.to_string(),

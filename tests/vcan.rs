@@ -2,6 +2,8 @@
 //! SocketCAN `vcan0`. Built only with `--features vcan-tests`; `tools/vcan-suite.sh` runs it
 //! where vcan0 exists (inside User-Mode Linux on kernels without CAN).
 
+#[path = "vcan/bus.rs"]
+mod bus;
 mod common;
 #[path = "vcan/recovery.rs"]
 mod recovery;

@@ -165,6 +165,8 @@ for k in net/can/can.ko net/can/can-raw.ko net/can/can-bcm.ko \
     drivers/net/can/dev/can-dev.ko drivers/net/can/vcan.ko; do
     busybox insmod "$M/$k" || fail "insmod $k failed"
 done
+# The plug qdisc holds vcan0's transmit queue full (ENOBUFS) for the tests of a blocked bus.
+busybox insmod "$M/net/sched/sch_plug.ko" 2>/dev/null || true
 ip link set lo up || fail "lo up failed"
 { ip link add dev vcan0 type vcan && ip link set vcan0 up; } || fail "vcan0 setup failed"
 if [ "$VERBOSE" = 1 ]; then

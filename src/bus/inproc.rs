@@ -1,21 +1,24 @@
 //! An in-process CAN bus with vcan semantics: a frame sent on one port is delivered, in order, to
 //! every other port whose filters pass it (like SocketCAN's default loopback to other sockets,
-//! without the sender's own copy).
+//! without the sender's own copy). Error frames sent with [`Port::send_error`] reach the ports
+//! whose error mask has one of their classes, as on SocketCAN.
 
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use super::{BusError, Filter, Frame, Port, passes};
+use super::{BusError, ErrorFrame, Filter, Frame, Port, Received, error, frames_only, passes};
 
 enum Sink {
-    Blocking(mpsc::Sender<Frame>),
+    Blocking(mpsc::Sender<Received>),
     Async(tokio::sync::mpsc::UnboundedSender<Frame>),
 }
 
 struct Member {
     id: u64,
     filters: Vec<Filter>,
+    /// Error classes this member receives (bus-off by default, as a SocketCAN port).
+    error_mask: u32,
     sink: Sink,
 }
 
@@ -50,6 +53,7 @@ impl InProcBus {
         inner.members.push(Member {
             id,
             filters: filters.to_vec(),
+            error_mask: error::class::BUS_OFF,
             sink,
         });
         id
@@ -63,8 +67,24 @@ impl InProcBus {
                 return true;
             }
             match &m.sink {
-                Sink::Blocking(tx) => tx.send(*frame).is_ok(),
+                Sink::Blocking(tx) => tx.send(Received::Frame(*frame)).is_ok(),
                 Sink::Async(tx) => tx.send(*frame).is_ok(),
+            }
+        });
+    }
+
+    /// Deliver an error frame to every member but `from` whose error mask has one of its
+    /// classes. Async ports (the non-cyclic side) get none: on SocketCAN they would only end on a
+    /// bus-off, which the cyclic thread reports.
+    fn deliver_error(&self, from: u64, e: &ErrorFrame) {
+        let mut inner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        inner.members.retain(|m| {
+            if m.id == from || m.error_mask & e.class() == 0 {
+                return true;
+            }
+            match &m.sink {
+                Sink::Blocking(tx) => tx.send(Received::Error(*e)).is_ok(),
+                Sink::Async(_) => true,
             }
         });
     }
@@ -101,7 +121,7 @@ impl InProcBus {
 pub struct InProcPort {
     bus: InProcBus,
     id: u64,
-    rx: mpsc::Receiver<Frame>,
+    rx: mpsc::Receiver<Received>,
 }
 
 impl Port for InProcPort {
@@ -119,6 +139,10 @@ impl Port for InProcPort {
     }
 
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<Frame>, BusError> {
+        frames_only(self, "sim", timeout)
+    }
+
+    fn recv_any(&mut self, timeout: Duration) -> Result<Option<Received>, BusError> {
         let r = if timeout.is_zero() {
             self.rx.try_recv().map_err(|e| match e {
                 mpsc::TryRecvError::Empty => None,
@@ -135,6 +159,19 @@ impl Port for InProcPort {
             Err(None) => Ok(None),
             Err(Some(e)) => Err(e),
         }
+    }
+
+    fn set_error_mask(&mut self, classes: u32) -> Result<(), BusError> {
+        let mut inner = self.bus.inner.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(m) = inner.members.iter_mut().find(|m| m.id == self.id) {
+            m.error_mask = classes;
+        }
+        Ok(())
+    }
+
+    fn send_error(&mut self, e: &ErrorFrame) -> Result<(), BusError> {
+        self.bus.deliver_error(self.id, e);
+        Ok(())
     }
 }
 
@@ -197,6 +234,35 @@ mod tests {
             c.recv_timeout(Duration::ZERO).unwrap().is_none(),
             "filter let through"
         );
+    }
+
+    #[test]
+    fn error_frames_reach_the_ports_whose_mask_has_their_class() {
+        let bus = InProcBus::new();
+        let mut a = bus.port(&[]);
+        let mut all = bus.port(&[Filter::exact(0x181)]);
+        all.set_error_mask(error::class::ALL).unwrap();
+        let mut none = bus.port(&[]);
+        none.set_error_mask(0).unwrap();
+        let mut default = bus.port(&[]);
+        a.send_error(&ErrorFrame::error_passive(128, 0)).unwrap();
+        a.send_error(&ErrorFrame::bus_off()).unwrap();
+        let got = |p: &mut InProcPort| {
+            std::iter::from_fn(|| p.recv_any(Duration::ZERO).unwrap()).collect::<Vec<_>>()
+        };
+        assert_eq!(
+            got(&mut all),
+            vec![
+                Received::Error(ErrorFrame::error_passive(128, 0)),
+                Received::Error(ErrorFrame::bus_off())
+            ]
+        );
+        assert_eq!(got(&mut none), vec![]);
+        // The default mask is bus-off only, and recv_timeout makes it an error.
+        assert!(matches!(
+            default.recv_timeout(Duration::ZERO),
+            Err(BusError::BusOff { .. })
+        ));
     }
 
     #[test]

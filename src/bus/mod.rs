@@ -9,14 +9,40 @@
 //! A [`Bus`] is a description that opens [`Port`]s (a socket each). Every port may carry a set of
 //! [`Filter`]s, applied by the kernel on SocketCAN and in software in-process, so the cyclic thread
 //! only ever wakes for its own process data.
+//!
+//! Besides frames, a port can receive the controller's error frames ([`error`]: bus-off,
+//! error-passive, protocol errors…) through [`Port::recv_any`], and the cyclic thread sends with
+//! [`Port::try_send`], which never waits, so that it alone decides how long a full transmit queue
+//! may hold up a cycle. [`sync_tap`] timestamps SYNC frames in the kernel.
 
+pub mod error;
 mod frame;
 pub mod inproc;
 pub mod socketcan;
+pub mod sync_tap;
 
 use std::time::Duration;
 
+pub use error::ErrorFrame;
 pub use frame::Frame;
+
+/// What a port receives: a frame, or an error frame from the controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Received {
+    /// A data or remote frame.
+    Frame(Frame),
+    /// An error frame (see [`error`]).
+    Error(ErrorFrame),
+}
+
+/// The outcome of one attempt to queue a frame without waiting ([`Port::try_send`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TrySend {
+    /// The frame is in the transmit queue.
+    Queued,
+    /// The transmit queue has no room (ENOBUFS): nothing was queued.
+    QueueFull,
+}
 
 /// A receive filter: a frame passes when `frame.id & mask == id & mask`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,6 +120,9 @@ pub enum BusError {
     /// The in-process bus was shut down.
     #[error("the in-process bus is closed")]
     Closed,
+    /// The port cannot do this (e.g. send an error frame on a bus without them).
+    #[error("{0}")]
+    Unsupported(&'static str),
     /// Any other I/O error from the socket.
     #[error("CAN interface '{iface}': {source}")]
     Io {
@@ -104,14 +133,84 @@ pub enum BusError {
     },
 }
 
+impl BusError {
+    /// Whether the bus is gone for this port (bus-off, interface down or removed): nothing sent
+    /// on it reaches anyone any more.
+    pub fn is_bus_lost(&self) -> bool {
+        matches!(
+            self,
+            BusError::BusOff { .. }
+                | BusError::InterfaceDown { .. }
+                | BusError::NoSuchInterface { .. }
+                | BusError::Closed
+        )
+    }
+}
+
 /// One connection to a bus (a socket): blocking, used by threads.
+///
+/// A port receives error frames of the classes in its error mask, bus-off only unless
+/// [`Port::set_error_mask`] says otherwise; [`Port::recv_timeout`] reports a bus-off as
+/// [`BusError::BusOff`] and skips the others, [`Port::recv_any`] returns them all.
 pub trait Port: Send {
-    /// Send a frame. Never blocks for longer than a short transmit deadline.
+    /// Send a frame. Never blocks for longer than a short transmit deadline
+    /// ([`socketcan::SEND_DEADLINE`]).
     fn send(&mut self, frame: &Frame) -> Result<(), BusError>;
     /// Wait up to `timeout` for a frame; `Ok(None)` on timeout. A zero timeout polls.
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<Frame>, BusError>;
     /// Replace the receive filters (an empty set receives everything).
     fn set_filters(&mut self, filters: &[Filter]) -> Result<(), BusError>;
+
+    /// Try once to queue `frame`, without waiting: [`TrySend::QueueFull`] when the transmit
+    /// queue has no room. The default waits like [`Port::send`].
+    fn try_send(&mut self, frame: &Frame) -> Result<TrySend, BusError> {
+        self.send(frame).map(|()| TrySend::Queued)
+    }
+    /// Receive error frames of these classes ([`error::class`] bits; 0 for none). Ports that
+    /// never see error frames accept any mask.
+    fn set_error_mask(&mut self, classes: u32) -> Result<(), BusError> {
+        let _ = classes;
+        Ok(())
+    }
+    /// Wait up to `timeout` for a frame or an error frame; `Ok(None)` on timeout.
+    fn recv_any(&mut self, timeout: Duration) -> Result<Option<Received>, BusError> {
+        Ok(self.recv_timeout(timeout)?.map(Received::Frame))
+    }
+    /// Send an error frame, as a controller's driver would report it to every other socket
+    /// (fault injection: vcan has no controller).
+    fn send_error(&mut self, error: &ErrorFrame) -> Result<(), BusError> {
+        let _ = error;
+        Err(BusError::Unsupported("this port cannot send error frames"))
+    }
+}
+
+/// [`Port::recv_timeout`] in terms of [`Port::recv_any`]: a bus-off is an error, other error
+/// frames are skipped. The clock is read only after a skipped error frame (rare), so the wait
+/// is then bounded by twice `timeout`.
+pub(crate) fn frames_only(
+    port: &mut dyn Port,
+    iface: &str,
+    timeout: Duration,
+) -> Result<Option<Frame>, BusError> {
+    let mut deadline: Option<std::time::Instant> = None;
+    let mut left = timeout;
+    loop {
+        match port.recv_any(left)? {
+            Some(Received::Frame(f)) => return Ok(Some(f)),
+            Some(Received::Error(e)) if e.is_bus_off() => {
+                return Err(BusError::BusOff {
+                    iface: iface.to_string(),
+                });
+            }
+            Some(Received::Error(_)) => {
+                let now = std::time::Instant::now();
+                left = deadline
+                    .get_or_insert(now + timeout)
+                    .saturating_duration_since(now);
+            }
+            None => return Ok(None),
+        }
+    }
 }
 
 /// Which bus to open ports on.
@@ -146,6 +245,16 @@ impl Bus {
         match self {
             Bus::InProc(bus) => Ok(Box::new(bus.port(filters))),
             Bus::SocketCan(iface) => Ok(Box::new(socketcan::SocketCanPort::open(iface, filters)?)),
+        }
+    }
+
+    /// A socket that receives only SYNC frames (`cob_id`) with their kernel receive timestamps,
+    /// for the SYNC period statistics; `None` on the in-process bus, which has no kernel (the
+    /// gateway then times SYNC on its own clock as it sends).
+    pub fn sync_tap(&self, cob_id: u16) -> Result<Option<sync_tap::SyncTap>, BusError> {
+        match self {
+            Bus::InProc(_) => Ok(None),
+            Bus::SocketCan(iface) => Ok(Some(sync_tap::SyncTap::open(iface, cob_id)?)),
         }
     }
 

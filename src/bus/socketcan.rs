@@ -1,26 +1,30 @@
 //! SocketCAN ports (`vcan0`, `can0`) through the `socketcan` crate.
 //!
 //! Filters are installed in the kernel, so a port only wakes for the frames it asked for. Error
-//! frames are enabled for bus-off only; a bus-off is reported as [`BusError::BusOff`]. A full
-//! transmit queue (ENOBUFS, the usual answer of a real controller nobody acknowledges) is retried
-//! for up to [`SEND_DEADLINE`] and then reported, never silently dropped.
+//! frames come through for the classes of the port's error mask (bus-off by default, see
+//! [`Port::set_error_mask`]). A full transmit queue (ENOBUFS, the usual answer of a real
+//! controller nobody acknowledges) is retried by [`Port::send`] and [`AsyncSocketCanPort::send`]
+//! for up to [`SEND_DEADLINE`] and then reported, never silently dropped; [`Port::try_send`]
+//! never waits, for the cyclic thread, which has its own deadline.
 
 use std::io;
 use std::time::{Duration, Instant};
 
 use socketcan::{
-    CanFilter, CanFrame, EmbeddedFrame, Frame as _, Socket, SocketOptions, StandardId,
+    CanErrorFrame, CanFilter, CanFrame, EmbeddedFrame, Frame as _, Socket, SocketOptions,
+    StandardId,
 };
 
-use super::{BusError, Filter, Frame, Port};
+use super::error::{self, ErrorFrame};
+use super::{BusError, Filter, Frame, Port, Received, TrySend, frames_only};
 
 /// How long a send waits for room in a full transmit queue before it reports the frame unsent.
 pub const SEND_DEADLINE: Duration = Duration::from_millis(2);
 
-/// CAN_ERR_BUSOFF in the error class mask (linux/can/error.h).
-const CAN_ERR_BUSOFF: u32 = 0x0000_0040;
+/// How long to wait between two attempts at a full transmit queue.
+const SEND_RETRY_PAUSE: Duration = Duration::from_micros(50);
 
-fn open_error(iface: &str, e: io::Error) -> BusError {
+pub(super) fn open_error(iface: &str, e: io::Error) -> BusError {
     match e.raw_os_error() {
         Some(libc::EAFNOSUPPORT) | Some(libc::EPROTONOSUPPORT) => BusError::NoSocketCan(e),
         Some(libc::ENODEV) | Some(libc::ENXIO) => BusError::NoSuchInterface {
@@ -39,7 +43,7 @@ fn open_error(iface: &str, e: io::Error) -> BusError {
     }
 }
 
-fn io_error(iface: &str, e: io::Error) -> BusError {
+pub(super) fn io_error(iface: &str, e: io::Error) -> BusError {
     match e.raw_os_error() {
         Some(libc::ENETDOWN) => BusError::InterfaceDown {
             iface: iface.to_string(),
@@ -56,7 +60,7 @@ fn io_error(iface: &str, e: io::Error) -> BusError {
 
 /// Check that the interface exists and is up before opening a socket on it: binding a CAN
 /// socket to a down interface succeeds, and the first send fails much later.
-fn check_interface(iface: &str) -> Result<(), BusError> {
+pub(super) fn check_interface(iface: &str) -> Result<(), BusError> {
     let flags_path = format!("/sys/class/net/{iface}/flags");
     match std::fs::read_to_string(&flags_path) {
         Ok(s) => {
@@ -85,8 +89,6 @@ fn configure<S: SocketOptions>(sock: &S, iface: &str, filters: &[Filter]) -> Res
             .collect();
         sock.set_filters(&f).map_err(|e| io_error(iface, e))?;
     }
-    sock.set_error_filter(CAN_ERR_BUSOFF)
-        .map_err(|e| io_error(iface, e))?;
     Ok(())
 }
 
@@ -99,26 +101,80 @@ fn to_socketcan(frame: &Frame) -> CanFrame {
     }
 }
 
-/// Convert a received frame; extended-id frames are not CANopen's and are skipped (`Ok(None)`).
-fn from_socketcan(iface: &str, frame: CanFrame) -> Result<Option<Frame>, BusError> {
+/// Convert a received frame; extended-id frames are not CANopen's and are skipped (`None`).
+fn from_socketcan(frame: CanFrame) -> Option<Received> {
     match frame {
-        CanFrame::Error(e) => {
-            if e.error_bits() & CAN_ERR_BUSOFF != 0 {
-                Err(BusError::BusOff {
-                    iface: iface.to_string(),
-                })
-            } else {
-                Ok(None)
-            }
-        }
-        f if f.is_extended() => Ok(None),
-        CanFrame::Remote(_) => Ok(Frame::remote(f_id(&frame), frame.dlc() as u8)),
-        CanFrame::Data(_) => Ok(Frame::new(f_id(&frame), frame.data())),
+        CanFrame::Error(e) => ErrorFrame::from_raw(e.error_bits() | error::CAN_ERR_FLAG, e.data())
+            .map(Received::Error),
+        f if f.is_extended() => None,
+        CanFrame::Remote(_) => Frame::remote(f_id(&frame), frame.dlc() as u8).map(Received::Frame),
+        CanFrame::Data(_) => Frame::new(f_id(&frame), frame.data()).map(Received::Frame),
     }
 }
 
 fn f_id(frame: &CanFrame) -> u16 {
     (frame.raw_id() & 0x7FF) as u16
+}
+
+/// What one attempt at writing a frame came to.
+enum Attempt {
+    Done,
+    Full,
+    Again,
+    Failed(io::Error),
+}
+
+fn attempt(r: io::Result<()>) -> Attempt {
+    match r {
+        Ok(()) => Attempt::Done,
+        Err(e)
+            if e.raw_os_error() == Some(libc::ENOBUFS) || e.kind() == io::ErrorKind::WouldBlock =>
+        {
+            Attempt::Full
+        }
+        Err(e) if e.kind() == io::ErrorKind::Interrupted => Attempt::Again,
+        Err(e) => Attempt::Failed(e),
+    }
+}
+
+/// The send-retry policy of both ports: retry a full queue every [`SEND_RETRY_PAUSE`] until
+/// [`SEND_DEADLINE`], then report the frame unsent. The callers only write and pause.
+struct SendRetry {
+    start: Instant,
+}
+
+enum Step {
+    Finished(Result<(), BusError>),
+    Pause(Duration),
+    Retry,
+}
+
+impl SendRetry {
+    fn new() -> SendRetry {
+        SendRetry {
+            start: Instant::now(),
+        }
+    }
+
+    fn step(&self, r: io::Result<()>, iface: &str, frame: &Frame) -> Step {
+        match attempt(r) {
+            Attempt::Done => Step::Finished(Ok(())),
+            Attempt::Again => Step::Retry,
+            Attempt::Full => {
+                let waited = self.start.elapsed();
+                if waited >= SEND_DEADLINE {
+                    Step::Finished(Err(BusError::TxQueueFull {
+                        iface: iface.to_string(),
+                        frame: *frame,
+                        waited_us: waited.as_micros() as u64,
+                    }))
+                } else {
+                    Step::Pause(SEND_RETRY_PAUSE)
+                }
+            }
+            Attempt::Failed(e) => Step::Finished(Err(io_error(iface, e))),
+        }
+    }
 }
 
 /// A blocking SocketCAN port.
@@ -133,6 +189,8 @@ impl SocketCanPort {
         let sock = socketcan::CanSocket::open(iface).map_err(|e| open_error(iface, e))?;
         check_interface(iface)?;
         configure(&sock, iface, filters)?;
+        sock.set_error_filter(error::class::BUS_OFF)
+            .map_err(|e| io_error(iface, e))?;
         sock.set_nonblocking(true).map_err(|e| io_error(iface, e))?;
         Ok(SocketCanPort {
             iface: iface.to_string(),
@@ -152,42 +210,74 @@ impl Port for SocketCanPort {
         }
     }
 
+    fn set_error_mask(&mut self, classes: u32) -> Result<(), BusError> {
+        self.sock
+            .set_error_filter(classes & error::CAN_ERR_MASK)
+            .map_err(|e| io_error(&self.iface, e))
+    }
+
     fn send(&mut self, frame: &Frame) -> Result<(), BusError> {
         let f = to_socketcan(frame);
+        let retry = SendRetry::new();
+        loop {
+            match retry.step(self.sock.write_frame(&f), &self.iface, frame) {
+                Step::Finished(r) => return r,
+                Step::Pause(d) => std::thread::sleep(d),
+                Step::Retry => {}
+            }
+        }
+    }
+
+    fn try_send(&mut self, frame: &Frame) -> Result<TrySend, BusError> {
+        let f = to_socketcan(frame);
+        loop {
+            match attempt(self.sock.write_frame(&f)) {
+                Attempt::Done => return Ok(TrySend::Queued),
+                Attempt::Full => return Ok(TrySend::QueueFull),
+                Attempt::Again => {}
+                Attempt::Failed(e) => return Err(io_error(&self.iface, e)),
+            }
+        }
+    }
+
+    fn send_error(&mut self, e: &ErrorFrame) -> Result<(), BusError> {
+        let f = CanFrame::Error(CanErrorFrame::new_error(e.class(), e.data()).expect("8 bytes"));
         let start = Instant::now();
         loop {
-            match self.sock.write_frame(&f) {
-                Ok(()) => return Ok(()),
-                Err(e)
-                    if e.raw_os_error() == Some(libc::ENOBUFS)
-                        || e.kind() == io::ErrorKind::WouldBlock =>
-                {
-                    let waited = start.elapsed();
-                    if waited >= SEND_DEADLINE {
-                        return Err(BusError::TxQueueFull {
-                            iface: self.iface.clone(),
-                            frame: *frame,
-                            waited_us: waited.as_micros() as u64,
-                        });
-                    }
-                    std::thread::sleep(Duration::from_micros(50));
+            match attempt(self.sock.write_frame(&f)) {
+                Attempt::Done => return Ok(()),
+                Attempt::Again => {}
+                Attempt::Full if start.elapsed() < SEND_DEADLINE => {
+                    std::thread::sleep(SEND_RETRY_PAUSE)
                 }
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(io_error(&self.iface, e)),
+                Attempt::Full => {
+                    return Err(io_error(
+                        &self.iface,
+                        io::Error::from_raw_os_error(libc::ENOBUFS),
+                    ));
+                }
+                Attempt::Failed(e) => return Err(io_error(&self.iface, e)),
             }
         }
     }
 
     fn recv_timeout(&mut self, timeout: Duration) -> Result<Option<Frame>, BusError> {
-        let deadline = Instant::now() + timeout;
+        let iface = self.iface.clone();
+        frames_only(self, &iface, timeout)
+    }
+
+    fn recv_any(&mut self, timeout: Duration) -> Result<Option<Received>, BusError> {
+        // The clock is read only when there is something to wait for: inside User-Mode Linux
+        // every clock_gettime is a system call, and the cyclic thread polls with a zero timeout.
+        let mut deadline = None;
         loop {
             // The socket is non-blocking: a queued frame costs one system call, an empty queue
             // one more, and only then do we sleep in ppoll (whose nanosecond timeout, unlike
             // poll's milliseconds, does not round a short wait to zero and spin).
             match self.sock.read_frame() {
                 Ok(f) => {
-                    if let Some(f) = from_socketcan(&self.iface, f)? {
-                        return Ok(Some(f));
+                    if let Some(r) = from_socketcan(f) {
+                        return Ok(Some(r));
                     }
                     continue;
                 }
@@ -195,7 +285,13 @@ impl Port for SocketCanPort {
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(e) => return Err(io_error(&self.iface, e)),
             }
-            let left = deadline.saturating_duration_since(Instant::now());
+            if timeout.is_zero() {
+                return Ok(None);
+            }
+            let now = Instant::now();
+            let left = deadline
+                .get_or_insert(now + timeout)
+                .saturating_duration_since(now);
             if left.is_zero() {
                 return Ok(None);
             }
@@ -236,6 +332,8 @@ impl AsyncSocketCanPort {
         let sock = socketcan::tokio::CanSocket::open(iface).map_err(|e| open_error(iface, e))?;
         check_interface(iface)?;
         configure(&sock, iface, filters)?;
+        sock.set_error_filter(error::class::BUS_OFF)
+            .map_err(|e| io_error(iface, e))?;
         Ok(AsyncSocketCanPort {
             iface: iface.to_string(),
             sock,
@@ -247,15 +345,19 @@ impl AsyncSocketCanPort {
         &self.iface
     }
 
-    /// Wait for the next frame.
+    /// Wait for the next frame; a bus-off is an error, other error frames are skipped.
     pub async fn recv(&mut self) -> Result<Frame, BusError> {
         loop {
             match self.sock.read_frame().await {
-                Ok(f) => {
-                    if let Some(f) = from_socketcan(&self.iface, f)? {
-                        return Ok(f);
+                Ok(f) => match from_socketcan(f) {
+                    Some(Received::Frame(f)) => return Ok(f),
+                    Some(Received::Error(e)) if e.is_bus_off() => {
+                        return Err(BusError::BusOff {
+                            iface: self.iface.clone(),
+                        });
                     }
-                }
+                    _ => {}
+                },
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
                 Err(e) => return Err(io_error(&self.iface, e)),
             }
@@ -265,26 +367,12 @@ impl AsyncSocketCanPort {
     /// Send a frame, waiting up to [`SEND_DEADLINE`] while the transmit queue is full.
     pub async fn send(&self, frame: &Frame) -> Result<(), BusError> {
         let f = to_socketcan(frame);
-        let start = Instant::now();
+        let retry = SendRetry::new();
         loop {
-            match self.sock.try_write_frame(f) {
-                Ok(()) => return Ok(()),
-                Err(e)
-                    if e.raw_os_error() == Some(libc::ENOBUFS)
-                        || e.kind() == io::ErrorKind::WouldBlock =>
-                {
-                    let waited = start.elapsed();
-                    if waited >= SEND_DEADLINE {
-                        return Err(BusError::TxQueueFull {
-                            iface: self.iface.clone(),
-                            frame: *frame,
-                            waited_us: waited.as_micros() as u64,
-                        });
-                    }
-                    tokio::time::sleep(Duration::from_micros(100)).await;
-                }
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(io_error(&self.iface, e)),
+            match retry.step(self.sock.try_write_frame(f), &self.iface, frame) {
+                Step::Finished(r) => return r,
+                Step::Pause(d) => tokio::time::sleep(d).await,
+                Step::Retry => {}
             }
         }
     }
@@ -311,14 +399,51 @@ mod tests {
     }
 
     #[test]
+    fn error_frames_convert_with_their_class_and_data() {
+        let e = ErrorFrame::error_passive(130, 4);
+        let f = CanFrame::Error(CanErrorFrame::new_error(e.class(), e.data()).unwrap());
+        assert_eq!(from_socketcan(f), Some(Received::Error(e)));
+    }
+
+    #[test]
+    fn full_queues_are_retried_until_the_deadline_then_reported() {
+        let f = Frame::new(0x201, &[1]).unwrap();
+        let full = || Err(io::Error::from_raw_os_error(libc::ENOBUFS));
+        let r = SendRetry::new();
+        assert!(matches!(r.step(full(), "vcan0", &f), Step::Pause(_)));
+        assert!(matches!(
+            r.step(Err(io::ErrorKind::Interrupted.into()), "vcan0", &f),
+            Step::Retry
+        ));
+        let late = SendRetry {
+            start: Instant::now() - SEND_DEADLINE,
+        };
+        match late.step(full(), "vcan0", &f) {
+            Step::Finished(Err(e)) => {
+                let msg = e.to_string();
+                assert!(msg.contains("ENOBUFS") && msg.contains("201#01"), "{msg}");
+            }
+            _ => panic!("a full queue past the deadline must be reported"),
+        }
+        match r.step(
+            Err(io::Error::from_raw_os_error(libc::ENETDOWN)),
+            "vcan0",
+            &f,
+        ) {
+            Step::Finished(Err(BusError::InterfaceDown { .. })) => {}
+            _ => panic!("ENETDOWN is the interface going down"),
+        }
+    }
+
+    #[test]
     fn frames_convert_both_ways() {
         for f in [
             Frame::new(0x181, &[1, 2, 3]).unwrap(),
             Frame::new(0x000, &[]).unwrap(),
             Frame::remote(0x701, 1).unwrap(),
         ] {
-            let back = from_socketcan("x", to_socketcan(&f)).unwrap().unwrap();
-            assert_eq!(back, f);
+            let back = from_socketcan(to_socketcan(&f)).unwrap();
+            assert_eq!(back, Received::Frame(f));
         }
     }
 }

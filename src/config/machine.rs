@@ -53,6 +53,8 @@ struct RawProgram {
     g30_mm: Option<Vec<f64>>,
     #[serde(default)]
     work_offsets_mm: std::collections::BTreeMap<String, Vec<f64>>,
+    #[serde(default)]
+    outside_corners: crate::compensation::OutsideCorners,
 }
 
 #[derive(Debug, Deserialize)]
@@ -378,6 +380,8 @@ pub struct ProgramSetup {
     pub g30_mm: nalgebra::Vector3<f64>,
     /// Origins of G54 … G59.3 in machine mm (see [`WORK_OFFSETS`]).
     pub work_offsets_mm: [nalgebra::Vector3<f64>; 9],
+    /// How cutter radius compensation (G41/G42) joins outside corners.
+    pub compensation: crate::compensation::CompOptions,
 }
 
 impl Machine {
@@ -444,6 +448,9 @@ fn program_setup(ctx: &Ctx, raw: &RawProgram) -> Result<ProgramSetup, ConfigErro
             .as_deref()
             .map_or(Ok(nalgebra::Vector3::zeros()), |v| point("g30_mm", v))?,
         work_offsets_mm,
+        compensation: crate::compensation::CompOptions {
+            outside_corners: raw.outside_corners,
+        },
     })
 }
 

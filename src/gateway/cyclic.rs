@@ -373,6 +373,15 @@ impl CyclicMaster {
         self.fail(message);
     }
 
+    /// The bus is gone (bus-off, interface down): no frame reaches the drives any more, so no
+    /// controlled stop is possible. Every setpoint is held where it is, and the run ends now
+    /// ([`Phase::Done`]: no more frames).
+    pub fn bus_lost(&mut self, message: String) {
+        self.frozen.iter_mut().for_each(|f| *f = true);
+        self.fail(message);
+        self.set_phase(Phase::Done);
+    }
+
     fn fail(&mut self, message: String) {
         if self.failure.is_none() {
             let at = match self.line {

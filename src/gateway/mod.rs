@@ -2,6 +2,7 @@
 //! cyclic thread, watch the drives, and bring everything down in order.
 
 pub mod cyclic;
+pub mod cyclic_bus;
 pub mod io;
 pub mod resume;
 pub mod startup;
@@ -203,6 +204,10 @@ pub struct MotionFailure {
     pub detected_ns: Option<u64>,
     /// Where the program's motion stopped, once it had started (the resume point's source).
     pub stop: Option<StopPoint>,
+    /// The cyclic thread's timing up to the end (cycles, overruns).
+    pub timing: Timing,
+    /// The bus up to the end: error frames, frames not sent, SYNC period statistics.
+    pub bus: cyclic_bus::BusReport,
 }
 
 impl MotionFailure {
@@ -216,6 +221,8 @@ impl MotionFailure {
             bit12_to_failure_s: None,
             detected_ns: None,
             stop: None,
+            timing: Timing::default(),
+            bus: cyclic_bus::BusReport::default(),
         })
     }
 }
@@ -298,6 +305,9 @@ pub struct Summary {
     pub log_dropped: u64,
     /// Warnings the drives reported (EMCYs after which they kept running).
     pub warnings: Vec<Warning>,
+    /// The bus as the cyclic thread saw it: error frames, frames it could not queue in time,
+    /// SYNC period statistics.
+    pub bus: cyclic_bus::BusReport,
 }
 
 /// An EMCY after which the drive kept running (see [`emcy::is_warning`]), counted.
@@ -351,6 +361,7 @@ impl std::fmt::Display for Summary {
         for w in &self.warnings {
             writeln!(f, "warning           {w}")?;
         }
+        write!(f, "{}", self.bus)?;
         if self.log_dropped > 0 {
             writeln!(
                 f,
@@ -409,7 +420,7 @@ pub fn plan_program(
     start_mm: Vector3<f64>,
 ) -> Result<Plan, GatewayError> {
     use crate::gcode::{Error as GcodeError, ErrorKind as GcodeErrorKind, Item};
-    let program = crate::gcode::parse_program_with(text, name, machine.setup(start_mm))?;
+    let program = interpret_program(machine, name, text, start_mm)?;
     for item in &program.items {
         match item {
             Item::Motion(e) => check_element(machine, name, e)?,
@@ -435,6 +446,21 @@ pub fn plan_program(
     })
 }
 
+/// Interprets a whole program on `machine` from `start_mm` (its tool table, work offsets, G28/G30
+/// positions) and applies cutter radius compensation: the tool-centre path the planner takes.
+pub fn interpret_program(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+) -> Result<crate::gcode::Program, GatewayError> {
+    let program = crate::gcode::parse_program_with(text, name, machine.setup(start_mm))?;
+    Ok(crate::compensation::compensate_program(
+        &program,
+        machine.program.compensation,
+    )?)
+}
+
 /// Checks one element of the tool-centre path against the machine: every axis it moves exists
 /// and stays within its travel (an arc over its whole extent, not only its end points).
 pub fn check_element(
@@ -442,17 +468,6 @@ pub fn check_element(
     name: &str,
     element: &crate::gcode::Element,
 ) -> Result<(), GatewayError> {
-    if element.comp != crate::gcode::CompState::Off {
-        return Err(GatewayError::Program(crate::gcode::Error {
-            file: name.to_string(),
-            line: element.line,
-            col: element.col,
-            kind: crate::gcode::ErrorKind::Unsupported {
-                what: "G41/G42".to_string(),
-                reason: "cutter radius compensation is not applied on this path yet",
-            },
-        }));
-    }
     // A line is checked at its end (its start was checked as the previous end); an arc can
     // leave the box of its end points, so its whole extent is checked.
     let (lo_mm, hi_mm) = match element.kind {
@@ -653,16 +668,25 @@ async fn run_async(
         .collect();
     let mut port = bus.open(&tpdo_filters)?;
     let completed = source.completed_line();
+    let cyc_bus = cyclic_bus::CyclicBus::new(
+        machine,
+        bus.name(),
+        port.as_mut(),
+        bus.sync_tap(machine.sync_cob_id)?,
+    )?;
     let cyc = std::thread::Builder::new()
         .name("canmotion-cyclic".into())
         .spawn(move || {
             cyclic_thread(
                 &m,
                 port.as_mut(),
+                cyc_bus,
                 &health,
-                plan_rx,
-                armed_tx,
-                log_tx,
+                CyclicLinks {
+                    plan_rx,
+                    armed_tx,
+                    log_tx,
+                },
                 completed,
             )
         })
@@ -687,10 +711,19 @@ async fn run_async(
         Err(_) => Ok(()), // the cyclic thread ended before arming: its result says why
     };
     drop(plan_tx);
-    let (master, timing, rt_setup, port_err, dropped, warnings, bit12_to_failure_s, detected_ns) =
-        tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
-            .await
-            .expect("join");
+    let CyclicEnd {
+        master,
+        timing,
+        rt_setup,
+        port_err,
+        dropped,
+        warnings,
+        bit12_to_failure_s,
+        detected_ns,
+        bus: bus_report,
+    } = tokio::task::spawn_blocking(move || cyc.join().expect("cyclic thread panicked"))
+        .await
+        .expect("join");
     if let Some(t) = log_thread {
         t.join()
             .expect("log thread")
@@ -700,9 +733,8 @@ async fn run_async(
             })?;
     }
     plan_result?;
-    if let Some(e) = port_err {
-        return Err(GatewayError::Bus(e));
-    }
+    // A failure of the motion first: when the bus failed during it, the failure says so, with
+    // what the motion did about it.
     if let Some(f) = master.failure() {
         return Err(GatewayError::Motion(Box::new(MotionFailure {
             message: f.to_string(),
@@ -713,7 +745,12 @@ async fn run_async(
             bit12_to_failure_s,
             detected_ns,
             stop: StopPoint::of(&master),
+            timing: timing.clone(),
+            bus: bus_report.clone(),
         })));
+    }
+    if let Some(e) = port_err {
+        return Err(GatewayError::Bus(e));
     }
     let final_counts = master.final_counts();
     Ok(Summary {
@@ -730,29 +767,49 @@ async fn run_async(
         rt: rt_setup,
         log_dropped: dropped,
         warnings,
+        bus: bus_report,
     })
 }
 
-type CyclicResult = (
-    CyclicMaster,
-    Timing,
-    String,
-    Option<BusError>,
-    u64,
-    Vec<Warning>,
-    Option<f64>,
-    Option<u64>,
-);
+/// The channels between the cyclic thread and the async side.
+struct CyclicLinks {
+    /// The motion, once planned from the armed position.
+    plan_rx: mpsc::Receiver<Interpolator>,
+    /// The armed position (every drive following, setpoints = actual positions).
+    armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
+    /// One record per cycle for `--log`.
+    log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+}
+
+/// What the cyclic thread hands back when it ends.
+struct CyclicEnd {
+    master: CyclicMaster,
+    timing: Timing,
+    /// The real-time set-up achieved (scheduling class, memory lock).
+    rt_setup: String,
+    port_err: Option<BusError>,
+    /// Log records dropped because the log writer fell behind.
+    dropped: u64,
+    warnings: Vec<Warning>,
+    bit12_to_failure_s: Option<f64>,
+    /// When the cycle that detected the failure ran ([`rt::now_ns`]).
+    detected_ns: Option<u64>,
+    bus: cyclic_bus::BusReport,
+}
 
 fn cyclic_thread(
     machine: &Machine,
     port: &mut dyn crate::bus::Port,
+    mut bus: cyclic_bus::CyclicBus,
     health: &io::Health,
-    plan_rx: mpsc::Receiver<Interpolator>,
-    armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
-    log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+    links: CyclicLinks,
     completed_line: Option<usize>,
-) -> CyclicResult {
+) -> CyclicEnd {
+    let CyclicLinks {
+        plan_rx,
+        armed_tx,
+        log_tx,
+    } = links;
     let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
     master.set_completed_line(completed_line);
@@ -775,16 +832,9 @@ fn cyclic_thread(
     let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
     loop {
         ticker.wait();
-        // Feedback received since the last cycle.
-        loop {
-            match port.recv_timeout(Duration::ZERO) {
-                Ok(Some(f)) => master.on_frame(&f),
-                Ok(None) => break,
-                Err(e) => {
-                    port_err = Some(e);
-                    break;
-                }
-            }
+        // Feedback and error frames received since the last cycle.
+        if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {
+            port_err.get_or_insert(e);
         }
         if let Some(e) = &port_err {
             master.alarm(0, format!("bus error: {e}"));
@@ -872,13 +922,11 @@ fn cyclic_thread(
         if master.failure_cycle.is_some() && fail_ns.is_none() {
             fail_ns = Some(rt::now_ns());
         }
-        for f in &out {
-            if let Err(e) = port.send(f) {
-                master.alarm(0, format!("bus error: {e}"));
-                port_err.get_or_insert(e);
-                break;
-            }
+        let deadline = ticker.this_deadline_ns();
+        if let Some(e) = bus.send(port, &out, deadline, &mut master, ticker.timing.cycles) {
+            port_err.get_or_insert(e);
         }
+        bus.measure();
         if let Some(tx) = &log_tx
             && tx.try_send(rec).is_err()
         {
@@ -889,8 +937,8 @@ fn cyclic_thread(
         }
     }
     // Orderly end: Pre-operational right after the last SYNC, so no drive waits for a SYNC that
-    // will not come.
-    for a in &machine.axes {
+    // will not come (unless the bus is gone).
+    for a in machine.axes.iter().filter(|_| !bus.lost()) {
         let f = Frame::new(
             crate::canopen::cob::NMT,
             &[crate::canopen::nmt::PRE_OPERATIONAL, a.node],
@@ -905,16 +953,17 @@ fn cyclic_thread(
         (Some(a), Some(b)) => Some((b as f64 - a as f64) * 1e-9),
         _ => None,
     };
-    (
+    CyclicEnd {
         master,
-        ticker.timing,
+        timing: ticker.timing,
         rt_setup,
         port_err,
         dropped,
         warnings,
         bit12_to_failure_s,
-        fail_ns,
-    )
+        detected_ns: fail_ns,
+        bus: bus.report(),
+    }
 }
 
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;

@@ -48,7 +48,8 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    GatewayError, MotionFailure, MotionSource, RunOptions, StopPoint, Summary, limits, plan_program,
+    GatewayError, MotionFailure, MotionSource, RunOptions, StopPoint, Summary, interpret_program,
+    limits, plan_program,
 };
 use crate::bus::Bus;
 use crate::config::{AxisMode, Machine};
@@ -501,9 +502,10 @@ impl MotionSource for FromStartRecorded<'_> {
             &self.opts.program_text,
             armed_mm,
         )?;
-        let program = crate::gcode::parse_program(
-            &self.opts.program_text,
+        let program = interpret_program(
+            machine,
             &self.opts.program_name,
+            &self.opts.program_text,
             armed_mm,
         )?;
         self.motion = Some(Motion {
@@ -802,7 +804,7 @@ fn prepare(machine: &Machine, opts: &RunOptions, state: &ResumeState) -> Result<
         ));
     }
     let start = Vector3::from(state.program_start_mm);
-    let program = crate::gcode::parse_program(&opts.program_text, &opts.program_name, start)
+    let program = interpret_program(machine, &opts.program_name, &opts.program_text, start)
         .map_err(|e| e.to_string())?;
     let items = program.items;
     let target = state.stop_point();
@@ -955,6 +957,8 @@ mod tests {
             bit12_to_failure_s: None,
             detected_ns: None,
             stop: Some(stop),
+            timing: Default::default(),
+            bus: Default::default(),
         }
     }
 

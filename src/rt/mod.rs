@@ -2,6 +2,8 @@
 //! (`clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`), at SCHED_FIFO with locked memory when
 //! the process is permitted, never bursting a backlog after an overrun.
 
+pub mod period_stats;
+
 use std::time::Duration;
 
 /// A monotonic timestamp in nanoseconds (CLOCK_MONOTONIC).
@@ -121,7 +123,7 @@ pub fn make_realtime(priority: i32) -> RtSetup {
 }
 
 /// Cycle timing statistics kept by the loop.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Timing {
     /// Cycles run.
     pub cycles: u64,
@@ -155,13 +157,29 @@ impl Ticker {
     /// deadlines are dropped (counted), not run back to back.
     pub fn wait(&mut self) {
         sleep_until_ns(self.next_ns);
-        let now = now_ns();
-        let late = Duration::from_nanos(now.saturating_sub(self.next_ns));
+        self.woke(now_ns());
+    }
+
+    /// The deadline the next [`Ticker::wait`] sleeps to (CLOCK_MONOTONIC, ns).
+    pub fn next_deadline_ns(&self) -> u64 {
+        self.next_ns
+    }
+
+    /// The deadline of the cycle running now (the one the last wait slept to), ns.
+    pub fn this_deadline_ns(&self) -> u64 {
+        self.next_ns - self.period_ns
+    }
+
+    /// The bookkeeping of a wake-up at `now_ns` for the deadline slept to: lateness, the next
+    /// deadline one period on along the original grid, and any deadline already past counted as
+    /// an overrun and skipped.
+    fn woke(&mut self, now_ns: u64) {
+        let late = Duration::from_nanos(now_ns.saturating_sub(self.next_ns));
         self.timing.max_wake_late = self.timing.max_wake_late.max(late);
         self.timing.cycles += 1;
         self.next_ns += self.period_ns;
-        if now >= self.next_ns {
-            let missed = (now - self.next_ns) / self.period_ns + 1;
+        if now_ns >= self.next_ns {
+            let missed = (now_ns - self.next_ns) / self.period_ns + 1;
             self.timing.overruns += missed;
             self.next_ns += missed * self.period_ns;
         }
@@ -184,5 +202,24 @@ mod tests {
         // The next wait after an overrun still sleeps (no back-to-back burst).
         assert!(now_ns() > after_overrun);
         assert!(t.timing.overruns > before, "{:?}", t.timing);
+    }
+
+    #[test]
+    fn deadlines_stay_on_the_grid_and_every_skipped_one_is_counted() {
+        let ms = 1_000_000;
+        let mut t = Ticker {
+            period_ns: ms,
+            next_ns: 10 * ms,
+            timing: Timing::default(),
+        };
+        t.woke(10 * ms + 30_000); // 30 µs late: no overrun, the grid holds
+        assert_eq!((t.next_deadline_ns(), t.timing.overruns), (11 * ms, 0));
+        assert_eq!(t.this_deadline_ns(), 10 * ms);
+        t.woke(13 * ms + 500_000); // woke 2.5 periods late: deadlines 12 and 13 ms are gone
+        assert_eq!((t.next_deadline_ns(), t.timing.overruns), (14 * ms, 2));
+        t.woke(14 * ms); // on time again, no catching up
+        assert_eq!((t.next_deadline_ns(), t.timing.overruns), (15 * ms, 2));
+        assert_eq!(t.timing.cycles, 3);
+        assert_eq!(t.timing.max_wake_late, Duration::from_micros(2500));
     }
 }

@@ -3,6 +3,12 @@
 //! `--inject drop-rpdo=5%`, `--inject no-heartbeat@1s`, `--inject persistent-fault@1s`,
 //! `--inject recurring-fault@1s`, optionally for one node: `--inject 2:silent@1.5s`.
 //!
+//! `--inject bus-off@T` and `--inject error-passive@T` stand in for the *gateway's* CAN
+//! controller: at T the drive sends the error frame a controller's driver would report
+//! (`linux/can/error.h`), which every other socket with that class in its error mask receives as
+//! if its own controller had reported it. vcan has no controller, so this is how a bus-off can
+//! be tested on vcan0. The drive itself carries on.
+//!
 //! Times count from the moment the drive starts following setpoints (statusword bit 12 first
 //! set), so a test can place a fault in the middle of a motion whatever the start-up took.
 
@@ -53,6 +59,16 @@ pub enum Inject {
         /// 0–100.
         percent: f64,
     },
+    /// A bus-off error frame is sent (see the module's documentation).
+    BusOff {
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// An error-passive error frame (both counters above 127) is sent.
+    ErrorPassive {
+        /// When, after motion start.
+        after: Duration,
+    },
 }
 
 /// How long after a fault reset a [`Inject::RecurringFault`] comes back.
@@ -67,7 +83,9 @@ impl Inject {
             | Inject::Reboot { after }
             | Inject::NoHeartbeat { after }
             | Inject::PersistentFault { after }
-            | Inject::RecurringFault { after } => Some(after),
+            | Inject::RecurringFault { after }
+            | Inject::BusOff { after }
+            | Inject::ErrorPassive { after } => Some(after),
             Inject::DropRpdo { .. } => None,
         }
     }
@@ -123,9 +141,11 @@ impl FromStr for Targeted {
                 "no-heartbeat" => Inject::NoHeartbeat { after },
                 "persistent-fault" => Inject::PersistentFault { after },
                 "recurring-fault" => Inject::RecurringFault { after },
+                "bus-off" => Inject::BusOff { after },
+                "error-passive" => Inject::ErrorPassive { after },
                 _ => {
                     return Err(format!(
-                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, no-heartbeat, persistent-fault, recurring-fault, drop-rpdo)"
+                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, no-heartbeat, persistent-fault, recurring-fault, bus-off, error-passive, drop-rpdo)"
                     ));
                 }
             }
@@ -142,7 +162,7 @@ impl FromStr for Targeted {
             Inject::DropRpdo { percent }
         } else {
             return Err(format!(
-                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T or drop-rpdo=P% (optionally NODE: first)"
+                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T, bus-off@T, error-passive@T or drop-rpdo=P% (optionally NODE: first)"
             ));
         };
         Ok(Targeted { node, inject })
@@ -198,6 +218,20 @@ mod tests {
         assert_eq!(
             "recurring-fault@0.5s".parse::<Targeted>().map(|t| t.inject),
             Ok(Inject::RecurringFault { after: ms(500) })
+        );
+        assert_eq!(
+            "bus-off@250ms".parse(),
+            Ok(Targeted {
+                node: None,
+                inject: Inject::BusOff { after: ms(250) }
+            })
+        );
+        assert_eq!(
+            "3:error-passive@0s".parse(),
+            Ok(Targeted {
+                node: Some(3),
+                inject: Inject::ErrorPassive { after: ms(0) }
+            })
         );
         for bad in [
             "no-heartbeat",

@@ -114,6 +114,8 @@ pub struct SimDrive {
     refault_at: Option<Duration>,
     rng: u64,
     rpdo_dropped: u64,
+    /// Error frames an injection produced, for the runner to send.
+    bus_errors: Vec<crate::bus::ErrorFrame>,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -168,6 +170,7 @@ impl SimDrive {
             refault_at: None,
             rng: 0x9E37_79B9_7F4A_7C15 ^ u64::from(node),
             rpdo_dropped: 0,
+            bus_errors: Vec::new(),
         }
     }
 
@@ -200,7 +203,9 @@ impl SimDrive {
             if fired {
                 continue;
             }
-            let Some(after) = inj.after() else { continue };
+            let Some(after) = inj.after() else {
+                continue;
+            };
             if now < since + after {
                 continue;
             }
@@ -230,9 +235,19 @@ impl SimDrive {
                     self.raise_fault(FaultCause::Injected { code }, now, out, true);
                     self.refresh();
                 }
+                Inject::BusOff { .. } => self.bus_errors.push(crate::bus::ErrorFrame::bus_off()),
+                Inject::ErrorPassive { .. } => self
+                    .bus_errors
+                    .push(crate::bus::ErrorFrame::error_passive(128, 128)),
                 Inject::DropRpdo { .. } => {}
             }
         }
+    }
+
+    /// Error frames injected since the last call ([`Inject::BusOff`], [`Inject::ErrorPassive`]),
+    /// to send with [`crate::bus::Port::send_error`].
+    pub fn take_bus_errors(&mut self) -> Vec<crate::bus::ErrorFrame> {
+        std::mem::take(&mut self.bus_errors)
     }
 
     fn next_inject_at(&self) -> Option<Duration> {

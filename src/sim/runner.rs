@@ -97,9 +97,14 @@ fn run(
         d.boot(epoch.elapsed(), &mut out);
     }
     let mut filters = filters_of(&drives);
+    // A simulated drive has no controller: injected error frames are sent, never received.
+    port.set_error_mask(0)?;
     while !stop.load(Ordering::Relaxed) {
         for f in out.drain(..) {
             port.send(&f)?;
+        }
+        for e in drives.iter_mut().flat_map(|d| d.take_bus_errors()) {
+            port.send_error(&e)?;
         }
         let now = epoch.elapsed();
         let next = drives.iter().map(|d| d.poll_at(now)).min().unwrap_or(now);

@@ -7,6 +7,13 @@
 //! (1700000000.123456) vcan0 201#1F0050C30000     RPDO1 node 1 (axis X): controlword 0x001F Enable operation, enable IP (bit 4); IP setpoint 50000 counts (50.000 mm)
 //! (1700000000.123501) vcan0 080#                 SYNC
 //! ```
+//!
+//! The controller's error frames are shown too, decoded per `linux/can/error.h`, and logged as
+//! candump logs them (`20000040#0000000000000000`):
+//!
+//! ```text
+//! (1700000000.125000) vcan0 20000040#0000000000000000 error frame: bus-off
+//! ```
 
 use std::fs::File;
 use std::io::{BufReader, LineWriter, Write};
@@ -16,7 +23,7 @@ use std::time::{Duration, Instant};
 use super::ToolError;
 use super::candump::{LogReader, LogRecord, Timestamp, frame_text};
 use super::decode::{DecodeContext, decode};
-use crate::bus::Bus;
+use crate::bus::{Bus, ErrorFrame, Received};
 
 /// When to stop, and where to log.
 #[derive(Debug, Clone, Default)]
@@ -46,6 +53,12 @@ pub fn format_line(rec: &LogRecord, ctx: &DecodeContext) -> String {
         frame_text(&rec.frame),
         decode(&rec.frame, ctx)
     )
+}
+
+/// The monitor's line for an error frame: timestamp, interface, the frame as candump logs it,
+/// then what it says.
+pub fn format_error_line(ts: Timestamp, iface: &str, e: &ErrorFrame) -> String {
+    format!("({ts}) {iface} {:<20} error frame: {e}", e.text())
 }
 
 struct Sink<'a> {
@@ -86,6 +99,24 @@ impl Sink<'_> {
         }
     }
 
+    /// Log and print an error frame; `Ok(false)` when the output was closed.
+    fn put_error(&mut self, ts: Timestamp, iface: &str, e: &ErrorFrame) -> Result<bool, ToolError> {
+        if let Some((path, w)) = &mut self.log {
+            writeln!(w, "({ts}) {iface} {}", e.text()).map_err(|source| ToolError::Io {
+                file: path.clone(),
+                source,
+            })?;
+        }
+        match writeln!(self.out, "{}", format_error_line(ts, iface, e)) {
+            Ok(()) => Ok(true),
+            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
+            Err(source) => Err(ToolError::Io {
+                file: PathBuf::from("stdout"),
+                source,
+            }),
+        }
+    }
+
     fn finish(&mut self) -> Result<(), ToolError> {
         if let Some((path, w)) = &mut self.log {
             w.flush().map_err(|source| ToolError::Io {
@@ -104,7 +135,8 @@ impl Sink<'_> {
 }
 
 /// Monitor `bus` live: print every frame to `out` (and log it) until `opts.count` frames or
-/// `opts.duration` (forever when neither is given). Returns the number of frames seen.
+/// `opts.duration` (forever when neither is given). Error frames of every class are shown (and
+/// counted) too. Returns the number of frames seen.
 pub fn monitor(
     bus: &Bus,
     ctx: &DecodeContext,
@@ -112,6 +144,7 @@ pub fn monitor(
     out: &mut dyn Write,
 ) -> Result<u64, ToolError> {
     let mut port = bus.open(&[])?;
+    port.set_error_mask(crate::bus::error::class::ALL)?;
     let iface = iface_name(bus).to_string();
     let mut sink = Sink::open(out, opts.log.as_deref())?;
     let deadline = opts.duration.map(|d| Instant::now() + d);
@@ -127,8 +160,16 @@ pub fn monitor(
             }
             None => Duration::from_millis(200),
         };
-        let Some(frame) = port.recv_timeout(wait)? else {
-            continue;
+        let frame = match port.recv_any(wait)? {
+            None => continue,
+            Some(Received::Frame(f)) => f,
+            Some(Received::Error(e)) => {
+                n += 1;
+                if !sink.put_error(Timestamp::now(), &iface, &e)? {
+                    break;
+                }
+                continue;
+            }
         };
         let rec = LogRecord {
             ts: Timestamp::now(),
@@ -275,6 +316,46 @@ mod tests {
             ]
         );
         assert!(recs.iter().all(|r| r.iface == "sim"));
+    }
+
+    #[test]
+    fn live_monitor_decodes_error_frames_and_logs_them_as_candump_does() {
+        let bus = InProcBus::new();
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join("bus.log");
+        let b = Bus::InProc(bus.clone());
+        let sender = std::thread::spawn(move || {
+            let mut p = bus.port(&[Filter::exact(0x7FF)]);
+            std::thread::sleep(Duration::from_millis(50));
+            crate::bus::Port::send_error(&mut p, &ErrorFrame::error_passive(128, 0)).unwrap();
+            crate::bus::Port::send_error(&mut p, &ErrorFrame::bus_off()).unwrap();
+        });
+        let mut out = Vec::new();
+        let opts = MonitorOptions {
+            log: Some(log.clone()),
+            count: Some(2),
+            duration: Some(Duration::from_secs(5)),
+        };
+        let n = monitor(&b, &DecodeContext::new(), &opts, &mut out).unwrap();
+        sender.join().unwrap();
+        assert_eq!(n, 2);
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert!(
+            lines[0].ends_with(
+                "sim 20000204#0030000000008000 error frame: controller: RX error-passive, TX error-passive; error counters TX 128, RX 0"
+            ),
+            "{text}"
+        );
+        assert!(
+            lines[1].ends_with("sim 20000040#0000000000000000 error frame: bus-off"),
+            "{text}"
+        );
+        let logged = std::fs::read_to_string(&log).unwrap();
+        assert!(
+            logged.ends_with(" sim 20000040#0000000000000000\n"),
+            "{logged}"
+        );
     }
 
     #[test]
