@@ -13,9 +13,11 @@
 //!    the whole of it is interpreted before anything moves; the line becomes a
 //!    [`gcode::Element`], a straight move with absolute start and end points in machine
 //!    millimetres and a feed of 20 mm/s. An error names `file:line:col`.
-//! 2. [`compensation::Compensator`] wraps the interpreter's stream and moves elements under
-//!    G41/G42 to the tool centre (C-type cutter radius compensation, one element of
-//!    look-ahead); under G40, as here, the element passes through unchanged.
+//! 2. [`compensation::Compensator`] wraps the interpreter's stream
+//!    ([`gateway::interpret_program`] for `run`, [`offline::plan_stream`] for `plan`) and moves
+//!    elements under G41/G42 to the tool centre (C-type cutter radius compensation, looking
+//!    ahead to the next element in the plane); under G40, as here, the element passes through
+//!    unchanged.
 //! 3. [`gateway::plan_program`] checks the target against the axes' travel, then
 //!    [`planner::plan`] turns the element into a [`planner::Segment`]: a trapezoid (or triangle)
 //!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
@@ -41,7 +43,7 @@
 //!
 //! ## Layers
 //!
-//! Data flows one way: `gcode → (compensation) → planner → interp → gateway::cyclic →
+//! Data flows one way: `gcode → compensation → planner → interp → gateway::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
 //! takes time as an argument.

@@ -237,3 +237,162 @@ fn the_machine_files_offsets_and_g28_position_apply() {
         "the configured G28 position"
     );
 }
+
+/// The path file's records: (line, kind, start, end, centre of an arc).
+type Record = (u64, String, [f64; 3], [f64; 3], Option<[f64; 3]>);
+
+fn plan_path(program: &str, machine: Option<&Path>) -> Vec<Record> {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(dir.path(), "square.ngc", program);
+    let path = dir.path().join("path.jsonl");
+    let mut cmd = canmotion();
+    cmd.arg("plan").arg(&file).arg("--path").arg(&path);
+    if let Some(m) = machine {
+        cmd.arg("--machine").arg(m);
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let point = |v: &serde_json::Value| -> [f64; 3] {
+        let a = v.as_array().unwrap();
+        [0, 1, 2].map(|i| a[i].as_f64().unwrap())
+    };
+    std::fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            (
+                v["line"].as_u64().unwrap(),
+                v["kind"].as_str().unwrap().to_string(),
+                point(&v["start"]),
+                point(&v["end"]),
+                v.get("center").map(point),
+            )
+        })
+        .collect()
+}
+
+fn near(a: [f64; 3], b: [f64; 3]) -> bool {
+    (0..3).all(|i| (a[i] - b[i]).abs() <= 1e-9)
+}
+
+/// The straight elements of a program line: (start, end) in the plane.
+fn lines_of(path: &[Record], line: u64) -> Vec<([f64; 3], [f64; 3])> {
+    path.iter()
+        .filter(|r| r.0 == line && r.1 == "line")
+        .map(|r| (r.2, r.3))
+        .collect()
+}
+
+/// A 20 mm square (corners (20, 20) and (40, 40)), entered and left diagonally from (10, 10) at
+/// the corner (20, 20), with the tool 1 of the demo table (radius 2 mm). Lines 4 to 7 are the
+/// four sides, in the order `sides` gives their far corners.
+fn square(g4x: &str, sides: [(f64, f64); 4]) -> String {
+    let mut p = format!("G21 G90 G17 F600\nG0 X10 Y10 Z0\n{g4x} D1 G1 X20 Y20\n");
+    for (x, y) in sides {
+        p.push_str(&format!("G1 X{x} Y{y}\n"));
+    }
+    p.push_str("G40 G1 X10 Y10\nM2\n");
+    p
+}
+
+#[test]
+fn g41_on_a_clockwise_square_runs_two_millimetres_outside_with_extended_corners() {
+    // Clockwise: up the left side first; G41 keeps the tool left of the motion: outside.
+    let path = plan_path(
+        &square(
+            "G41",
+            [(20.0, 40.0), (40.0, 40.0), (40.0, 20.0), (20.0, 20.0)],
+        ),
+        None,
+    );
+    // Each side is one straight element on the line 2 mm outside it; the three corners the
+    // sides share are outside corners of 90°, extended until the offsets meet.
+    let sides: Vec<_> = (4..=7).map(|l| lines_of(&path, l)).collect();
+    for s in &sides {
+        assert_eq!(s.len(), 1, "{path:?}");
+    }
+    let (left, top, right, bottom) = (sides[0][0], sides[1][0], sides[2][0], sides[3][0]);
+    assert!(left.0[0] == 18.0 && left.1[0] == 18.0, "{left:?}");
+    assert!(top.0[1] == 42.0 && top.1[1] == 42.0, "{top:?}");
+    assert!(right.0[0] == 42.0 && right.1[0] == 42.0, "{right:?}");
+    assert!(bottom.0[1] == 18.0 && bottom.1[1] == 18.0, "{bottom:?}");
+    assert!(near(left.1, [18.0, 42.0, 0.0]) && near(top.0, left.1));
+    assert!(near(top.1, [42.0, 42.0, 0.0]) && near(right.0, top.1));
+    assert!(near(right.1, [42.0, 18.0, 0.0]) && near(bottom.0, right.1));
+    // Start-up (45° inside corner with the left side: shortened) and cancel (the same with the
+    // bottom side): the diagonal's offset meets the side's offset at 18 + 2√2 …
+    // (the diagonal's offset is y = x + 2√2).
+    let meet = 18.0 + 2.0 * std::f64::consts::SQRT_2;
+    assert!((left.0[1] - meet).abs() < 1e-9, "{left:?}");
+    assert!((bottom.1[0] - meet).abs() < 1e-9, "{bottom:?}");
+    // … and nothing else: start-up, four sides, cancel back at the programmed (10, 10).
+    assert_eq!(path.len(), 1 + 1 + 4 + 1, "{path:?}");
+    assert!(near(path.last().unwrap().3, [10.0, 10.0, 0.0]));
+}
+
+#[test]
+fn g41_on_a_counter_clockwise_square_runs_two_millimetres_inside_with_shortened_corners() {
+    let path = plan_path(
+        &square(
+            "G41",
+            [(40.0, 20.0), (40.0, 40.0), (20.0, 40.0), (20.0, 20.0)],
+        ),
+        None,
+    );
+    let sides: Vec<_> = (4..=7).map(|l| lines_of(&path, l)).collect();
+    for s in &sides {
+        assert_eq!(s.len(), 1, "{path:?}");
+    }
+    let (bottom, right, top, left) = (sides[0][0], sides[1][0], sides[2][0], sides[3][0]);
+    assert!(bottom.0[1] == 22.0 && bottom.1[1] == 22.0, "{bottom:?}");
+    assert!(right.0[0] == 38.0 && right.1[0] == 38.0, "{right:?}");
+    assert!(top.0[1] == 38.0 && top.1[1] == 38.0, "{top:?}");
+    assert!(left.0[0] == 22.0 && left.1[0] == 22.0, "{left:?}");
+    // Inside corners of 270° (on the workpiece side): the offsets end at their intersection.
+    assert!(near(bottom.1, [38.0, 22.0, 0.0]) && near(right.0, bottom.1));
+    assert!(near(right.1, [38.0, 38.0, 0.0]) && near(top.0, right.1));
+    assert!(near(top.1, [22.0, 38.0, 0.0]) && near(left.0, top.1));
+    assert!(near(path.last().unwrap().3, [10.0, 10.0, 0.0]));
+}
+
+#[test]
+fn g42_mirrors_g41_and_outside_corners_can_be_arcs() {
+    // G42 on the counter-clockwise square is outside, like G41 on the clockwise one.
+    let ccw = [(40.0, 20.0), (40.0, 40.0), (20.0, 40.0), (20.0, 20.0)];
+    let path = plan_path(&square("G42", ccw), None);
+    let sides: Vec<_> = (4..=7).map(|l| lines_of(&path, l)[0]).collect();
+    assert!(sides[0].0[1] == 18.0 && near(sides[0].1, [42.0, 18.0, 0.0]));
+    assert!(near(sides[1].1, [42.0, 42.0, 0.0]));
+    assert!(near(sides[2].1, [18.0, 42.0, 0.0]));
+
+    // With `outside_corners = "arc"` each outside corner is a 2 mm arc about the programmed
+    // corner, from one side's offset to the next's.
+    let dir = tempfile::tempdir().unwrap();
+    let tools = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries/tools/demo-tools.toml");
+    let machine = machine_file(
+        dir.path(),
+        &format!(
+            "[program]\ntool_table = {:?}\nloaded_tool = 1\noutside_corners = \"arc\"",
+            tools.display().to_string()
+        ),
+    );
+    let path = plan_path(&square("G42", ccw), Some(&machine));
+    let arcs: Vec<&Record> = path.iter().filter(|r| r.1 == "arc").collect();
+    assert_eq!(arcs.len(), 3, "{path:?}");
+    for (arc, (corner, from, to)) in arcs.iter().zip([
+        ([40.0, 20.0, 0.0], [40.0, 18.0, 0.0], [42.0, 20.0, 0.0]),
+        ([40.0, 40.0, 0.0], [42.0, 40.0, 0.0], [40.0, 42.0, 0.0]),
+        ([20.0, 40.0, 0.0], [20.0, 42.0, 0.0], [18.0, 40.0, 0.0]),
+    ]) {
+        assert!(near(arc.4.unwrap(), corner), "{arc:?}");
+        assert!(near(arc.2, from) && near(arc.3, to), "{arc:?}");
+    }
+    let sides: Vec<_> = (4..=7).map(|l| lines_of(&path, l)[0]).collect();
+    assert!(near(sides[0].1, [40.0, 18.0, 0.0]), "{sides:?}");
+    assert!(near(sides[1].0, [42.0, 20.0, 0.0]) && near(sides[1].1, [42.0, 40.0, 0.0]));
+}

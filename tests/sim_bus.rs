@@ -184,3 +184,49 @@ fn a_move_out_of_travel_is_refused_before_motion() {
         "{msg}"
     );
 }
+
+#[test]
+fn run_streams_the_compensated_tool_centre_path() {
+    // A 20 mm square cut clockwise with G41 D1 (the demo tool table: radius 2 mm): the tool
+    // centre runs 2 mm outside each side, and the program ends at its cancel move's end.
+    let program = "G21 G90 G17 F1800\nG0 X10 Y10 Z0\nG41 D1 G1 X20 Y20\nG1 Y40\nG1 X40\nG1 Y20\nG1 X20\nG40 G1 X10 Y10\nM2\n";
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("out.csv");
+    let bus = Bus::InProc(InProcBus::new());
+    let m = canmotion::config::Machine::demo();
+    let s = gateway::run(&m, &bus, &opts(program, true, Some(log.clone()))).expect("run");
+    assert_eq!(s.target_counts, vec![10_000, 10_000, 0]);
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    // Columns: cycle, t_s, X_cmd_mm, Y_cmd_mm, ...
+    let on_side = |x: f64, y: f64| {
+        let left = (x - 18.0).abs() < 1e-6 && (20.0..=42.0).contains(&y);
+        let top = (y - 42.0).abs() < 1e-6 && (18.0..=42.0).contains(&x);
+        let right = (x - 42.0).abs() < 1e-6 && (18.0..=42.0).contains(&y);
+        let bottom = (y - 18.0).abs() < 1e-6 && (20.0..=42.0).contains(&x);
+        left || top || right || bottom
+    };
+    // Every setpoint inside the square's neighbourhood (away from the diagonal entry and exit)
+    // is on the offset path, and the cut went all the way round it.
+    let round: Vec<&Vec<f64>> = rows
+        .iter()
+        .filter(|r| r[2] > 17.0 && r[3] > 17.0 && (r[2] > 21.0 || r[3] > 21.0))
+        .collect();
+    assert!(
+        round.iter().all(|r| on_side(r[2], r[3])),
+        "off the offset path"
+    );
+    // Exact stops at the corners: the sample nearest each lies within a period's braking of it.
+    for corner in [(18.0, 42.0), (42.0, 42.0), (42.0, 18.0)] {
+        assert!(
+            round
+                .iter()
+                .any(|r| (r[2] - corner.0).abs() < 0.02 && (r[3] - corner.1).abs() < 0.02),
+            "never at the corner {corner:?}"
+        );
+    }
+}

@@ -594,9 +594,14 @@ pub fn run_with(
     source: &mut dyn MotionSource,
 ) -> Result<Summary, GatewayError> {
     // The whole program must parse and stay in travel before anything happens on the bus. The
-    // start position is not known yet: parse from the origin for the syntax, and plan again from
-    // the armed position below.
-    crate::gcode::parse_program(&opts.program_text, &opts.program_name, Vector3::zeros())?;
+    // start position is not known yet: interpret it from the origin (the machine's tools and
+    // offsets, compensation) for its errors, and plan again from the armed position below.
+    interpret_program(
+        machine,
+        &opts.program_name,
+        &opts.program_text,
+        Vector3::zeros(),
+    )?;
 
     let _sims = if opts.simulate {
         let drives = machine
