@@ -178,9 +178,11 @@ pub fn plan_stream<R: BufRead>(
         machine.program.compensation,
     );
     let mut planner =
-        Planner::new(start_mm, &limits(machine)).map_err(|source| GatewayError::Plan {
-            file: name.to_string(),
-            source,
+        Planner::with_config(start_mm, &limits(machine), &machine.planner).map_err(|source| {
+            GatewayError::Plan {
+                file: name.to_string(),
+                source,
+            }
         })?;
     let mut path_out = opts.path_out.as_deref().map(Out::create).transpose()?;
     let mut setpoints = match opts.setpoints_out.as_deref() {
@@ -215,7 +217,7 @@ pub fn plan_stream<R: BufRead>(
             Item::Dwell(_) => summary.dwells += 1,
             Item::Stop(_) => summary.stops += 1,
             Item::Note(_) => summary.notes += 1,
-            Item::End(_) => planner.finish(),
+            Item::End(_) => {}
         }
         planner.push(&item).map_err(|source| GatewayError::Plan {
             file: name.to_string(),
@@ -228,7 +230,10 @@ pub fn plan_stream<R: BufRead>(
             }
         }
     }
-    planner.finish();
+    planner.finish().map_err(|source| GatewayError::Plan {
+        file: name.to_string(),
+        source,
+    })?;
     while let Some(seg) = planner.pop() {
         summary.add_segment(&seg);
         if let Some(sp) = setpoints.as_mut() {

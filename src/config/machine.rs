@@ -40,6 +40,20 @@ struct RawMachine {
     axis: Vec<RawAxis>,
     #[serde(default)]
     program: RawProgram,
+    #[serde(default)]
+    planner: RawPlanner,
+}
+
+/// `[planner]`: how the look-ahead joins elements and shapes speed (all keys optional).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlanner {
+    profile: Option<crate::planner::ProfileKind>,
+    corner_acc_mm_s2: Option<f64>,
+    path_acc_share: Option<f64>,
+    path_acc_mm_s2: Option<f64>,
+    chord_tol_mm: Option<f64>,
+    lookahead: Option<usize>,
 }
 
 /// `[program]`: how programs are interpreted on this machine (all keys optional).
@@ -357,6 +371,9 @@ pub struct Machine {
     pub max_load_percent: f64,
     /// How programs are interpreted on this machine (`[program]`).
     pub program: ProgramSetup,
+    /// How the look-ahead plans (`[planner]`; the period and the jerk limits come from the
+    /// bus and the axes).
+    pub planner: crate::planner::PlannerConfig,
 }
 
 /// Work offset names in the order of [`crate::gcode::Setup::work_offsets_mm`].
@@ -452,6 +469,83 @@ fn program_setup(ctx: &Ctx, raw: &RawProgram) -> Result<ProgramSetup, ConfigErro
             outside_corners: raw.outside_corners,
         },
     })
+}
+
+/// Default share of each axis's acceleration and jerk the speed profiles may use.
+pub const DEFAULT_PATH_ACC_SHARE: f64 = 0.75;
+/// Default chord (bow-height) error on arcs, mm (1 µm, as in `shared/seeds` 001).
+pub const DEFAULT_CHORD_TOL_MM: f64 = 0.001;
+/// Default look-ahead window, elements.
+pub const DEFAULT_LOOKAHEAD: usize = 1000;
+
+fn planner_config(
+    ctx: &Ctx,
+    raw: &RawPlanner,
+    machine: &Machine,
+) -> Result<crate::planner::PlannerConfig, ConfigError> {
+    let mut jerk = nalgebra::Vector3::repeat(f64::INFINITY);
+    let mut min_acc = f64::INFINITY;
+    for a in &machine.axes {
+        if let Some(i) = a.xyz() {
+            jerk[i] = a.max_jerk_mm_s3;
+            min_acc = min_acc.min(a.max_acc_mm_s2);
+        }
+    }
+    let number = |key: &str, v: Option<f64>, default: f64, ok: &dyn Fn(f64) -> bool, what: &str| {
+        let v = v.unwrap_or(default);
+        if ok(v) {
+            Ok(v)
+        } else {
+            Err(ctx.err("planner", key, format!("{v} {what}")))
+        }
+    };
+    let config = crate::planner::PlannerConfig {
+        period_s: machine.cycle_s(),
+        corner_acc_mm_s2: number(
+            "corner_acc_mm_s2",
+            raw.corner_acc_mm_s2,
+            if min_acc.is_finite() { min_acc } else { 0.0 },
+            &|v| (0.0..=1e9).contains(&v),
+            "must be in 0..=1e9 (0: exact stop at every junction)",
+        )?,
+        path_acc_share: number(
+            "path_acc_share",
+            raw.path_acc_share,
+            DEFAULT_PATH_ACC_SHARE,
+            &|v| v > 0.0 && v <= 1.0,
+            "must be in (0, 1]",
+        )?,
+        path_acc_mm_s2: number(
+            "path_acc_mm_s2",
+            raw.path_acc_mm_s2,
+            f64::INFINITY,
+            &|v| v > 0.0 && (v <= 1e9 || v == f64::INFINITY),
+            "must be greater than 0 and at most 1e9",
+        )?,
+        max_jerk_mm_s3: jerk,
+        profile: raw.profile.unwrap_or_default(),
+        chord_tol_mm: number(
+            "chord_tol_mm",
+            raw.chord_tol_mm,
+            DEFAULT_CHORD_TOL_MM,
+            &|v| (0.0..=1.0).contains(&v),
+            "must be in 0..=1 mm (0: no limit)",
+        )?,
+        lookahead: match raw.lookahead.unwrap_or(DEFAULT_LOOKAHEAD) {
+            n @ 2..=1_000_000 => n,
+            n => {
+                return Err(ctx.err(
+                    "planner",
+                    "lookahead",
+                    format!("{n} elements must be in 2..=1000000"),
+                ));
+            }
+        },
+    };
+    config
+        .validate()
+        .map_err(|e| ctx.err("planner", "profile", e.to_string()))?;
+    Ok(config)
 }
 
 /// Checks that the loaded tool is in the table (once the table is read).
@@ -834,7 +928,7 @@ impl Machine {
                 sdo,
             });
         }
-        let machine = Machine {
+        let mut machine = Machine {
             file: path.to_path_buf(),
             name: raw.machine.name,
             interface: raw.bus.interface,
@@ -852,7 +946,9 @@ impl Machine {
             axes,
             max_load_percent: raw.bus.max_load_percent,
             program: program_setup(&ctx, &raw.program)?,
+            planner: crate::planner::PlannerConfig::exact_stop(),
         };
+        machine.planner = planner_config(&ctx, &raw.planner, &machine)?;
         machine.admit(&ctx)?;
         Ok(machine)
     }

@@ -440,9 +440,11 @@ pub fn plan_program(
             _ => {}
         }
     }
-    crate::planner::plan(&program, &limits(machine)).map_err(|source| GatewayError::Plan {
-        file: name.to_string(),
-        source,
+    crate::planner::plan_with(&program, &limits(machine), &machine.planner).map_err(|source| {
+        GatewayError::Plan {
+            file: name.to_string(),
+            source,
+        }
     })
 }
 

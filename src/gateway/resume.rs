@@ -54,7 +54,7 @@ use super::{
 use crate::bus::Bus;
 use crate::config::{AxisMode, Machine};
 use crate::gcode::{BlendMode, CompState, Element, ElementKind, Item, Plane};
-use crate::planner::{Limits, Plan, SegmentPath, plan_items};
+use crate::planner::{Limits, Plan, SegmentPath, plan_items, plan_items_with};
 
 /// Version of the resume file's layout.
 pub const STATE_VERSION: u32 = 1;
@@ -771,12 +771,11 @@ impl MotionSource for Resumption<'_> {
         let mut items = vec![(Item::Motion(approach), Origin::Approach)];
         items.extend(self.motion.items.iter().cloned());
         let planned: Vec<Item> = items.iter().map(|(i, _)| i.clone()).collect();
-        let plan = plan_items(armed_mm, &planned, &limits(machine)).map_err(|source| {
-            GatewayError::Plan {
+        let plan = plan_items_with(armed_mm, &planned, &limits(machine), &machine.planner)
+            .map_err(|source| GatewayError::Plan {
                 file: self.state.program.clone(),
                 source,
-            }
-        })?;
+            })?;
         self.motion.items = items;
         self.motion.plan = Some((armed_mm, plan.clone()));
         Ok(plan)

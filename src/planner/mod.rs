@@ -1,42 +1,80 @@
-//! Motion planner (exact stop): path elements into time-parameterised trapezoid segments.
+//! Motion planner: path elements into time-parameterised segments, with look-ahead.
 //!
-//! Second stage of the pipeline (`gcode → planner → interp`). Pure: no clock, no I/O; the
-//! output is a [`Plan`] whose only question downstream is [`Plan::position_at`] (as in Klipper,
-//! the sampler knows nothing about G-code or limits).
+//! Third stage of the pipeline (`gcode → compensation → planner → interp`). Pure: no clock, no
+//! I/O; the output is a stream of [`Segment`]s (or a whole [`Plan`]) whose only question
+//! downstream is the position at a time (as in Klipper, the sampler knows nothing about G-code
+//! or limits).
 //!
-//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_mm_s2` mm/s², `_s` seconds.
+//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_mm_s2` mm/s², `_mm_s3` mm/s³, `_s`
+//! seconds.
 //!
-//! # Profile
+//! # Segments
 //!
 //! Each element (line, arc or helix, see [`crate::gcode::Element`]) becomes one [`Segment`]
-//! along its path from the previous position, with a constant-acceleration ramp up, an optional
-//! cruise and a ramp down (a triangle when the element is too short to reach cruise speed); a
-//! dwell becomes a segment of zero motion of its duration, a program stop (M0/M1) a segment of
-//! zero motion and zero duration that marks where the run must wait. This planner stops exactly at every block end (G61): every
-//! segment starts and ends at rest. Segments already carry start and end speeds so that a later
-//! look-ahead (junction speeds, see `shared/seeds` 000/003) can fill them in without changing
-//! the sampler.
+//! along its path with a [`profile::SpeedProfile`] from its start speed to its end speed: a
+//! trapezoid, a 7-phase S-curve or a jerk-continuous S-curve ([`ProfileKind`]); a dwell becomes
+//! a segment of zero motion of its duration, a program stop (M0/M1) a segment of zero motion
+//! and zero duration that marks where the run must wait. Both stop the motion.
 //!
-//! For a move along the unit direction `u`, the path limits are
+//! # Limits along an element
+//!
+//! For a move along the unit direction `u`, with `s` the share of each axis's acceleration
+//! (and jerk) the profiles may use ([`PlannerConfig::path_acc_share`]; the rest is kept for
+//! the velocity jumps at junctions),
 //!
 //! - speed: `v ≤ min(feed, max_feed, min_i max_vel_i / |u_i|)` (a rapid uses `max_feed`),
-//! - acceleration: `a = min_i max_acc_i / |u_i|`,
+//! - acceleration: `a = min(path_acc, s · min_i max_acc_i / |u_i|)`,
+//! - jerk (S-curves): `j = s · min_i max_jerk_i / |u_i|`,
 //!
-//! so every axis stays within its own velocity and acceleration limit (`|v_i| = v |u_i|`).
+//! so every axis stays within its own limits (`|v_i| = v |u_i|`, and so on). On an arc of
+//! radius `r` (plane normal `n`, helix angle `α`) the tangent `T` and the inward normal `N` are
+//! orthogonal unit vectors, so the acceleration `a_t T + a_n N` has magnitude `√(a_t² + a_n²)`
+//! and no axis sees more than that times its share of the plane spanned by `T` and `N` (1 for
+//! an axis of the arc's plane, `sin α` for the helix axis). With `A` the smallest
+//! `s · max_acc_i / share_i`, the path acceleration is `a_t = A/2` and the centripetal
+//! acceleration is held to `a_n = v²/r ≤ A·√3/2` (LinuxCNC's 0.5 tangential ratio). The chord
+//! (bow-height) error of one period's step is held within ε (`shared/seeds` 001, 003):
+//! `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
+//! `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk budget `J` by
+//! `j_t ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ J/4`.
 //!
-//! On an arc of radius `r` (plane normal `n`, helix angle `α`) the tangent `T` and the inward
-//! normal `N` are orthogonal unit vectors, so the acceleration `a_t T + a_n N` has magnitude
-//! `√(a_t² + a_n²)` and no axis sees more than that times its share of the plane spanned by `T`
-//! and `N` (1 for an axis of the arc's plane, `sin α` for the helix axis). With `A` the smallest
-//! `max_acc_i / share_i`, the path acceleration is `a_t = A/2` and the centripetal acceleration
-//! is held to `a_n = v²/r ≤ A·√3/2` (LinuxCNC's 0.5 tangential ratio), so every axis stays
-//! within its limit while the speed ramps along the circle. Each axis's speed is `v` times its
-//! largest share of the tangent (`cos α` in the plane, `sin α` along the helix axis).
+//! # Junctions
+//!
+//! Under G61 (exact path) and G61.1 (exact stop) every junction is a stop. Otherwise the speed
+//! `v` through a junction is continuous and the *velocity vector* turns there within one
+//! period (`shared/seeds` 000): by eq. 5, `v·|u₂ − u₁| ≤ T·a_corner`, and, per axis, the jump
+//! `v·|u₂ᵢ − u₁ᵢ|` taken in one period on top of the acceleration the neighbouring profiles use
+//! must stay within the axis's limit: `v·|Δuᵢ| ≤ T·(max_accᵢ − usedᵢ)`. With S-curves the jump
+//! also bounds the jerk of the setpoints: `v·|Δuᵢ| ≤ T²·(max_jerkᵢ − usedᵢ)/2`, and so does
+//! the step of the centripetal acceleration where an arc begins or ends:
+//! `v²·|Δ(N/r)ᵢ| ≤ T·(max_jerkᵢ − usedᵢ)/2`. Never grbl's junction deviation: it lets the
+//! velocity jump by several times `a_max·T` in one period, a shock for a servo that follows
+//! cyclic setpoints. (Blending corners with arcs within G64 P is the next step.)
+//!
+//! # Look-ahead
+//!
+//! [`Planner`] keeps a window of up to [`PlannerConfig::lookahead`] elements. When it is full
+//! (or the program ends, or a dwell or stop comes), a backward pass computes the highest speed
+//! at each junction from which the rest of the window can still stop at its end (so a stop is
+//! always possible), with the reachability of the profile actually used
+//! ([`profile::max_start_speed`], 003's path-length constraint for S-curves); a forward pass
+//! then limits each end speed to what the element can reach from its start
+//! ([`profile::max_end_speed`]). An element is settled once its end speed can no longer change:
+//! the forward pass binds it, or the backward pass reached the junction's own limit (more
+//! elements can only raise the backward bound, never beyond that limit). Settled elements leave
+//! the window as segments and are never planned again, so the work per element is bounded; if
+//! too few are settled (a ramp longer than the window), the first quarter of the window is
+//! settled with the speeds it has, which are always safe.
+
+use std::collections::VecDeque;
 
 use nalgebra::Vector3;
+use serde::Deserialize;
 
-use crate::gcode::{ArcGeometry, Element, ElementKind, Item, Program};
+use crate::gcode::{ArcGeometry, BlendMode, Element, ElementKind, Item, Program};
 pub mod profile;
+
+use profile::{JerkShape, ProfileLimits, SpeedProfile};
 
 /// Largest value accepted for any machine limit; keeps squares and products of limits and
 /// lengths finite.
@@ -71,7 +109,115 @@ impl Limits {
     }
 }
 
-/// Why a plan could not be made.
+/// The speed profile the look-ahead plans every element with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ProfileKind {
+    /// Constant acceleration phases (infinite jerk).
+    #[default]
+    Trapezoid,
+    /// 7-phase jerk-limited S-curve (square jerk pulses).
+    SCurve,
+    /// Jerk-continuous S-curve (raised-cosine jerk pulses, 001 problem 4).
+    Smooth,
+}
+
+/// How the look-ahead joins elements and shapes their speed (the machine's `[planner]` table).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlannerConfig {
+    /// The interpolation (SYNC) period `T`.
+    pub period_s: f64,
+    /// `a_corner` of 000's eq. 5: the largest velocity change a junction may take in one period,
+    /// divided by the period. 0: exact stop at every junction.
+    pub corner_acc_mm_s2: f64,
+    /// Share (0, 1] of each axis's acceleration and jerk the profiles may use; the rest is the
+    /// budget of the junctions' velocity jumps.
+    pub path_acc_share: f64,
+    /// Cap on the path (tangential) acceleration; `f64::INFINITY` for none.
+    pub path_acc_mm_s2: f64,
+    /// Jerk limit of each axis (used by the S-curve profiles).
+    pub max_jerk_mm_s3: Vector3<f64>,
+    /// The profile.
+    pub profile: ProfileKind,
+    /// Largest chord (bow-height) error of one period's step on an arc; 0 for no limit.
+    pub chord_tol_mm: f64,
+    /// Elements in the look-ahead window (at least 2).
+    pub lookahead: usize,
+}
+
+impl PlannerConfig {
+    /// Trapezoids from rest to rest: a stop at every junction, the whole acceleration of each
+    /// axis for the profiles.
+    pub fn exact_stop() -> PlannerConfig {
+        PlannerConfig {
+            period_s: 0.004,
+            corner_acc_mm_s2: 0.0,
+            path_acc_share: 1.0,
+            path_acc_mm_s2: f64::INFINITY,
+            max_jerk_mm_s3: Vector3::repeat(f64::INFINITY),
+            profile: ProfileKind::Trapezoid,
+            chord_tol_mm: 0.0,
+            lookahead: 1000,
+        }
+    }
+
+    /// Checks every value's range.
+    pub fn validate(&self) -> Result<(), PlanError> {
+        let checks: [(&'static str, f64, bool); 5] = [
+            (
+                "period_s",
+                self.period_s,
+                self.period_s > 0.0 && self.period_s <= 1.0,
+            ),
+            (
+                "corner_acc_mm_s2",
+                self.corner_acc_mm_s2,
+                (0.0..=MAX_LIMIT).contains(&self.corner_acc_mm_s2),
+            ),
+            (
+                "path_acc_share",
+                self.path_acc_share,
+                self.path_acc_share > 0.0 && self.path_acc_share <= 1.0,
+            ),
+            (
+                "path_acc_mm_s2",
+                self.path_acc_mm_s2,
+                self.path_acc_mm_s2 > 0.0 && self.path_acc_mm_s2 <= f64::INFINITY,
+            ),
+            (
+                "chord_tol_mm",
+                self.chord_tol_mm,
+                (0.0..=1.0e3).contains(&self.chord_tol_mm),
+            ),
+        ];
+        for (name, value, ok) in checks {
+            if !ok {
+                return Err(PlanError::InvalidLimit { name, value });
+            }
+        }
+        if self.profile != ProfileKind::Trapezoid {
+            const JERK: [&str; 3] = ["max_jerk_mm_s3.x", "max_jerk_mm_s3.y", "max_jerk_mm_s3.z"];
+            for (i, name) in JERK.iter().enumerate() {
+                let j = self.max_jerk_mm_s3[i];
+                if !(j > 0.0 && j <= MAX_LIMIT) {
+                    return Err(PlanError::InvalidLimit { name, value: j });
+                }
+            }
+        }
+        if self.lookahead < 2 {
+            return Err(PlanError::InvalidLimit {
+                name: "lookahead",
+                value: self.lookahead as f64,
+            });
+        }
+        Ok(())
+    }
+
+    fn jerk_limited(&self) -> bool {
+        self.profile != ProfileKind::Trapezoid
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum PlanError {
     /// A machine limit is not finite, not positive, or above [`MAX_LIMIT`].
@@ -119,6 +265,19 @@ pub enum PlanError {
         /// The dwell.
         seconds: f64,
     },
+    /// No speed profile joins the speeds the passes chose (a planner defect: reported rather
+    /// than run).
+    #[error(
+        "line {line}: no speed profile from {v_start_mm_s} to {v_end_mm_s} mm/s over the element (planner defect)"
+    )]
+    NoProfile {
+        /// 1-based source line.
+        line: usize,
+        /// Start speed.
+        v_start_mm_s: f64,
+        /// End speed.
+        v_end_mm_s: f64,
+    },
     /// The move is so long or so slow that its length or duration overflows.
     #[error("line {line}: move length or duration is not finite (move too long or feed too low)")]
     Overflow {
@@ -146,11 +305,8 @@ pub enum SegmentPath {
     },
 }
 
-/// One element with its speed profile. Times in the profile are relative to the segment
-/// start; [`Segment::start_time_s`] places it in the plan.
-///
-/// Path speed: rises from `v_start_mm_s` to `v_peak_mm_s` at `accel_mm_s2` during `t_acc_s`,
-/// holds for `t_cruise_s`, falls to `v_end_mm_s` at `accel_mm_s2` during `t_dec_s`.
+/// One element with its speed profile. Times are relative to the segment start;
+/// [`Segment::start_time_s`] places it in the plan.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Segment {
     /// 1-based source line of the move.
@@ -165,20 +321,16 @@ pub struct Segment {
     pub path: SegmentPath,
     /// Path length along `path` (> 0 for lines and arcs, 0 for dwells and stops).
     pub length_mm: f64,
-    /// Path speed at the start (0 in this exact-stop planner).
+    /// Path speed at the start.
     pub v_start_mm_s: f64,
-    /// Highest path speed reached (cruise speed of a trapezoid, apex of a triangle).
+    /// Highest path speed reached (the cruise speed of the profile).
     pub v_peak_mm_s: f64,
-    /// Path speed at the end (0 in this exact-stop planner).
+    /// Path speed at the end.
     pub v_end_mm_s: f64,
-    /// Path acceleration of both ramps (magnitude).
-    pub accel_mm_s2: f64,
-    /// Duration of the ramp up.
-    pub t_acc_s: f64,
-    /// Duration of the constant-speed part (0 for a triangle).
-    pub t_cruise_s: f64,
-    /// Duration of the ramp down.
-    pub t_dec_s: f64,
+    /// The speed profile along the path (`None` for dwells and stops).
+    pub profile: Option<SpeedProfile>,
+    /// Duration of a dwell or stop (0 for moves: their profile has the duration).
+    pub hold_s: f64,
     /// Time in the plan at which the segment starts.
     pub start_time_s: f64,
 }
@@ -186,7 +338,7 @@ pub struct Segment {
 impl Segment {
     /// Total duration of the segment.
     pub fn duration_s(&self) -> f64 {
-        self.t_acc_s + self.t_cruise_s + self.t_dec_s
+        self.profile.map_or(self.hold_s, |p| p.duration_s())
     }
 
     /// Time in the plan at which the segment ends.
@@ -194,38 +346,29 @@ impl Segment {
         self.start_time_s + self.duration_s()
     }
 
-    /// Whether the profile has no constant-speed part.
-    pub fn is_triangle(&self) -> bool {
-        self.t_cruise_s == 0.0
-    }
-
     /// Distance travelled along the path at `t_s` after the segment start, clamped to
     /// `[0, length_mm]`.
     pub fn distance_at(&self, t_s: f64) -> f64 {
-        self.length_mm - self.remaining_at(t_s)
+        match &self.profile {
+            Some(p) if t_s > 0.0 => p.at(t_s).s_mm.clamp(0.0, self.length_mm),
+            _ => 0.0,
+        }
     }
 
-    /// Path speed at `t_s` after the segment start (0 outside the segment when it starts and
-    /// ends at rest).
+    /// Path speed at `t_s` after the segment start.
     pub fn speed_at(&self, t_s: f64) -> f64 {
-        let a = self.accel_mm_s2;
-        if t_s.is_nan() || t_s <= 0.0 {
-            self.v_start_mm_s
-        } else if t_s < self.t_acc_s {
-            self.v_start_mm_s + a * t_s
-        } else if t_s < self.t_acc_s + self.t_cruise_s {
-            self.v_peak_mm_s
-        } else {
-            let tr = (self.duration_s() - t_s).max(0.0);
-            self.v_end_mm_s + a * tr
+        match &self.profile {
+            Some(p) if t_s.is_nan() || t_s <= 0.0 => p.v_start_mm_s(),
+            Some(p) => p.at(t_s).v_mm_s,
+            None => 0.0,
         }
     }
 
     /// Position at `t_s` after the segment start. Exactly `start_mm` at `t_s <= 0` and exactly
-    /// `end_mm` at `t_s >= duration_s()`. On a line the ramp down is measured back from the end,
-    /// so the approach to `end_mm` is as precise as the approach from `start_mm`, and an axis
-    /// that does not move keeps its coordinate bit for bit. On an arc the point is on the circle
-    /// (helix) at the distance travelled.
+    /// `end_mm` at `t_s >= duration_s()`. On a line the second half is measured back from the
+    /// end, so the approach to `end_mm` is as precise as the departure from `start_mm`, and an
+    /// axis that does not move keeps its coordinate bit for bit. On an arc the point is on the
+    /// circle (helix) at the distance travelled.
     pub fn position_at(&self, t_s: f64) -> Vector3<f64> {
         if t_s.is_nan() || t_s <= 0.0 {
             return self.start_mm;
@@ -233,20 +376,16 @@ impl Segment {
         if t_s >= self.duration_s() {
             return self.end_mm;
         }
+        let d = self.distance_at(t_s);
         match &self.path {
             SegmentPath::Line { direction } => {
-                let a = self.accel_mm_s2;
-                if t_s < self.t_acc_s {
-                    self.start_mm + direction * (self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s)
-                } else if t_s < self.t_acc_s + self.t_cruise_s {
-                    let d_acc_mm =
-                        self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
-                    self.start_mm + direction * (d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s))
+                if d <= 0.5 * self.length_mm {
+                    self.start_mm + direction * d
                 } else {
-                    self.end_mm - direction * self.remaining_at(t_s)
+                    self.end_mm - direction * (self.length_mm - d)
                 }
             }
-            SegmentPath::Arc(arc) => arc.point_at(self.distance_at(t_s) / self.length_mm),
+            SegmentPath::Arc(arc) => arc.point_at(d / self.length_mm),
             SegmentPath::Dwell | SegmentPath::Stop { .. } => self.start_mm,
         }
     }
@@ -258,32 +397,10 @@ impl Segment {
             _ => None,
         }
     }
-
-    /// Distance still to go at `t_s` after the segment start.
-    fn remaining_at(&self, t_s: f64) -> f64 {
-        let a = self.accel_mm_s2;
-        let duration_s = self.duration_s();
-        if t_s.is_nan() || t_s <= 0.0 {
-            return self.length_mm;
-        }
-        if t_s >= duration_s {
-            return 0.0;
-        }
-        if t_s >= self.t_acc_s + self.t_cruise_s {
-            let tr = duration_s - t_s;
-            return (self.v_end_mm_s * tr + 0.5 * a * tr * tr).min(self.length_mm);
-        }
-        let d_acc_mm = self.v_start_mm_s * self.t_acc_s + 0.5 * a * self.t_acc_s * self.t_acc_s;
-        let travelled_mm = if t_s < self.t_acc_s {
-            self.v_start_mm_s * t_s + 0.5 * a * t_s * t_s
-        } else {
-            d_acc_mm + self.v_peak_mm_s * (t_s - self.t_acc_s)
-        };
-        (self.length_mm - travelled_mm).clamp(0.0, self.length_mm)
-    }
 }
 
-/// Speed profile of one segment, relative to its start.
+/// Reference trapezoid of the first planner, kept to check [`profile`] against.
+#[cfg(test)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Profile {
     v_peak_mm_s: f64,
@@ -294,7 +411,8 @@ struct Profile {
 
 /// Trapezoid (or triangle) over `length_mm` from `v_start` to `v_end` with speed cap `v_max` and
 /// acceleration `accel`. `None` if the end speed cannot be reached within the length or an input
-/// is out of its domain. All speeds in mm/s, `accel` in mm/s².
+/// is out of its domain.
+#[cfg(test)]
 fn trapezoid(
     length_mm: f64,
     v_start_mm_s: f64,
@@ -314,7 +432,6 @@ fn trapezoid(
     if !domain_ok || (v1 * v1 - v0 * v0).abs() > 2.0 * a * l * (1.0 + 1e-12) {
         return None;
     }
-    // Apex speed of the triangle that covers exactly `l`.
     let v_apex_sq = a * l + 0.5 * (v0 * v0 + v1 * v1);
     let profile = if v_apex_sq <= vmax * vmax {
         let vp = v_apex_sq.sqrt().max(v0).max(v1);
@@ -405,25 +522,44 @@ impl Plan {
     }
 }
 
-/// Plans a parsed program from its start position.
+/// Plans a parsed program from its start position, stopping at every junction.
 pub fn plan(program: &Program, limits: &Limits) -> Result<Plan, PlanError> {
-    plan_items(program.start_mm, &program.items, limits)
+    plan_with(program, limits, &PlannerConfig::exact_stop())
+}
+
+/// Plans a parsed program from its start position with the look-ahead `config`.
+pub fn plan_with(
+    program: &Program,
+    limits: &Limits,
+    config: &PlannerConfig,
+) -> Result<Plan, PlanError> {
+    plan_items_with(program.start_mm, &program.items, limits, config)
 }
 
 /// Plans `items` (elements, dwells, stops; notes and the end are ignored) from `start_mm`
-/// into one [`Plan`]: [`Planner`] run over all of them.
+/// into one [`Plan`], stopping at every junction.
 pub fn plan_items<'a>(
     start_mm: Vector3<f64>,
     items: impl IntoIterator<Item = &'a Item>,
     limits: &Limits,
 ) -> Result<Plan, PlanError> {
-    let mut planner = Planner::new(start_mm, limits)?;
+    plan_items_with(start_mm, items, limits, &PlannerConfig::exact_stop())
+}
+
+/// [`plan_items`] with the look-ahead `config`: [`Planner`] run over all of them.
+pub fn plan_items_with<'a>(
+    start_mm: Vector3<f64>,
+    items: impl IntoIterator<Item = &'a Item>,
+    limits: &Limits,
+    config: &PlannerConfig,
+) -> Result<Plan, PlanError> {
+    let mut planner = Planner::with_config(start_mm, limits, config)?;
     let mut segments = Vec::new();
     for item in items {
         planner.push(item)?;
         segments.extend(planner.drain());
     }
-    planner.finish();
+    planner.finish()?;
     segments.extend(planner.drain());
     Ok(Plan {
         start_mm,
@@ -432,46 +568,94 @@ pub fn plan_items<'a>(
     })
 }
 
+/// An element waiting in the look-ahead window.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    /// Geometry (the speeds and the profile are filled in when it settles).
+    seg: Segment,
+    limits: ProfileLimits,
+    blend: BlendMode,
+    /// Highest speed allowed at its start (the junction with the element before).
+    cap_start_mm_s: f64,
+    tangent_start: Vector3<f64>,
+    tangent_end: Vector3<f64>,
+    /// Curvature vector `N/r` at the start and at the end (zero on lines).
+    curvature_start: Vector3<f64>,
+    curvature_end: Vector3<f64>,
+    /// Largest acceleration and jerk of each axis the profile may use.
+    acc_used_mm_s2: Vector3<f64>,
+    jerk_used_mm_s3: Vector3<f64>,
+}
+
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
 /// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
-/// bounded by the look-ahead window, whatever the program's length.
-///
-/// This planner stops exactly at every block end: every element settles as soon as it is
-/// pushed (one exact-stop trapezoid, zero-length lines skipped). Each element must start where
-/// the previous one ended.
+/// bounded by the look-ahead window, whatever the program's length (see the module
+/// documentation for the passes). Each element must start where the previous one ended.
 #[derive(Debug, Clone)]
 pub struct Planner {
     limits: Limits,
+    config: PlannerConfig,
+    /// Where everything pushed ends.
     position_mm: Vector3<f64>,
+    /// End time of everything settled.
     time_s: f64,
-    ready: std::collections::VecDeque<Segment>,
+    window: VecDeque<Pending>,
+    /// Start speed of the window's first element (the last settled end speed).
+    v_settled_mm_s: f64,
+    /// Backward-pass speeds, scratch.
+    back_mm_s: Vec<f64>,
+    ready: VecDeque<Segment>,
     finished: bool,
 }
 
 impl Planner {
-    /// A planner at rest at `start_mm`, at time 0.
+    /// A planner at rest at `start_mm`, at time 0, that stops at every junction.
     pub fn new(start_mm: Vector3<f64>, limits: &Limits) -> Result<Planner, PlanError> {
+        Planner::with_config(start_mm, limits, &PlannerConfig::exact_stop())
+    }
+
+    /// A planner at rest at `start_mm`, at time 0, with the look-ahead `config`.
+    pub fn with_config(
+        start_mm: Vector3<f64>,
+        limits: &Limits,
+        config: &PlannerConfig,
+    ) -> Result<Planner, PlanError> {
         limits.validate()?;
+        config.validate()?;
         if !start_mm.iter().all(|c| c.is_finite()) {
             return Err(PlanError::NonFiniteStart);
         }
         Ok(Planner {
             limits: *limits,
+            config: *config,
             position_mm: start_mm,
             time_s: 0.0,
-            ready: std::collections::VecDeque::new(),
+            window: VecDeque::with_capacity(config.lookahead.min(1 << 16) + 1),
+            v_settled_mm_s: 0.0,
+            back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
+            ready: VecDeque::new(),
             finished: false,
         })
     }
 
-    /// Adds the next item of the program (notes and the end are ignored).
+    /// Adds the next item of the program (notes and the end are ignored). Segments that
+    /// settle become available to [`pop`](Self::pop).
     pub fn push(&mut self, item: &Item) -> Result<(), PlanError> {
-        let segment = match item {
+        match item {
             Item::Motion(e) => {
-                match plan_element(e, self.position_mm, self.time_s, &self.limits)? {
-                    Some(s) => s,
-                    None => return Ok(()),
+                let Some(mut p) = self.element(e)? else {
+                    return Ok(());
+                };
+                p.cap_start_mm_s = match self.window.back() {
+                    Some(prev) => self.junction_mm_s(prev, &p),
+                    None => 0.0,
+                };
+                self.position_mm = p.seg.end_mm;
+                self.window.push_back(p);
+                if self.window.len() >= self.config.lookahead {
+                    self.replan(false)?;
                 }
+                Ok(())
             }
             Item::Dwell(d) => {
                 if !(d.seconds >= 0.0 && d.seconds.is_finite()) {
@@ -483,38 +667,35 @@ impl Planner {
                 if d.seconds == 0.0 {
                     return Ok(());
                 }
-                still(
+                self.replan(true)?;
+                self.push_still(still(
                     d.line,
                     self.position_mm,
                     SegmentPath::Dwell,
                     d.seconds,
                     self.time_s,
-                )
+                ))
             }
-            Item::Stop(s) => still(
-                s.line,
-                self.position_mm,
-                SegmentPath::Stop {
-                    optional: s.optional,
-                },
-                0.0,
-                self.time_s,
-            ),
-            Item::Note(_) | Item::End(_) => return Ok(()),
-        };
-        let end_s = segment.end_time_s();
-        if !end_s.is_finite() {
-            return Err(PlanError::Overflow { line: segment.line });
+            Item::Stop(s) => {
+                self.replan(true)?;
+                self.push_still(still(
+                    s.line,
+                    self.position_mm,
+                    SegmentPath::Stop {
+                        optional: s.optional,
+                    },
+                    0.0,
+                    self.time_s,
+                ))
+            }
+            Item::Note(_) | Item::End(_) => Ok(()),
         }
-        self.time_s = end_s;
-        self.position_mm = segment.end_mm;
-        self.ready.push_back(segment);
-        Ok(())
     }
 
-    /// The program ended: everything pushed settles (the motion ends at rest).
-    pub fn finish(&mut self) {
+    /// The program ended: everything pushed settles, the motion ending at rest.
+    pub fn finish(&mut self) -> Result<(), PlanError> {
         self.finished = true;
+        self.replan(true)
     }
 
     /// The next settled segment, in time order.
@@ -527,7 +708,7 @@ impl Planner {
         self.ready.drain(..)
     }
 
-    /// End time of everything pushed so far.
+    /// End time of everything settled (of the whole program once finished).
     pub fn time_s(&self) -> f64 {
         self.time_s
     }
@@ -540,6 +721,302 @@ impl Planner {
     /// Whether [`finish`](Self::finish) was called.
     pub fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    /// Elements in the look-ahead window (pushed, not settled).
+    pub fn pending(&self) -> usize {
+        self.window.len()
+    }
+
+    fn push_still(&mut self, segment: Segment) -> Result<(), PlanError> {
+        let end_s = segment.end_time_s();
+        if !end_s.is_finite() {
+            return Err(PlanError::Overflow { line: segment.line });
+        }
+        self.time_s = end_s;
+        self.ready.push_back(segment);
+        Ok(())
+    }
+
+    /// The backward and forward passes over the window, then the settled elements out
+    /// (`all`: every element, the last ending at rest).
+    fn replan(&mut self, all: bool) -> Result<(), PlanError> {
+        let n = self.window.len();
+        if n == 0 {
+            return Ok(());
+        }
+        // Backward: the highest start speed of each element from which the rest of the window
+        // can still stop at its end.
+        self.back_mm_s.clear();
+        self.back_mm_s.resize(n + 1, 0.0);
+        let mut v_next = 0.0;
+        for i in (0..n).rev() {
+            let p = &self.window[i];
+            let reach = profile::max_start_speed(p.seg.length_mm, v_next, &p.limits).unwrap_or(0.0);
+            let cap = if i == 0 {
+                self.v_settled_mm_s
+            } else {
+                p.cap_start_mm_s
+            };
+            v_next = reach.min(cap);
+            self.back_mm_s[i] = v_next;
+        }
+        // Forward: settle the prefix whose end speeds can no longer change.
+        let quarter = (n / 4).max(1);
+        let mut v0 = self.v_settled_mm_s;
+        let mut settled = 0;
+        while settled < n {
+            let i = settled;
+            let p = self.window[i];
+            let fwd = profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0);
+            let back = self.back_mm_s[i + 1];
+            let v1 = fwd.min(back);
+            let last = i + 1 == n;
+            let fixed = all
+                || (!last && (fwd <= back || back >= self.window[i + 1].cap_start_mm_s))
+                || (!last && settled < quarter && n >= self.config.lookahead);
+            if !fixed {
+                break;
+            }
+            self.settle(&p, v0, v1)?;
+            v0 = v1;
+            settled += 1;
+        }
+        self.window.drain(..settled);
+        self.v_settled_mm_s = v0;
+        Ok(())
+    }
+
+    fn settle(&mut self, p: &Pending, v0: f64, v1: f64) -> Result<(), PlanError> {
+        let line = p.seg.line;
+        let no_profile = PlanError::NoProfile {
+            line,
+            v_start_mm_s: v0,
+            v_end_mm_s: v1,
+        };
+        let profile = profile::plan(p.seg.length_mm, v0, v1, &p.limits).ok_or(no_profile)?;
+        let mut seg = p.seg;
+        seg.v_start_mm_s = v0;
+        seg.v_end_mm_s = v1;
+        seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
+        seg.profile = Some(profile);
+        seg.start_time_s = self.time_s;
+        let end_s = seg.end_time_s();
+        if !end_s.is_finite() {
+            return Err(PlanError::Overflow { line });
+        }
+        self.time_s = end_s;
+        self.ready.push_back(seg);
+        Ok(())
+    }
+
+    /// Highest speed through the junction from `a` into `b` (see the module documentation).
+    fn junction_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
+        let cfg = &self.config;
+        if cfg.corner_acc_mm_s2 == 0.0
+            || matches!(a.blend, BlendMode::ExactStop | BlendMode::ExactPath)
+        {
+            return 0.0;
+        }
+        let t = cfg.period_s;
+        let mut v = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
+        let du = b.tangent_start - a.tangent_end;
+        let du_norm = du.norm();
+        if du_norm > 0.0 {
+            v = v.min(t * cfg.corner_acc_mm_s2 / du_norm);
+        }
+        let dk = b.curvature_start - a.curvature_end;
+        for i in 0..3 {
+            let acc_budget =
+                self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
+            let d = du[i].abs();
+            if d > 0.0 {
+                v = v.min((t * acc_budget).max(0.0) / d);
+            }
+            if cfg.jerk_limited() {
+                let jerk_budget = 0.5
+                    * (cfg.max_jerk_mm_s3[i] - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
+                        .max(0.0);
+                if d > 0.0 {
+                    v = v.min(t * t * jerk_budget / d);
+                }
+                let k = dk[i].abs();
+                if k > 0.0 {
+                    v = v.min((t * jerk_budget / k).sqrt());
+                }
+            }
+        }
+        v.max(0.0)
+    }
+
+    /// The pending element of `e` (`None` for a zero-length line).
+    fn element(&self, e: &Element) -> Result<Option<Pending>, PlanError> {
+        let line = e.line;
+        let (limits, cfg) = (&self.limits, &self.config);
+        if !e.end_mm.iter().all(|c| c.is_finite()) {
+            return Err(PlanError::NonFiniteTarget { line });
+        }
+        if e.start_mm != self.position_mm {
+            return Err(PlanError::Discontinuity { line });
+        }
+        let feed_mm_s = if e.rapid {
+            limits.max_feed_mm_s
+        } else {
+            match e.feed_mm_s {
+                Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
+                other => {
+                    return Err(PlanError::InvalidFeed {
+                        line,
+                        feed_mm_s: other,
+                    });
+                }
+            }
+        };
+        let share = cfg.path_acc_share;
+        let jerk = |budget: f64| {
+            if cfg.jerk_limited() {
+                budget
+            } else {
+                f64::INFINITY
+            }
+        };
+        let mut p = match e.kind {
+            ElementKind::Line => {
+                let delta_mm = e.end_mm - self.position_mm;
+                // Scaled norm: neither overflows for huge nor underflows for tiny moves.
+                let scale_mm = delta_mm.amax();
+                if scale_mm == 0.0 {
+                    return Ok(None);
+                }
+                if !scale_mm.is_finite() {
+                    return Err(PlanError::Overflow { line });
+                }
+                let unit_scaled = delta_mm / scale_mm;
+                let norm_scaled = unit_scaled.norm();
+                let length_mm = scale_mm * norm_scaled;
+                if length_mm.is_nan() || length_mm > profile::MAX_LENGTH_MM {
+                    return Err(PlanError::Overflow { line });
+                }
+                let direction = unit_scaled / norm_scaled;
+                let mut v_max_mm_s = feed_mm_s;
+                let mut acc_mm_s2 = cfg.path_acc_mm_s2;
+                let mut jerk_mm_s3 = f64::INFINITY;
+                for i in 0..3 {
+                    let u = direction[i].abs();
+                    if u > 0.0 {
+                        v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / u);
+                        acc_mm_s2 = acc_mm_s2.min(share * limits.max_acc_mm_s2[i] / u);
+                        jerk_mm_s3 = jerk_mm_s3.min(share * cfg.max_jerk_mm_s3[i] / u);
+                    }
+                }
+                let jerk_mm_s3 = jerk(jerk_mm_s3);
+                let abs = direction.abs();
+                Pending {
+                    seg: moving(
+                        e,
+                        self.position_mm,
+                        SegmentPath::Line { direction },
+                        length_mm,
+                    ),
+                    limits: profile_limits(cfg, v_max_mm_s, acc_mm_s2, jerk_mm_s3, line)?,
+                    blend: e.blend,
+                    cap_start_mm_s: 0.0,
+                    tangent_start: direction,
+                    tangent_end: direction,
+                    curvature_start: Vector3::zeros(),
+                    curvature_end: Vector3::zeros(),
+                    acc_used_mm_s2: abs * acc_mm_s2,
+                    jerk_used_mm_s3: if cfg.jerk_limited() {
+                        abs * jerk_mm_s3
+                    } else {
+                        Vector3::zeros()
+                    },
+                }
+            }
+            ElementKind::Arc { .. } => {
+                let arc = e.arc().ok_or(PlanError::InvalidArc { line })?;
+                let length_mm = arc.length_mm;
+                if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
+                    return Err(PlanError::Overflow { line });
+                }
+                let a = arc_limits(&arc, feed_mm_s, limits, cfg);
+                let curvature = |s: f64| {
+                    let at = arc.point_at(s);
+                    let rel = at - arc.center_mm;
+                    let radial = rel - arc.normal * rel.dot(&arc.normal);
+                    let r = radial.norm();
+                    if r > 0.0 {
+                        -radial / (r * r)
+                    } else {
+                        Vector3::zeros()
+                    }
+                };
+                Pending {
+                    seg: moving(e, self.position_mm, SegmentPath::Arc(arc), length_mm),
+                    limits: profile_limits(
+                        cfg,
+                        a.v_max_mm_s,
+                        a.acc_mm_s2,
+                        jerk(a.jerk_mm_s3),
+                        line,
+                    )?,
+                    blend: e.blend,
+                    cap_start_mm_s: 0.0,
+                    tangent_start: arc.tangent_at(0.0),
+                    tangent_end: arc.tangent_at(1.0),
+                    curvature_start: curvature(0.0),
+                    curvature_end: curvature(1.0),
+                    acc_used_mm_s2: a.axis_acc_mm_s2,
+                    jerk_used_mm_s3: if cfg.jerk_limited() {
+                        a.axis_jerk_mm_s3
+                    } else {
+                        Vector3::zeros()
+                    },
+                }
+            }
+        };
+        p.seg.end_mm = e.end_mm;
+        Ok(Some(p))
+    }
+}
+
+/// The profile limits of an element, valid for [`profile`].
+fn profile_limits(
+    cfg: &PlannerConfig,
+    v_max_mm_s: f64,
+    acc_mm_s2: f64,
+    jerk_mm_s3: f64,
+    line: usize,
+) -> Result<ProfileLimits, PlanError> {
+    // A speed or acceleration this low is a feed too small to run (the move would overflow).
+    if !(v_max_mm_s >= profile::MIN_LIMIT && acc_mm_s2 >= profile::MIN_LIMIT) {
+        return Err(PlanError::Overflow { line });
+    }
+    let clamp = |x: f64| x.clamp(profile::MIN_LIMIT, MAX_LIMIT);
+    let (v, a) = (clamp(v_max_mm_s), clamp(acc_mm_s2));
+    let limits = match cfg.profile {
+        ProfileKind::Trapezoid => ProfileLimits::trapezoid(v, a),
+        ProfileKind::SCurve => ProfileLimits::new(v, a, clamp(jerk_mm_s3), JerkShape::Square),
+        ProfileKind::Smooth => ProfileLimits::new(v, a, clamp(jerk_mm_s3), JerkShape::RaisedCosine),
+    };
+    limits.ok_or(PlanError::Overflow { line })
+}
+
+/// A moving segment's geometry, speeds not yet planned.
+fn moving(e: &Element, start_mm: Vector3<f64>, path: SegmentPath, length_mm: f64) -> Segment {
+    Segment {
+        line: e.line,
+        rapid: e.rapid,
+        start_mm,
+        end_mm: e.end_mm,
+        path,
+        length_mm,
+        v_start_mm_s: 0.0,
+        v_peak_mm_s: 0.0,
+        v_end_mm_s: 0.0,
+        profile: None,
+        hold_s: 0.0,
+        start_time_s: 0.0,
     }
 }
 
@@ -561,108 +1038,37 @@ fn still(
         v_start_mm_s: 0.0,
         v_peak_mm_s: 0.0,
         v_end_mm_s: 0.0,
-        accel_mm_s2: 0.0,
-        t_acc_s: 0.0,
-        t_cruise_s: duration_s,
-        t_dec_s: 0.0,
+        profile: None,
+        hold_s: duration_s,
         start_time_s,
     }
 }
 
-/// The segment of one element from `position_mm` (`None` for a zero-length line).
-fn plan_element(
-    e: &Element,
-    position_mm: Vector3<f64>,
-    start_time_s: f64,
+/// Limits along an arc (see the module documentation).
+struct ArcLimits {
+    v_max_mm_s: f64,
+    /// Path (tangential) acceleration.
+    acc_mm_s2: f64,
+    /// Path (tangential) jerk.
+    jerk_mm_s3: f64,
+    /// Largest acceleration and jerk of each axis on the arc.
+    axis_acc_mm_s2: Vector3<f64>,
+    axis_jerk_mm_s3: Vector3<f64>,
+}
+
+fn arc_limits(
+    arc: &ArcGeometry,
+    feed_mm_s: f64,
     limits: &Limits,
-) -> Result<Option<Segment>, PlanError> {
-    let line = e.line;
-    if !e.end_mm.iter().all(|c| c.is_finite()) {
-        return Err(PlanError::NonFiniteTarget { line });
-    }
-    if e.start_mm != position_mm {
-        return Err(PlanError::Discontinuity { line });
-    }
-    let feed_mm_s = if e.rapid {
-        limits.max_feed_mm_s
-    } else {
-        match e.feed_mm_s {
-            Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
-            other => {
-                return Err(PlanError::InvalidFeed {
-                    line,
-                    feed_mm_s: other,
-                });
-            }
-        }
-    };
-    let (path, length_mm, v_max_mm_s, accel_mm_s2) = match e.kind {
-        ElementKind::Line => {
-            let delta_mm = e.end_mm - position_mm;
-            // Scaled norm: neither overflows for huge nor underflows for tiny moves.
-            let scale_mm = delta_mm.amax();
-            if scale_mm == 0.0 {
-                return Ok(None);
-            }
-            if !scale_mm.is_finite() {
-                return Err(PlanError::Overflow { line });
-            }
-            let unit_scaled = delta_mm / scale_mm;
-            let norm_scaled = unit_scaled.norm();
-            let length_mm = scale_mm * norm_scaled;
-            let direction = unit_scaled / norm_scaled;
-            let mut v_max_mm_s = feed_mm_s;
-            let mut accel_mm_s2 = f64::INFINITY;
-            for i in 0..3 {
-                let share = direction[i].abs();
-                if share > 0.0 {
-                    v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / share);
-                    accel_mm_s2 = accel_mm_s2.min(limits.max_acc_mm_s2[i] / share);
-                }
-            }
-            (
-                SegmentPath::Line { direction },
-                length_mm,
-                v_max_mm_s,
-                accel_mm_s2,
-            )
-        }
-        ElementKind::Arc { .. } => {
-            let arc = e.arc().ok_or(PlanError::InvalidArc { line })?;
-            let length_mm = arc.length_mm;
-            if !(length_mm > 0.0 && length_mm.is_finite()) {
-                return Err(PlanError::Overflow { line });
-            }
-            let (v_max_mm_s, accel_mm_s2) = arc_limits(&arc, feed_mm_s, limits);
-            (SegmentPath::Arc(arc), length_mm, v_max_mm_s, accel_mm_s2)
-        }
-    };
-    let profile = trapezoid(length_mm, 0.0, 0.0, v_max_mm_s, accel_mm_s2)
-        .ok_or(PlanError::Overflow { line })?;
-    Ok(Some(Segment {
-        line,
-        rapid: e.rapid,
-        start_mm: position_mm,
-        end_mm: e.end_mm,
-        path,
-        length_mm,
-        v_start_mm_s: 0.0,
-        v_peak_mm_s: profile.v_peak_mm_s,
-        v_end_mm_s: 0.0,
-        accel_mm_s2,
-        t_acc_s: profile.t_acc_s,
-        t_cruise_s: profile.t_cruise_s,
-        t_dec_s: profile.t_dec_s,
-        start_time_s,
-    }))
-}
-
-/// Speed cap and path acceleration on an arc (see the module documentation).
-fn arc_limits(arc: &ArcGeometry, feed_mm_s: f64, limits: &Limits) -> (f64, f64) {
+    cfg: &PlannerConfig,
+) -> ArcLimits {
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+    let share = cfg.path_acc_share;
     let mut v_max_mm_s = feed_mm_s;
-    let mut budget_mm_s2 = f64::INFINITY;
+    let mut acc_budget_mm_s2 = f64::INFINITY;
+    let mut jerk_budget_mm_s3 = f64::INFINITY;
+    let mut acc_share = Vector3::zeros();
     for i in 0..3 {
         let n_i = arc.normal[i].abs().min(1.0);
         let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
@@ -670,19 +1076,64 @@ fn arc_limits(arc: &ArcGeometry, feed_mm_s: f64, limits: &Limits) -> (f64, f64) 
         if speed_share > 0.0 {
             v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / speed_share);
         }
-        let acc_share = (p_i + n_i * sin_a).min(1.0);
-        if acc_share > 0.0 {
-            budget_mm_s2 = budget_mm_s2.min(limits.max_acc_mm_s2[i] / acc_share);
+        acc_share[i] = (p_i + n_i * sin_a).min(1.0);
+        if acc_share[i] > 0.0 {
+            acc_budget_mm_s2 = acc_budget_mm_s2.min(share * limits.max_acc_mm_s2[i] / acc_share[i]);
+            jerk_budget_mm_s3 = jerk_budget_mm_s3.min(share * cfg.max_jerk_mm_s3[i] / acc_share[i]);
         }
     }
     let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
-    let centripetal_mm_s2 = budget_mm_s2 * (0.75f64).sqrt();
+    let centripetal_mm_s2 = acc_budget_mm_s2 * (0.75f64).sqrt();
     v_max_mm_s = v_max_mm_s.min((centripetal_mm_s2 * radius_mm).sqrt());
-    (v_max_mm_s, 0.5 * budget_mm_s2)
+    let eps = cfg.chord_tol_mm;
+    if eps > 0.0 && eps < radius_mm {
+        v_max_mm_s =
+            v_max_mm_s.min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / cfg.period_s);
+    }
+    let mut acc_mm_s2 = (0.5 * acc_budget_mm_s2).min(cfg.path_acc_mm_s2);
+    let mut jerk_mm_s3 = 0.5 * jerk_budget_mm_s3;
+    if cfg.jerk_limited() {
+        // v³/r² ≤ J/4 and 3 v a_t / r ≤ J/4.
+        v_max_mm_s = v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt());
+        if v_max_mm_s > 0.0 {
+            acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 * radius_mm / (12.0 * v_max_mm_s));
+        }
+    } else {
+        jerk_mm_s3 = f64::INFINITY;
+    }
+    ArcLimits {
+        v_max_mm_s,
+        acc_mm_s2,
+        jerk_mm_s3,
+        axis_acc_mm_s2: acc_share * acc_budget_mm_s2,
+        axis_jerk_mm_s3: acc_share * jerk_budget_mm_s3,
+    }
 }
 
 #[cfg(test)]
 mod tests {
+
+    /// The trapezoid of a moving segment: its phases and its acceleration.
+    struct Parts {
+        accel_mm_s2: f64,
+        t_acc_s: f64,
+        t_cruise_s: f64,
+        t_dec_s: f64,
+        is_triangle: bool,
+    }
+
+    fn parts(s: &Segment) -> Parts {
+        let p = s.profile.expect("a moving segment");
+        assert!(p.limits().is_trapezoid());
+        let ph = p.phase_durations_s();
+        Parts {
+            accel_mm_s2: p.limits().a_max_mm_s2(),
+            t_acc_s: ph[0] + ph[1] + ph[2],
+            t_cruise_s: ph[3],
+            t_dec_s: ph[4] + ph[5] + ph[6],
+            is_triangle: ph[3] == 0.0,
+        }
+    }
     use super::*;
     use crate::gcode::{BlendMode, CompState, Plane, parse_program};
     use crate::gcode::{Element, ElementKind, Item};
@@ -769,11 +1220,11 @@ mod tests {
         )
         .unwrap();
         let s = p.segments()[0];
-        assert!(!s.is_triangle());
+        assert!(!parts(&s).is_triangle);
         assert_eq!(s.v_peak_mm_s, 40.0);
-        assert_eq!(s.accel_mm_s2, 1000.0);
-        assert!(close(s.t_acc_s, 0.04) && close(s.t_dec_s, 0.04));
-        assert!(close(s.t_cruise_s, 98.4 / 40.0));
+        assert_eq!(parts(&s).accel_mm_s2, 1000.0);
+        assert!(close(parts(&s).t_acc_s, 0.04) && close(parts(&s).t_dec_s, 0.04));
+        assert!(close(parts(&s).t_cruise_s, 98.4 / 40.0));
         // Duration of a trapezoid from rest to rest: L/v + v/a.
         assert!(close(p.duration_s(), 100.0 / 40.0 + 40.0 / 1000.0));
         assert!(close(s.distance_at(0.04), 0.8));
@@ -796,9 +1247,9 @@ mod tests {
         )
         .unwrap();
         let s = p.segments()[0];
-        assert!(s.is_triangle());
+        assert!(parts(&s).is_triangle);
         assert!(close(s.v_peak_mm_s, 20.0));
-        assert!(close(s.t_acc_s, 0.02) && close(s.t_dec_s, 0.02));
+        assert!(close(parts(&s).t_acc_s, 0.02) && close(parts(&s).t_dec_s, 0.02));
         // Duration of a triangle: 2 sqrt(L / a).
         assert!(close(p.duration_s(), 2.0 * (0.4f64 / 1000.0).sqrt()));
         assert!(close(p.position_at(0.02)[0], 0.2));
@@ -813,7 +1264,7 @@ mod tests {
         assert_eq!(s.line, 7);
         assert!(s.rapid);
         assert_eq!(s.v_peak_mm_s, 50.0);
-        assert_eq!(s.accel_mm_s2, 500.0);
+        assert_eq!(parts(&s).accel_mm_s2, 500.0);
         assert!(close(p.duration_s(), 100.0 / 50.0 + 50.0 / 500.0));
         // X and Z do not move at all, bit for bit.
         for k in 0..=100 {
@@ -834,11 +1285,14 @@ mod tests {
         let s = p.segments()[0];
         let sqrt2 = 2f64.sqrt();
         assert!(close(s.v_peak_mm_s, 50.0 * sqrt2));
-        assert!(close(s.accel_mm_s2, 500.0 * sqrt2));
+        assert!(close(parts(&s).accel_mm_s2, 500.0 * sqrt2));
         assert!(close(s.length_mm, 100.0 * sqrt2));
         // Y runs exactly at its limits, X at half of its own.
         assert!(close(s.v_peak_mm_s * s.direction().unwrap()[1], 50.0));
-        assert!(close(s.accel_mm_s2 * s.direction().unwrap()[1], 500.0));
+        assert!(close(
+            parts(&s).accel_mm_s2 * s.direction().unwrap()[1],
+            500.0
+        ));
         let hand_s = (100.0 * sqrt2) / (50.0 * sqrt2) + (50.0 * sqrt2) / (500.0 * sqrt2);
         assert!(close(p.duration_s(), hand_s));
 
@@ -852,7 +1306,7 @@ mod tests {
         let s = p.segments()[0];
         assert_eq!(s.v_peak_mm_s, 10.0);
         // u = (0.6, 0.8): a = min(1000/0.6, 500/0.8) = 625.
-        assert!(close(s.accel_mm_s2, 625.0));
+        assert!(close(parts(&s).accel_mm_s2, 625.0));
         assert!(close(p.duration_s(), 5.0 / 10.0 + 10.0 / 625.0));
     }
 
@@ -1012,7 +1466,7 @@ mod tests {
         // F1200 mm/min = 20 mm/s on Y (limit 50), Z move limited by Z's 20 mm/s.
         assert_eq!(p.segments()[1].v_peak_mm_s, 20.0);
         let z = p.segments()[2];
-        assert!(z.is_triangle());
+        assert!(parts(&z).is_triangle);
         assert!(close(z.v_peak_mm_s, 200f64.sqrt()));
     }
 
@@ -1064,7 +1518,7 @@ mod tests {
         let p = plan_text("G21 F4800\nG2 X2 Y0 I1\n", &limits());
         let s = p.segments()[0];
         assert!(close(s.v_peak_mm_s, (500.0 * 0.75f64.sqrt()).sqrt()));
-        assert!(close(s.accel_mm_s2, 250.0));
+        assert!(close(parts(&s).accel_mm_s2, 250.0));
         // A big radius: the feed, clamped to the plane axes' speeds (Y: 50 mm/s), wins.
         let p = plan_text("G21 F4800\nG2 X200 Y0 I100\n", &limits());
         assert!(close(p.segments()[0].v_peak_mm_s, 50.0));
