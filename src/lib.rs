@@ -23,7 +23,9 @@
 //!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
 //!    projected on the move's direction.
 //! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
-//!    allocation, no blocking; the last sample is the end point, exactly.
+//!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
+//!    `filter` in the machine file passes its samples through [`interp::filter::AxisFilter`]
+//!    (moving average or first-order lag after interpolation), which ends exactly there too.
 //! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
 //!    SCHED_FIFO where permitted), converts the sample to counts (50 mm → 50000), checks it
 //!    against the travel and the largest step a cycle allows, and packs it with the controlword

@@ -17,6 +17,7 @@ use crate::compensation::Compensator;
 use crate::config::Machine;
 use crate::gateway::{GatewayError, check_element, limits};
 use crate::gcode::{Element, ElementKind, Interpreter, Item};
+use crate::interp::filter::AxisFilter;
 use crate::interp::{Interpolator, Status};
 use crate::planner::{Planner, Segment, SegmentPath};
 
@@ -367,13 +368,15 @@ impl PlanSummary {
     }
 }
 
-/// The `--setpoints` writer: samples segments as they settle, one row per cycle.
+/// The `--setpoints` writer: samples segments as they settle, one row per cycle, each axis
+/// through its post-interpolation filter as `run` streams it, until every filter has settled.
 struct Setpoints {
     out: Out,
     interp: Interpolator,
     /// For each machine axis, its X/Y/Z index (`None`: held at its start).
     axes: Vec<Option<usize>>,
     held_mm: Vec<f64>,
+    filters: Vec<Option<AxisFilter>>,
     period_s: f64,
     cycle: u64,
     name: String,
@@ -400,11 +403,31 @@ impl Setpoints {
         }
         header.push('\n');
         out.write_all(header.as_bytes())?;
+        let mut filters = Vec::with_capacity(machine.axes.len());
+        for a in &machine.axes {
+            let filter = a
+                .filter
+                .map(|spec| AxisFilter::new(spec, period_s))
+                .transpose()
+                .map_err(|e| {
+                    GatewayError::Config(crate::config::ConfigError::Invalid {
+                        file: machine.file.clone(),
+                        table: format!("axis {}", a.name),
+                        key: "filter.time_ms".into(),
+                        message: e.to_string(),
+                    })
+                })?;
+            filters.push(filter.map(|mut f| {
+                f.reset(a.xyz().map_or(0.0, |k| start_mm[k]));
+                f
+            }));
+        }
         let mut sp = Setpoints {
             out,
             interp,
             axes: machine.axes.iter().map(|a| a.xyz()).collect(),
             held_mm: vec![0.0; machine.axes.len()],
+            filters,
             period_s,
             cycle: 0,
             name: name.to_string(),
@@ -444,6 +467,7 @@ impl Setpoints {
         let mut s = format!("{},{:.6}", self.cycle, self.cycle as f64 * self.period_s);
         for (i, axis) in self.axes.iter().enumerate() {
             let v = axis.map_or(self.held_mm[i], |k| p[k]);
+            let v = self.filters[i].as_mut().map_or(v, |f| f.update(v));
             s.push_str(&format!(",{v:.6}"));
         }
         s.push('\n');
@@ -454,6 +478,10 @@ impl Setpoints {
     fn finish(mut self) -> Result<u64, OfflineError> {
         self.interp.close();
         self.drain()?;
+        // The end waits for the filters, as in `run`: their output reaches the end exactly.
+        while !self.filters.iter().flatten().all(AxisFilter::is_settled) {
+            self.row(self.interp.last_mm())?;
+        }
         let cycles = self.cycle;
         self.out.finish()?;
         Ok(cycles)

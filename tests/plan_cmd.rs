@@ -396,3 +396,99 @@ fn g42_mirrors_g41_and_outside_corners_can_be_arcs() {
     assert!(near(sides[0].1, [40.0, 18.0, 0.0]), "{sides:?}");
     assert!(near(sides[1].0, [42.0, 20.0, 0.0]) && near(sides[1].1, [42.0, 40.0, 0.0]));
 }
+
+/// `plan --setpoints` of `PROGRAM` on `machine` (the demo's when `None`): the rows' axis columns.
+fn setpoint_rows(dir: &Path, machine: Option<&Path>) -> Vec<Vec<f64>> {
+    let program = write(dir, "p.ngc", PROGRAM);
+    let setpoints = dir.join("sp.csv");
+    let mut cmd = canmotion();
+    cmd.arg("plan")
+        .arg(&program)
+        .arg("--setpoints")
+        .arg(&setpoints);
+    if let Some(m) = machine {
+        cmd.arg("--machine").arg(m);
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::read_to_string(&setpoints)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(2).map(|f| f.parse().unwrap()).collect())
+        .collect()
+}
+
+/// The demo machine with `filter = FILTER` on X, Y and Z.
+fn filtered_machine_file(dir: &Path, filter: &str) -> PathBuf {
+    let plain = machine_file(dir, "[program]");
+    let mut text = String::new();
+    for line in std::fs::read_to_string(&plain).unwrap().lines() {
+        text.push_str(line);
+        text.push('\n');
+        if line.starts_with("following_error_timeout_ms") {
+            text.push_str(&format!("filter = {filter}\n"));
+        }
+    }
+    assert_eq!(text.matches("\nfilter = ").count(), 3);
+    write(dir, "filtered.toml", &text)
+}
+
+#[test]
+fn plan_setpoints_of_a_filtered_machine_end_at_the_program_end_within_the_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = setpoint_rows(dir.path(), None);
+    let machine = Machine::demo();
+    let period_s = machine.cycle_s();
+    let end = [12.5, 17.25, 2.0];
+    assert_eq!(plain.last().unwrap()[..], end);
+    for (filter, linear_cycles) in [
+        (r#"{ kind = "linear", time_ms = 24 }"#, Some(6)),
+        (r#"{ kind = "exponential", time_ms = 8 }"#, None),
+    ] {
+        let file = filtered_machine_file(dir.path(), filter);
+        let rows = setpoint_rows(dir.path(), Some(&file));
+        assert_eq!(rows[0][..], [0.0, 0.0, 0.0]);
+        assert_eq!(rows.last().unwrap()[..], end, "{filter}");
+        // 6 decimals in the file: allow their rounding in the differences.
+        let round_mm = 2e-6;
+        for (k, w) in rows.windows(3).enumerate() {
+            for (i, axis) in machine.axes.iter().enumerate() {
+                let step = (w[1][i] - w[0][i]).abs();
+                assert!(
+                    step <= axis.max_vel_mm_s * period_s + round_mm,
+                    "{filter} cycle {k}: axis {} steps {step} mm",
+                    axis.name
+                );
+                let acc = (w[2][i] - 2.0 * w[1][i] + w[0][i]).abs();
+                assert!(
+                    acc <= axis.max_acc_mm_s2 * period_s * period_s * 1.01 + 2.0 * round_mm,
+                    "{filter} cycle {k}: axis {} accelerates {} mm/s²",
+                    axis.name,
+                    acc / (period_s * period_s)
+                );
+            }
+        }
+        match linear_cycles {
+            Some(n) => {
+                // The moving average of the unfiltered setpoints over n cycles (the start
+                // repeated before it), and the end n − 1 cycles after theirs.
+                assert_eq!(rows.len(), plain.len() + n - 1);
+                for (k, row) in rows.iter().enumerate() {
+                    for i in 0..3 {
+                        let avg = (0..n)
+                            .map(|j| plain[k.saturating_sub(j).min(plain.len() - 1)][i])
+                            .sum::<f64>()
+                            / n as f64;
+                        assert!((row[i] - avg).abs() <= 2e-6, "cycle {k} axis {i}");
+                    }
+                }
+            }
+            None => assert!(rows.len() > plain.len()),
+        }
+    }
+}

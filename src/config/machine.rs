@@ -12,6 +12,7 @@ use serde::Deserialize;
 
 use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use super::{ConfigError, parse_toml};
+use crate::interp::filter::{AxisFilter, FilterKind, FilterSpec};
 
 /// The most axes a machine may have.
 pub const MAX_AXES: usize = 8;
@@ -158,7 +159,20 @@ struct RawAxis {
     feedback_pdo: RawPdo,
     #[serde(default)]
     sdo: Vec<RawSdo>,
+    #[serde(default)]
+    filter: Option<RawFilter>,
 }
+
+/// `filter = { kind = "linear", time_ms = 8 }`: the axis's post-interpolation filter.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFilter {
+    kind: FilterKind,
+    time_ms: f64,
+}
+
+/// The longest post-interpolation filter a machine file may ask for.
+pub const MAX_FILTER_MS: f64 = 1000.0;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -305,6 +319,8 @@ pub struct AxisConfig {
     pub feedback_pdo: PdoConfig,
     /// Extra SDO writes at start-up, in order.
     pub sdo: Vec<SdoWrite>,
+    /// The post-interpolation filter on the axis's setpoints (`filter`), if any.
+    pub filter: Option<FilterSpec>,
 }
 
 impl AxisConfig {
@@ -771,6 +787,11 @@ impl Machine {
                     return Err(ctx.err(table, key, "beyond the INT32 range of position counts"));
                 }
             }
+            let filter = a
+                .filter
+                .as_ref()
+                .map(|f| axis_filter(&ctx, &table, f, raw.bus.cycle_us))
+                .transpose()?;
             let dict = match dicts.iter().find(|(p, _)| *p == a.dictionary) {
                 Some((_, d)) => d.clone(),
                 None => {
@@ -926,6 +947,7 @@ impl Machine {
                 setpoint_pdo,
                 feedback_pdo,
                 sdo,
+                filter,
             });
         }
         let mut machine = Machine {
@@ -1027,6 +1049,45 @@ impl Machine {
     pub fn axis(&self, name: &str) -> Option<&AxisConfig> {
         self.axes.iter().find(|a| a.name == name)
     }
+}
+
+/// Checks an axis's `filter`: `time_ms` within 0..=[`MAX_FILTER_MS`] and, for a linear filter,
+/// a whole number of cycles (its ramps last whole cycles; rather than round a time the file
+/// states, the file is refused with the multiples on either side).
+fn axis_filter(
+    ctx: &Ctx,
+    table: &str,
+    raw: &RawFilter,
+    cycle_us: u32,
+) -> Result<FilterSpec, ConfigError> {
+    let ms = raw.time_ms;
+    if !(ms.is_finite() && (0.0..=MAX_FILTER_MS).contains(&ms)) {
+        return Err(ctx.err(
+            table,
+            "filter.time_ms",
+            format!("{ms} outside 0..={MAX_FILTER_MS} ms"),
+        ));
+    }
+    let cycle_ms = f64::from(cycle_us) / 1000.0;
+    let cycles = ms / cycle_ms;
+    if raw.kind == FilterKind::Linear && (cycles - cycles.round()).abs() > 1e-9 {
+        return Err(ctx.err(
+            table,
+            "filter.time_ms",
+            format!(
+                "{ms} ms is not a whole number of {cycle_ms} ms cycles (a linear filter's ramp lasts whole cycles): use {} or {} ms",
+                cycles.floor() * cycle_ms,
+                cycles.ceil() * cycle_ms
+            ),
+        ));
+    }
+    let spec = FilterSpec {
+        kind: raw.kind,
+        time_s: ms / 1000.0,
+    };
+    AxisFilter::new(spec, f64::from(cycle_us) * 1e-6)
+        .map_err(|e| ctx.err(table, "filter.time_ms", e.to_string()))?;
+    Ok(spec)
 }
 
 fn pdo(
@@ -1331,6 +1392,45 @@ mod tests {
             1,
         );
         assert!(parse(&raised).is_ok());
+    }
+
+    #[test]
+    fn an_axis_filter_is_optional_and_its_time_is_checked_by_name() {
+        assert!(Machine::demo().axes.iter().all(|a| a.filter.is_none()));
+        let x = "following_error_timeout_ms = 10  # 0x6066";
+        let with = |f: &str| DEMO_MACHINE.replacen(x, &format!("{x}\nfilter = {f}"), 1);
+        let m = parse(&with(r#"{ kind = "linear", time_ms = 8 }"#)).unwrap();
+        assert_eq!(
+            m.axes[0].filter,
+            Some(FilterSpec {
+                kind: FilterKind::Linear,
+                time_s: 0.008
+            })
+        );
+        assert_eq!(m.axes[1].filter, None);
+        // An exponential filter's time constant need not be a whole number of cycles.
+        let m = parse(&with(r#"{ kind = "exponential", time_ms = 4.5 }"#)).unwrap();
+        assert_eq!(m.axes[0].filter.unwrap().time_s, 0.0045);
+
+        let bad = |f: &str| parse(&with(f)).unwrap_err().to_string();
+        assert_eq!(
+            bad(r#"{ kind = "linear", time_ms = 10 }"#),
+            "six.toml: [axis X] filter.time_ms: 10 ms is not a whole number of 4 ms cycles (a linear filter's ramp lasts whole cycles): use 8 or 12 ms"
+        );
+        assert_eq!(
+            bad(r#"{ kind = "exponential", time_ms = -1 }"#),
+            "six.toml: [axis X] filter.time_ms: -1 outside 0..=1000 ms"
+        );
+        assert_eq!(
+            bad(r#"{ kind = "linear", time_ms = 1004 }"#),
+            "six.toml: [axis X] filter.time_ms: 1004 outside 0..=1000 ms"
+        );
+        let e = bad(r#"{ kind = "cubic", time_ms = 8 }"#);
+        assert!(e.contains("cubic") && e.contains("linear"), "{e}");
+        let e = bad(r#"{ kind = "linear", time_ms = 8, order = 2 }"#);
+        assert!(e.contains("order"), "{e}");
+        let e = bad(r#"{ kind = "linear" }"#);
+        assert!(e.contains("time_ms"), "{e}");
     }
 
     #[test]

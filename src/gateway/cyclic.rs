@@ -9,8 +9,10 @@
 //!    answer with statusword bit 12 before any motion (CSP axes: bit 12 = following).
 //! 3. **Armed**: holding, waiting for the motion (an [`Interpolator`] planned from the armed
 //!    positions on another thread) to be supplied.
-//! 4. **Streaming**: one setpoint per axis per cycle from the interpolator, each checked against
-//!    the axis's travel limits and its largest step (max velocity × period).
+//! 4. **Streaming**: one setpoint per axis per cycle from the interpolator, through the axis's
+//!    post-interpolation filter when it has one ([`AxisFilter`]), each checked against the
+//!    axis's travel limits and its largest step (max velocity × period). The motion is over
+//!    once the interpolator has given its end point and every filter has settled there.
 //! 5. **Settling**: holding the final setpoint until every axis is within one count of it.
 //! 6. **Disabling**: bit 4 cleared, drives walked to Switch on disabled.
 //!
@@ -27,6 +29,7 @@ use crate::bus::Frame;
 use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
 use crate::config::machine::MAX_AXES;
 use crate::config::{AxisConfig, AxisMode, Machine};
+use crate::interp::filter::AxisFilter;
 use crate::interp::{Interpolator, Status};
 
 /// Cycles a drive may take to reach Operation enabled, or to answer bit 4 with bit 12.
@@ -167,6 +170,8 @@ pub struct CyclicMaster {
     /// Setpoint history per axis (mm): [this cycle, 1 ago, 2 ago].
     sp_mm: Vec<[f64; 3]>,
     motion: Option<Interpolator>,
+    /// Per axis, its post-interpolation filter (allocated here, reset when streaming starts).
+    filters: Vec<Option<AxisFilter>>,
     phase: Phase,
     phase_since: u64,
     cycle: u64,
@@ -205,6 +210,16 @@ impl CyclicMaster {
             fb: vec![None; n],
             sp_mm: vec![[0.0; 3]; n],
             motion: None,
+            filters: machine
+                .axes
+                .iter()
+                .map(|a| {
+                    a.filter.map(|spec| {
+                        AxisFilter::new(spec, machine.cycle_s())
+                            .expect("validated with the machine file")
+                    })
+                })
+                .collect(),
             phase: Phase::Enabling,
             phase_since: 0,
             cycle: 0,
@@ -606,6 +621,11 @@ impl CyclicMaster {
                 }
             }
             Phase::Armed if self.motion.is_some() => {
+                for (f, h) in self.filters.iter_mut().zip(&self.sp_mm) {
+                    if let Some(f) = f {
+                        f.reset(h[0]);
+                    }
+                }
                 self.set_phase(Phase::Streaming);
             }
             _ => {}
@@ -644,6 +664,10 @@ impl CyclicMaster {
                     Some(k) => p[k],
                     None => self.sp_mm[i][1],
                 };
+                let target = match &mut self.filters[i] {
+                    Some(f) => f.update(target),
+                    None => target,
+                };
                 let prev = self.sp_mm[i][1];
                 let step = (target - prev).abs();
                 // Last line of defence; the plan is checked against these before motion starts.
@@ -670,7 +694,8 @@ impl CyclicMaster {
                     self.first_motion_cycle = Some(self.cycle);
                 }
             }
-            if self.phase == Phase::Streaming && status == Some(Status::Finished) {
+            let filtered = self.filters.iter().flatten().all(AxisFilter::is_settled);
+            if self.phase == Phase::Streaming && status == Some(Status::Finished) && filtered {
                 self.set_phase(Phase::Settling);
             }
         } else if self.phase == Phase::Settling {
@@ -836,8 +861,11 @@ mod tests {
 
     impl Rig {
         fn new() -> Rig {
-            let m = Machine::demo();
-            let master = CyclicMaster::new(&m);
+            Rig::with(&Machine::demo())
+        }
+
+        fn with(m: &Machine) -> Rig {
+            let master = CyclicMaster::new(m);
             let drives = vec![
                 FakeDrive::new(1000),
                 FakeDrive::new(-2000),
@@ -959,6 +987,67 @@ mod tests {
                 .iter()
                 .all(|d| d.psm.state() == State::SwitchOnDisabled)
         );
+    }
+
+    #[test]
+    fn filtered_setpoints_end_exactly_at_the_program_end_and_agree_with_plan() {
+        use crate::interp::filter::{FilterKind, FilterSpec};
+        for (kind, time_s) in [
+            (FilterKind::Linear, 0.024),
+            (FilterKind::Exponential, 0.008),
+        ] {
+            let mut m = Machine::demo();
+            for a in &mut m.axes {
+                a.filter = Some(FilterSpec { kind, time_s });
+            }
+            let mut r = Rig::with(&m);
+            r.run_until(Phase::Armed, 40);
+            let armed = r.master.armed_mm().unwrap();
+            let program = "G1 X10 Y5 Z-1 F3000\nG2 X20 Y5 I5 J0 F2400\n";
+            let interp = motion(armed, program);
+            let samples = interp.total_samples();
+            r.master.supply_motion(interp);
+            r.run_until(Phase::Done, 5000);
+            assert_eq!(r.master.failure(), None);
+            // The last setpoint is the program's end, bit for bit, and so is every axis's
+            // position once settled.
+            let streamed: Vec<[f64; MAX_AXES]> = r
+                .records
+                .iter()
+                .skip_while(|c| c.phase != Phase::Streaming)
+                .take(r.master.streaming_cycles as usize)
+                .map(|c| c.cmd_mm)
+                .collect();
+            assert_eq!(streamed.last().unwrap()[..3], [20.0, 5.0, -1.0]);
+            assert_eq!(r.master.setpoint_counts(), vec![20_000, 5_000, -2_000]);
+            // The end waited for the filters: a linear filter of 6 cycles settles 5 cycles
+            // after its input stops.
+            if kind == FilterKind::Linear {
+                assert_eq!(r.master.streaming_cycles, samples + 5);
+            } else {
+                assert!(r.master.streaming_cycles > samples);
+            }
+            // `plan --setpoints` writes the same setpoints (6 decimals), cycle for cycle.
+            let dir = tempfile::tempdir().unwrap();
+            let file = dir.path().join("sp.csv");
+            let opts = crate::offline::PlanOptions {
+                path_out: None,
+                setpoints_out: Some(file.clone()),
+            };
+            crate::offline::plan_stream(&m, program.as_bytes(), "t.ngc", armed, &opts).unwrap();
+            let text = std::fs::read_to_string(&file).unwrap();
+            let rows: Vec<Vec<f64>> = text
+                .lines()
+                .skip(2) // the header and row 0, the start
+                .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+                .collect();
+            assert_eq!(rows.len(), streamed.len());
+            for (k, (row, cmd)) in rows.iter().zip(&streamed).enumerate() {
+                for i in 0..3 {
+                    assert!((row[2 + i] - cmd[i]).abs() <= 5e-7, "cycle {k} axis {i}");
+                }
+            }
+        }
     }
 
     #[test]

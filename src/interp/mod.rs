@@ -22,6 +22,8 @@
 //!
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
+pub mod filter;
+
 use std::collections::VecDeque;
 
 use nalgebra::Vector3;
