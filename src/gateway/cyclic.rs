@@ -935,7 +935,8 @@ mod tests {
     fn motion(from: Vector3<f64>, text: &str) -> Interpolator {
         let m = Machine::demo();
         let prog = crate::gcode::parse_program(text, "t.ngc", from).unwrap();
-        let plan = planner::plan(&prog, &crate::gateway::limits(&m)).unwrap();
+        // As `run` plans it: the machine's look-ahead.
+        let plan = planner::plan_with(&prog, &crate::gateway::limits(&m), &m.planner).unwrap();
         Interpolator::new(plan, m.cycle_s()).unwrap()
     }
 
