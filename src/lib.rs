@@ -58,6 +58,7 @@ pub mod gateway;
 pub mod gcode;
 pub mod interp;
 pub mod offline;
+pub mod optimize;
 pub mod planner;
 pub mod rt;
 pub mod sim;

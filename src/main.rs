@@ -82,6 +82,21 @@ enum Command {
         #[arg(long, value_name = "FILE.csv")]
         setpoints: Option<PathBuf>,
     },
+    /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
+    /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
+    Optimize {
+        /// The program (`-` for standard input).
+        program: PathBuf,
+        /// The optimised program to write.
+        #[arg(short = 'o', long, value_name = "OUT.ngc")]
+        output: PathBuf,
+        /// Machine file (the embedded demo machine when omitted).
+        #[arg(long)]
+        machine: Option<PathBuf>,
+        /// Do not follow each changed F by a `(canmotion optimize: was F...)` comment.
+        #[arg(long)]
+        no_trace: bool,
+    },
     /// Simulated CiA 402 drives as real peers on a bus.
     Simdrive {
         /// SocketCAN interface (or `sim`, which is only useful in tests).
@@ -270,6 +285,40 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 canmotion::offline::plan_file(&machine, &program, start_mm, &opts)?
             };
             print!("{}", summary.report(&machine));
+            Ok(())
+        }
+        Command::Optimize {
+            program,
+            output,
+            machine,
+            no_trace,
+        } => {
+            let machine = match machine {
+                Some(p) => Machine::load(&p)?,
+                None => Machine::demo(),
+            };
+            let (name, text) = if program.as_os_str() == "-" {
+                let mut text = String::new();
+                std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+                    .map_err(|e| format!("<stdin>: cannot read: {e}"))?;
+                ("<stdin>".to_string(), text)
+            } else {
+                let text = std::fs::read_to_string(&program)
+                    .map_err(|e| format!("{}: cannot read: {e}", program.display()))?;
+                (program.display().to_string(), text)
+            };
+            let opts = canmotion::optimize::OptimizeOptions { trace: !no_trace };
+            let done = canmotion::optimize::optimize(
+                &machine,
+                &text,
+                &name,
+                nalgebra::Vector3::zeros(),
+                &opts,
+            )?;
+            std::fs::write(&output, &done.text)
+                .map_err(|e| format!("{}: cannot write: {e}", output.display()))?;
+            print!("{}", done.report.summary());
+            println!("wrote             {}", output.display());
             Ok(())
         }
         Command::Run {
