@@ -60,6 +60,7 @@ pub mod interp;
 pub mod offline;
 pub mod optimize;
 pub mod planner;
+pub mod plot;
 pub mod rt;
 pub mod sim;
 pub mod tools;

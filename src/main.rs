@@ -81,6 +81,11 @@ enum Command {
         /// Write the interpolated setpoints here, one CSV row per cycle (what `run` streams).
         #[arg(long, value_name = "FILE.csv")]
         setpoints: Option<PathBuf>,
+        /// Plot the path feed and each axis's velocity, acceleration and jerk against time
+        /// (finite differences of the setpoints), limits dashed; the extension (.svg, .png)
+        /// picks the format.
+        #[arg(long, value_name = "FILE.svg|FILE.png")]
+        plot: Option<PathBuf>,
     },
     /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
     /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
@@ -263,7 +268,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             machine,
             path,
             setpoints,
+            plot,
         } => {
+            if let Some(p) = &plot {
+                canmotion::plot::PlotFormat::of(p)?;
+            }
             let machine = match machine {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
@@ -271,6 +280,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let opts = canmotion::offline::PlanOptions {
                 path_out: path,
                 setpoints_out: setpoints,
+                plot_out: plot,
             };
             let start_mm = nalgebra::Vector3::zeros();
             let summary = if program.as_os_str() == "-" {
