@@ -261,6 +261,55 @@ fn confirm(preview: &ResumePreview, yes: bool) -> bool {
     )
 }
 
+/// The progress line of `run` on a terminal: program line, feed and largest following error,
+/// read a few times per second from the figures the cyclic thread stores
+/// ([`gateway::progress::PROGRESS`]); drawn only once the program streams.
+struct ProgressLine {
+    stop: std::sync::mpsc::Sender<()>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl ProgressLine {
+    fn start(total_lines: u64) -> ProgressLine {
+        use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let bar =
+                ProgressBar::with_draw_target(Some(total_lines), ProgressDrawTarget::hidden());
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{wide_bar}] line {pos}/{len}  {msg}",
+                )
+                .expect("template")
+                .progress_chars("=> "),
+            );
+            let mut shown = false;
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+                stopped.recv_timeout(std::time::Duration::from_millis(250))
+            {
+                let p = gateway::progress::PROGRESS.read();
+                let Some(line) = p.line else { continue };
+                if !shown {
+                    bar.set_draw_target(ProgressDrawTarget::stderr());
+                    shown = true;
+                }
+                bar.set_position(line as u64);
+                bar.set_message(format!(
+                    "feed {:8.3} mm/s  max following error {:.4} mm",
+                    p.feed_mm_s, p.max_following_error_mm
+                ));
+            }
+            bar.finish_and_clear();
+        });
+        ProgressLine { stop, thread }
+    }
+
+    fn finish(self) {
+        let _ = self.stop.send(());
+        let _ = self.thread.join();
+    }
+}
+
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     match Cli::parse().command {
         Command::Plan {
@@ -392,6 +441,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 log: log.clone(),
                 simulate,
             };
+            let progress = std::io::IsTerminal::is_terminal(&std::io::stderr())
+                .then(|| ProgressLine::start(opts.program_text.lines().count() as u64));
             let outcome = if resume {
                 let path = state.as_deref().ok_or(
                     "--resume needs --state FILE when the program comes from standard input or is the embedded demo",
@@ -401,6 +452,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 resume::run_program(&machine, &bus, &opts)
             };
+            if let Some(p) = progress {
+                p.finish();
+            }
             let summary = match outcome.result {
                 Ok(s) => s,
                 Err(e) => {

@@ -90,7 +90,10 @@ fn an_svg_plot_is_valid_and_has_the_four_panels() {
     assert!(svg.contains("time (s)"));
     // Each axis is named in the legends.
     for axis in ["X", "Y", "Z"] {
-        assert!(svg.contains(&format!("\n{axis}\n</text>")), "no legend for {axis}");
+        assert!(
+            svg.contains(&format!("\n{axis}\n</text>")),
+            "no legend for {axis}"
+        );
     }
 }
 
