@@ -515,7 +515,7 @@ pub fn optimize(
                 steps.push(Step::Other(e.line));
             }
             // A move that goes nowhere does not take part (its F word stays as it is).
-            Some(_) if !(length_mm > 0.0) => steps.push(Step::Other(e.line)),
+            Some(_) if length_mm.is_nan() || length_mm <= 0.0 => steps.push(Step::Other(e.line)),
             Some(f) => {
                 let worst = worst_tangent(&e);
                 let mut feed_mm_s = f;

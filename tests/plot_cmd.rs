@@ -39,7 +39,7 @@ fn check_xml(text: &str) -> Result<Vec<String>, String> {
         let after = &rest[i + 1..];
         let end = after.find('>').ok_or("unclosed tag")?;
         let tag = &after[..end];
-        if tag.matches('"').count() % 2 != 0 || tag.contains('<') {
+        if !tag.matches('"').count().is_multiple_of(2) || tag.contains('<') {
             return Err(format!("bad tag <{tag}>"));
         }
         if let Some(name) = tag.strip_prefix('/') {
