@@ -81,6 +81,26 @@ enum Command {
         /// Write the interpolated setpoints here, one CSV row per cycle (what `run` streams).
         #[arg(long, value_name = "FILE.csv")]
         setpoints: Option<PathBuf>,
+        /// Plot the path feed and each axis's velocity, acceleration and jerk against time
+        /// (finite differences of the setpoints), limits dashed; the extension (.svg, .png)
+        /// picks the format.
+        #[arg(long, value_name = "FILE.svg|FILE.png")]
+        plot: Option<PathBuf>,
+    },
+    /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
+    /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
+    Optimize {
+        /// The program (`-` for standard input).
+        program: PathBuf,
+        /// The optimised program to write.
+        #[arg(short = 'o', long, value_name = "OUT.ngc")]
+        output: PathBuf,
+        /// Machine file (the embedded demo machine when omitted).
+        #[arg(long)]
+        machine: Option<PathBuf>,
+        /// Do not follow each changed F by a `(canmotion optimize: was F...)` comment.
+        #[arg(long)]
+        no_trace: bool,
     },
     /// Simulated CiA 402 drives as real peers on a bus.
     Simdrive {
@@ -241,6 +261,55 @@ fn confirm(preview: &ResumePreview, yes: bool) -> bool {
     )
 }
 
+/// The progress line of `run` on a terminal: program line, feed and largest following error,
+/// read a few times per second from the figures the cyclic thread stores
+/// ([`gateway::progress::PROGRESS`]); drawn only once the program streams.
+struct ProgressLine {
+    stop: std::sync::mpsc::Sender<()>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl ProgressLine {
+    fn start(total_lines: u64) -> ProgressLine {
+        use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+        let (stop, stopped) = std::sync::mpsc::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let bar =
+                ProgressBar::with_draw_target(Some(total_lines), ProgressDrawTarget::hidden());
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{wide_bar}] line {pos}/{len}  {msg}",
+                )
+                .expect("template")
+                .progress_chars("=> "),
+            );
+            let mut shown = false;
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+                stopped.recv_timeout(std::time::Duration::from_millis(250))
+            {
+                let p = gateway::progress::PROGRESS.read();
+                let Some(line) = p.line else { continue };
+                if !shown {
+                    bar.set_draw_target(ProgressDrawTarget::stderr());
+                    shown = true;
+                }
+                bar.set_position(line as u64);
+                bar.set_message(format!(
+                    "feed {:8.3} mm/s  max following error {:.4} mm",
+                    p.feed_mm_s, p.max_following_error_mm
+                ));
+            }
+            bar.finish_and_clear();
+        });
+        ProgressLine { stop, thread }
+    }
+
+    fn finish(self) {
+        let _ = self.stop.send(());
+        let _ = self.thread.join();
+    }
+}
+
 fn real_main() -> Result<(), Box<dyn std::error::Error>> {
     match Cli::parse().command {
         Command::Plan {
@@ -248,7 +317,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             machine,
             path,
             setpoints,
+            plot,
         } => {
+            if let Some(p) = &plot {
+                canmotion::plot::PlotFormat::of(p)?;
+            }
             let machine = match machine {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
@@ -256,6 +329,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let opts = canmotion::offline::PlanOptions {
                 path_out: path,
                 setpoints_out: setpoints,
+                plot_out: plot,
             };
             let start_mm = nalgebra::Vector3::zeros();
             let summary = if program.as_os_str() == "-" {
@@ -270,6 +344,40 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 canmotion::offline::plan_file(&machine, &program, start_mm, &opts)?
             };
             print!("{}", summary.report(&machine));
+            Ok(())
+        }
+        Command::Optimize {
+            program,
+            output,
+            machine,
+            no_trace,
+        } => {
+            let machine = match machine {
+                Some(p) => Machine::load(&p)?,
+                None => Machine::demo(),
+            };
+            let (name, text) = if program.as_os_str() == "-" {
+                let mut text = String::new();
+                std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+                    .map_err(|e| format!("<stdin>: cannot read: {e}"))?;
+                ("<stdin>".to_string(), text)
+            } else {
+                let text = std::fs::read_to_string(&program)
+                    .map_err(|e| format!("{}: cannot read: {e}", program.display()))?;
+                (program.display().to_string(), text)
+            };
+            let opts = canmotion::optimize::OptimizeOptions { trace: !no_trace };
+            let done = canmotion::optimize::optimize(
+                &machine,
+                &text,
+                &name,
+                nalgebra::Vector3::zeros(),
+                &opts,
+            )?;
+            std::fs::write(&output, &done.text)
+                .map_err(|e| format!("{}: cannot write: {e}", output.display()))?;
+            print!("{}", done.report.summary());
+            println!("wrote             {}", output.display());
             Ok(())
         }
         Command::Run {
@@ -333,6 +441,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 log: log.clone(),
                 simulate,
             };
+            let progress = std::io::IsTerminal::is_terminal(&std::io::stderr())
+                .then(|| ProgressLine::start(opts.program_text.lines().count() as u64));
             let outcome = if resume {
                 let path = state.as_deref().ok_or(
                     "--resume needs --state FILE when the program comes from standard input or is the embedded demo",
@@ -342,6 +452,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 resume::run_program(&machine, &bus, &opts)
             };
+            if let Some(p) = progress {
+                p.finish();
+            }
             let summary = match outcome.result {
                 Ok(s) => s,
                 Err(e) => {

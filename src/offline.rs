@@ -20,6 +20,7 @@ use crate::gcode::{Element, ElementKind, Interpreter, Item};
 use crate::interp::filter::AxisFilter;
 use crate::interp::{Interpolator, Status};
 use crate::planner::{Planner, Segment, SegmentPath};
+use crate::plot::PlotRecorder;
 
 /// What to write besides the summary.
 #[derive(Debug, Clone, Default)]
@@ -28,6 +29,8 @@ pub struct PlanOptions {
     pub path_out: Option<PathBuf>,
     /// The interpolated setpoints, one CSV row per cycle.
     pub setpoints_out: Option<PathBuf>,
+    /// A plot of the setpoints' feed, velocity, acceleration and jerk (`.svg` or `.png`).
+    pub plot_out: Option<PathBuf>,
 }
 
 /// What a plan amounts to.
@@ -75,6 +78,9 @@ pub enum OfflineError {
         /// Why.
         source: std::io::Error,
     },
+    /// The plot could not be made (its extension, or drawing it).
+    #[error("{0}")]
+    Plot(String),
     /// A planned segment did not continue the motion (a planner bug, reported, never sampled).
     #[error("{file}: {source}")]
     Sampling {
@@ -186,9 +192,22 @@ pub fn plan_stream<R: BufRead>(
             }
         })?;
     let mut path_out = opts.path_out.as_deref().map(Out::create).transpose()?;
-    let mut setpoints = match opts.setpoints_out.as_deref() {
-        Some(file) => Some(Setpoints::new(machine, file, start_mm, name)?),
-        None => None,
+    let plot = opts
+        .plot_out
+        .as_deref()
+        .map(|file| PlotRecorder::new(machine, file))
+        .transpose()
+        .map_err(OfflineError::Plot)?;
+    let mut setpoints = if opts.setpoints_out.is_some() || plot.is_some() {
+        Some(Setpoints::new(
+            machine,
+            opts.setpoints_out.as_deref(),
+            plot,
+            start_mm,
+            name,
+        )?)
+    } else {
+        None
     };
     let mut summary = PlanSummary {
         elements: 0,
@@ -243,7 +262,10 @@ pub fn plan_stream<R: BufRead>(
     }
     summary.program_s = planner.time_s();
     if let Some(sp) = setpoints {
-        summary.cycles = Some(sp.finish()?);
+        let cycles = sp.finish()?;
+        if opts.setpoints_out.is_some() {
+            summary.cycles = Some(cycles);
+        }
     }
     if let Some(out) = path_out {
         out.finish()?;
@@ -369,9 +391,13 @@ impl PlanSummary {
 }
 
 /// The `--setpoints` writer: samples segments as they settle, one row per cycle, each axis
-/// through its post-interpolation filter as `run` streams it, until every filter has settled.
+/// through its post-interpolation filter as `run` streams it, until every filter has settled,
+/// into the CSV file and the plot, whichever were asked for.
 struct Setpoints {
-    out: Out,
+    out: Option<Out>,
+    plot: Option<PlotRecorder>,
+    /// The row being written, one position per machine axis.
+    row_mm: Vec<f64>,
     interp: Interpolator,
     /// For each machine axis, its X/Y/Z index (`None`: held at its start).
     axes: Vec<Option<usize>>,
@@ -385,11 +411,12 @@ struct Setpoints {
 impl Setpoints {
     fn new(
         machine: &Machine,
-        file: &Path,
+        file: Option<&Path>,
+        plot: Option<PlotRecorder>,
         start_mm: Vector3<f64>,
         name: &str,
     ) -> Result<Setpoints, OfflineError> {
-        let mut out = Out::create(file)?;
+        let mut out = file.map(Out::create).transpose()?;
         let period_s = machine.cycle_s();
         let interp = Interpolator::streaming(start_mm, period_s).map_err(|source| {
             OfflineError::Sampling {
@@ -402,7 +429,9 @@ impl Setpoints {
             header.push_str(&format!(",{}_mm", a.name));
         }
         header.push('\n');
-        out.write_all(header.as_bytes())?;
+        if let Some(out) = out.as_mut() {
+            out.write_all(header.as_bytes())?;
+        }
         let mut filters = Vec::with_capacity(machine.axes.len());
         for a in &machine.axes {
             let filter = a
@@ -424,6 +453,8 @@ impl Setpoints {
         }
         let mut sp = Setpoints {
             out,
+            plot,
+            row_mm: vec![0.0; machine.axes.len()],
             interp,
             axes: machine.axes.iter().map(|a| a.xyz()).collect(),
             held_mm: vec![0.0; machine.axes.len()],
@@ -464,15 +495,24 @@ impl Setpoints {
     }
 
     fn row(&mut self, p: Vector3<f64>) -> Result<(), OfflineError> {
-        let mut s = format!("{},{:.6}", self.cycle, self.cycle as f64 * self.period_s);
         for (i, axis) in self.axes.iter().enumerate() {
             let v = axis.map_or(self.held_mm[i], |k| p[k]);
-            let v = self.filters[i].as_mut().map_or(v, |f| f.update(v));
+            self.row_mm[i] = self.filters[i].as_mut().map_or(v, |f| f.update(v));
+        }
+        if let Some(plot) = self.plot.as_mut() {
+            plot.push(&self.row_mm);
+        }
+        let cycle = self.cycle;
+        self.cycle += 1;
+        let Some(out) = self.out.as_mut() else {
+            return Ok(());
+        };
+        let mut s = format!("{},{:.6}", cycle, cycle as f64 * self.period_s);
+        for v in &self.row_mm {
             s.push_str(&format!(",{v:.6}"));
         }
         s.push('\n');
-        self.cycle += 1;
-        self.out.write_all(s.as_bytes())
+        out.write_all(s.as_bytes())
     }
 
     fn finish(mut self) -> Result<u64, OfflineError> {
@@ -483,7 +523,12 @@ impl Setpoints {
             self.row(self.interp.last_mm())?;
         }
         let cycles = self.cycle;
-        self.out.finish()?;
+        if let Some(out) = self.out {
+            out.finish()?;
+        }
+        if let Some(plot) = self.plot {
+            plot.finish().map_err(OfflineError::Plot)?;
+        }
         Ok(cycles)
     }
 }

@@ -1034,6 +1034,7 @@ mod tests {
             let opts = crate::offline::PlanOptions {
                 path_out: None,
                 setpoints_out: Some(file.clone()),
+                plot_out: None,
             };
             crate::offline::plan_stream(&m, program.as_bytes(), "t.ngc", armed, &opts).unwrap();
             let text = std::fs::read_to_string(&file).unwrap();

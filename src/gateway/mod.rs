@@ -4,6 +4,7 @@
 pub mod cyclic;
 pub mod cyclic_bus;
 pub mod io;
+pub mod progress;
 pub mod resume;
 pub mod startup;
 
@@ -837,6 +838,10 @@ fn cyclic_thread(
     let mut port_err = None;
     let mut warnings: Vec<Warning> = Vec::new();
     let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
+    // For the progress display: the path speed of the setpoints and the largest following error.
+    let on_path: Vec<bool> = machine.axes.iter().map(|a| a.xyz().is_some()).collect();
+    let mut prev_cmd_mm: Option<[f64; crate::config::machine::MAX_AXES]> = None;
+    let mut max_ferr_mm = 0.0f64;
     loop {
         ticker.wait();
         // Feedback and error frames received since the last cycle.
@@ -921,6 +926,22 @@ fn cyclic_thread(
         }
         out.clear();
         let rec = master.cycle(machine.sync_cob_id, &mut out);
+        let mut feed2 = 0.0;
+        for (i, &p) in on_path.iter().enumerate() {
+            max_ferr_mm = max_ferr_mm.max(rec.ferr_mm[i].abs());
+            if let Some(prev) = &prev_cmd_mm
+                && p
+            {
+                feed2 += (rec.cmd_mm[i] - prev[i]).powi(2);
+            }
+        }
+        prev_cmd_mm = Some(rec.cmd_mm);
+        progress::PROGRESS.store(
+            rec.cycle,
+            rec.line,
+            feed2.sqrt() / master.period_s(),
+            max_ferr_mm,
+        );
         // Wall-clock instants of arming and of a failure: cycle counts do not see the periods
         // an overrun skipped.
         if master.bit12_cycle.is_some() && bit12_ns.is_none() {

@@ -1338,6 +1338,17 @@ impl<R: BufRead> Interpreter<R> {
         self.state.pos_mm
     }
 
+    /// Whether inch units (G20) are in force after the line read last (the units the F words
+    /// of that line's items were read in).
+    pub fn inch(&self) -> bool {
+        self.state.inch
+    }
+
+    /// Whether inverse-time feed (G93) is in force after the line read last.
+    pub fn inverse_time(&self) -> bool {
+        self.state.inverse_time
+    }
+
     /// The interpreter's tool table, with the G10 L1 changes made so far.
     pub fn tools(&self) -> &ToolTable {
         &self.state.tools

@@ -1,0 +1,392 @@
+//! `canmotion plan --plot FILE.svg|FILE.png`: the path feed and each axis's velocity,
+//! acceleration and jerk against time, by finite differences of the interpolated setpoints (the
+//! stream `--setpoints` writes), in four stacked panels with the axis limits as dashed lines.
+//!
+//! Memory is bounded whatever the program's length: the samples go into at most [`COLUMNS`]
+//! time buckets, each keeping the smallest and largest value of every series; when the buckets
+//! are full, neighbours merge and each bucket covers twice the time. Every extreme survives the
+//! merge, so a one-cycle spike is still drawn.
+//!
+//! Text is drawn with an embedded font (DejaVu Sans Mono, `assets/fonts/`, under the Bitstream
+//! Vera licence with DejaVu's changes in the public domain, see `DejaVu-LICENSE.txt`), so no
+//! system font or fontconfig is needed.
+//!
+//! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_mm_s2` mm/s², `_mm_s3` mm/s³, `_s` seconds.
+
+use std::path::{Path, PathBuf};
+
+use plotters::prelude::*;
+
+use crate::config::Machine;
+
+/// Time buckets kept (about one per pixel column of the plot).
+pub const COLUMNS: usize = 1200;
+
+/// Size of the picture in pixels.
+const SIZE_PX: (u32, u32) = (1400, 1300);
+
+/// The embedded font.
+static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSansMono.ttf");
+
+/// Panel titles, top to bottom.
+pub const PANEL_TITLES: [&str; 4] = [
+    "Path feed (mm/s)",
+    "Axis velocity (mm/s)",
+    "Axis acceleration (mm/s²)",
+    "Axis jerk (mm/s³)",
+];
+
+/// The picture's format, from the file's extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlotFormat {
+    /// `.svg`
+    Svg,
+    /// `.png`
+    Png,
+}
+
+impl PlotFormat {
+    /// The format of `file` by its extension (case-insensitive); another extension is an error
+    /// naming the flag.
+    pub fn of(file: &Path) -> Result<PlotFormat, String> {
+        let ext = file
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("svg") => Ok(PlotFormat::Svg),
+            Some("png") => Ok(PlotFormat::Png),
+            _ => Err(format!(
+                "--plot {}: the extension must be .svg or .png",
+                file.display()
+            )),
+        }
+    }
+}
+
+/// One time bucket: the smallest and largest value of every series in it.
+#[derive(Debug, Clone)]
+struct Bucket {
+    t0_s: f64,
+    t1_s: f64,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+}
+
+impl Bucket {
+    fn new(series: usize, t_s: f64) -> Bucket {
+        Bucket {
+            t0_s: t_s,
+            t1_s: t_s,
+            lo: vec![f64::INFINITY; series],
+            hi: vec![f64::NEG_INFINITY; series],
+        }
+    }
+
+    fn merge(&mut self, other: &Bucket) {
+        self.t1_s = other.t1_s;
+        for i in 0..self.lo.len() {
+            self.lo[i] = self.lo[i].min(other.lo[i]);
+            self.hi[i] = self.hi[i].max(other.hi[i]);
+        }
+    }
+}
+
+/// Collects the setpoint stream, cycle by cycle, and draws it at the end.
+///
+/// Series: 0 the path feed, then per machine axis `k`: `1 + 3k` velocity, `2 + 3k`
+/// acceleration, `3 + 3k` jerk.
+#[derive(Debug)]
+pub struct PlotRecorder {
+    file: PathBuf,
+    format: PlotFormat,
+    period_s: f64,
+    names: Vec<String>,
+    xyz: Vec<Option<usize>>,
+    max_vel_mm_s: Vec<f64>,
+    max_acc_mm_s2: Vec<f64>,
+    max_jerk_mm_s3: Vec<f64>,
+    prev_mm: Option<Vec<f64>>,
+    prev_vel_mm_s: Option<Vec<f64>>,
+    prev_acc_mm_s2: Option<Vec<f64>>,
+    /// Samples (cycles) received.
+    samples: u64,
+    /// Cycles per bucket.
+    width: u64,
+    current: Option<(Bucket, u64)>,
+    buckets: Vec<Bucket>,
+    vel: Vec<f64>,
+    acc: Vec<f64>,
+}
+
+impl PlotRecorder {
+    /// A recorder for `machine`'s axes that will draw into `file` (its extension picks the
+    /// format).
+    pub fn new(machine: &Machine, file: &Path) -> Result<PlotRecorder, String> {
+        let format = PlotFormat::of(file)?;
+        let n = machine.axes.len();
+        Ok(PlotRecorder {
+            file: file.to_path_buf(),
+            format,
+            period_s: machine.cycle_s(),
+            names: machine.axes.iter().map(|a| a.name.clone()).collect(),
+            xyz: machine.axes.iter().map(|a| a.xyz()).collect(),
+            max_vel_mm_s: machine.axes.iter().map(|a| a.max_vel_mm_s).collect(),
+            max_acc_mm_s2: machine.axes.iter().map(|a| a.max_acc_mm_s2).collect(),
+            max_jerk_mm_s3: machine.axes.iter().map(|a| a.max_jerk_mm_s3).collect(),
+            prev_mm: None,
+            prev_vel_mm_s: None,
+            prev_acc_mm_s2: None,
+            samples: 0,
+            width: 1,
+            current: None,
+            buckets: Vec::with_capacity(COLUMNS),
+            vel: vec![0.0; n],
+            acc: vec![0.0; n],
+        })
+    }
+
+    fn series(&self) -> usize {
+        1 + 3 * self.names.len()
+    }
+
+    /// The setpoint of every machine axis for the next cycle.
+    pub fn push(&mut self, position_mm: &[f64]) {
+        let t_s = self.samples as f64 * self.period_s;
+        self.samples += 1;
+        let series = self.series();
+        let (mut bucket, count) = self
+            .current
+            .take()
+            .unwrap_or_else(|| (Bucket::new(series, t_s), 0));
+        bucket.t1_s = t_s;
+        if let Some(prev) = &self.prev_mm {
+            let mut feed2 = 0.0;
+            for k in 0..position_mm.len() {
+                self.vel[k] = (position_mm[k] - prev[k]) / self.period_s;
+                if self.xyz[k].is_some() {
+                    feed2 += self.vel[k] * self.vel[k];
+                }
+                record(&mut bucket, 1 + 3 * k, self.vel[k]);
+            }
+            record(&mut bucket, 0, feed2.sqrt());
+            if let Some(pv) = &self.prev_vel_mm_s {
+                for k in 0..position_mm.len() {
+                    self.acc[k] = (self.vel[k] - pv[k]) / self.period_s;
+                    record(&mut bucket, 2 + 3 * k, self.acc[k]);
+                    if let Some(pa) = &self.prev_acc_mm_s2 {
+                        record(
+                            &mut bucket,
+                            3 + 3 * k,
+                            (self.acc[k] - pa[k]) / self.period_s,
+                        );
+                    }
+                }
+                match &mut self.prev_acc_mm_s2 {
+                    Some(pa) => pa.copy_from_slice(&self.acc),
+                    None => self.prev_acc_mm_s2 = Some(self.acc.clone()),
+                }
+            }
+            match &mut self.prev_vel_mm_s {
+                Some(pv) => pv.copy_from_slice(&self.vel),
+                None => self.prev_vel_mm_s = Some(self.vel.clone()),
+            }
+        }
+        match &mut self.prev_mm {
+            Some(p) => p.copy_from_slice(position_mm),
+            None => self.prev_mm = Some(position_mm.to_vec()),
+        }
+        if count + 1 < self.width {
+            self.current = Some((bucket, count + 1));
+            return;
+        }
+        self.buckets.push(bucket);
+        if self.buckets.len() == COLUMNS {
+            // Full: neighbours merge, each bucket now covers twice the time.
+            let mut merged = Vec::with_capacity(COLUMNS);
+            for pair in self.buckets.chunks(2) {
+                let mut b = pair[0].clone();
+                if let Some(second) = pair.get(1) {
+                    b.merge(second);
+                }
+                merged.push(b);
+            }
+            self.buckets = merged;
+            self.width *= 2;
+        }
+    }
+
+    /// Draws the picture into the file.
+    pub fn finish(mut self) -> Result<(), String> {
+        if let Some((b, _)) = self.current.take() {
+            self.buckets.push(b);
+        }
+        static REGISTER: std::sync::Once = std::sync::Once::new();
+        REGISTER.call_once(|| {
+            // The embedded font is valid: this cannot fail.
+            let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+        });
+        let err = |e: String| format!("{}: cannot draw the plot: {e}", self.file.display());
+        match self.format {
+            PlotFormat::Svg => {
+                let root = SVGBackend::new(&self.file, SIZE_PX).into_drawing_area();
+                self.draw(&root).map_err(err)?;
+                root.present().map_err(|e| err(e.to_string()))
+            }
+            PlotFormat::Png => {
+                let root = BitMapBackend::new(&self.file, SIZE_PX).into_drawing_area();
+                self.draw(&root).map_err(err)?;
+                root.present().map_err(|e| err(e.to_string()))
+            }
+        }
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+        root.fill(&WHITE).map_err(e)?;
+        let panels = root.split_evenly((4, 1));
+        let t_end_s = self
+            .buckets
+            .last()
+            .map_or(self.period_s, |b| b.t1_s)
+            .max(self.period_s);
+        let n = self.names.len();
+        let max_feed_mm_s = self
+            .xyz
+            .iter()
+            .zip(&self.max_vel_mm_s)
+            .filter(|(x, _)| x.is_some())
+            .map(|(_, v)| *v)
+            .fold(0.0, f64::max);
+        for (p, area) in panels.iter().enumerate() {
+            // (series, label, colour index, limit)
+            let lines: Vec<(usize, String, usize, Option<f64>)> = match p {
+                0 => vec![(0, "feed".to_string(), 0, Some(max_feed_mm_s))],
+                _ => (0..n)
+                    .map(|k| {
+                        let limit = match p {
+                            1 => self.max_vel_mm_s[k],
+                            2 => self.max_acc_mm_s2[k],
+                            _ => self.max_jerk_mm_s3[k],
+                        };
+                        (p + 3 * k, self.names[k].clone(), k, Some(limit))
+                    })
+                    .collect(),
+            };
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for (s, _, _, limit) in &lines {
+                for b in &self.buckets {
+                    if b.lo[*s] <= b.hi[*s] {
+                        lo = lo.min(b.lo[*s]);
+                        hi = hi.max(b.hi[*s]);
+                    }
+                }
+                if let Some(l) = limit {
+                    hi = hi.max(*l);
+                    if p > 0 {
+                        lo = lo.min(-*l);
+                    }
+                }
+            }
+            if p == 0 {
+                lo = 0.0;
+            }
+            if !(lo.is_finite() && hi.is_finite()) {
+                (lo, hi) = (-1.0, 1.0);
+            }
+            let pad = ((hi - lo) * 0.05).max(1e-9);
+            let mut chart = ChartBuilder::on(area)
+                .caption(PANEL_TITLES[p], ("sans-serif", 20))
+                .margin(8)
+                .x_label_area_size(40)
+                .y_label_area_size(90)
+                .build_cartesian_2d(0.0..t_end_s, (lo - pad)..(hi + pad))
+                .map_err(e)?;
+            let unit = ["mm/s", "mm/s", "mm/s²", "mm/s³"][p];
+            chart
+                .configure_mesh()
+                .x_desc("time (s)")
+                .y_desc(unit)
+                .label_style(("sans-serif", 13))
+                .draw()
+                .map_err(e)?;
+            for (s, label, colour, limit) in &lines {
+                let colour = Palette99::pick(*colour).to_rgba();
+                let points = self
+                    .buckets
+                    .iter()
+                    .filter(|b| b.lo[*s] <= b.hi[*s])
+                    .flat_map(|b| {
+                        let t = 0.5 * (b.t0_s + b.t1_s);
+                        [(t, b.lo[*s]), (t, b.hi[*s])]
+                    });
+                chart
+                    .draw_series(LineSeries::new(points, colour))
+                    .map_err(e)?
+                    .label(label.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+                if let Some(l) = limit {
+                    let style = colour.stroke_width(1);
+                    for v in if p == 0 { vec![*l] } else { vec![*l, -*l] } {
+                        chart
+                            .draw_series(DashedLineSeries::new(
+                                [(0.0, v), (t_end_s, v)],
+                                6,
+                                4,
+                                style,
+                            ))
+                            .map_err(e)?;
+                    }
+                }
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 13))
+                .draw()
+                .map_err(e)?;
+        }
+        Ok(())
+    }
+}
+
+fn record(b: &mut Bucket, series: usize, v: f64) {
+    if v.is_finite() {
+        b.lo[series] = b.lo[series].min(v);
+        b.hi[series] = b.hi[series].max(v);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn memory_stays_bounded_and_extremes_survive_decimation() {
+        let machine = Machine::demo();
+        let mut r = PlotRecorder::new(&machine, Path::new("x.svg")).unwrap();
+        let n = machine.axes.len();
+        let mut p = vec![0.0; n];
+        for c in 0..100_000u64 {
+            // X moves 0.1 mm per cycle except one cycle with a 1 mm step.
+            p[0] += if c == 77_777 { 1.0 } else { 0.1 };
+            r.push(&p);
+        }
+        assert!(r.buckets.len() <= COLUMNS);
+        let peak = r.buckets.iter().map(|b| b.hi[1]).fold(f64::MIN, f64::max);
+        assert!((peak - 1.0 / machine.cycle_s()).abs() < 1e-6, "{peak}");
+        assert_eq!(PlotFormat::of(Path::new("a.PNG")), Ok(PlotFormat::Png));
+        assert!(
+            PlotFormat::of(Path::new("a.pdf"))
+                .unwrap_err()
+                .contains("--plot")
+        );
+    }
+}
