@@ -14,7 +14,10 @@ use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 
 use canmotion::gcode::{Interpreter, Item, Setup, Tool, ToolTable};
-use canmotion::planner::{Limits, plan_items};
+use canmotion::planner::{Limits, PlannerConfig, ProfileKind, plan_items, plan_items_with};
+
+#[path = "common/setpoints.rs"]
+mod setpoints;
 use nalgebra::Vector3;
 
 /// Acceptance of issue 3: at least this many of the 169 programs plan.
@@ -77,31 +80,10 @@ enum Outcome {
 }
 
 fn run(path: &Path, name: &str) -> Outcome {
-    let file = match File::open(path) {
-        Ok(f) => f,
-        Err(e) => return Outcome::Failed(format!("cannot open: {e}")),
+    let items = match interpret(path, name) {
+        Ok(items) => items,
+        Err(outcome) => return outcome,
     };
-    let interp = Interpreter::new(BufReader::new(file), name, setup());
-    let mut items = Vec::new();
-    for item in interp {
-        match item {
-            Ok(Item::Note(_)) => {}
-            Ok(item) => items.push(item),
-            Err(e) => {
-                return match e.unsupported_feature() {
-                    Some(what) if e.line > 0 && e.col > 0 => Outcome::Unsupported {
-                        what: what.to_owned(),
-                        line: e.line,
-                        col: e.col,
-                    },
-                    _ => Outcome::Failed(e.to_string()),
-                };
-            }
-        }
-    }
-    if !matches!(items.last(), Some(Item::End(_))) {
-        return Outcome::Failed("the stream did not end with an End item".into());
-    }
     let elements = items
         .iter()
         .filter(|i| matches!(i, Item::Motion(_)))
@@ -111,6 +93,86 @@ fn run(path: &Path, name: &str) -> Outcome {
         Ok(_) => Outcome::Failed("plan duration is not finite".into()),
         Err(e) => Outcome::Failed(format!("plan: {e}")),
     }
+}
+
+/// The items of a corpus program, or why it does not interpret.
+fn interpret(path: &Path, name: &str) -> Result<Vec<Item>, Outcome> {
+    let file = match File::open(path) {
+        Ok(f) => f,
+        Err(e) => return Err(Outcome::Failed(format!("cannot open: {e}"))),
+    };
+    let interp = Interpreter::new(BufReader::new(file), name, setup());
+    let mut items = Vec::new();
+    for item in interp {
+        match item {
+            Ok(Item::Note(_)) => {}
+            Ok(item) => items.push(item),
+            Err(e) => {
+                return Err(match e.unsupported_feature() {
+                    Some(what) if e.line > 0 && e.col > 0 => Outcome::Unsupported {
+                        what: what.to_owned(),
+                        line: e.line,
+                        col: e.col,
+                    },
+                    _ => Outcome::Failed(e.to_string()),
+                });
+            }
+        }
+    }
+    if !matches!(items.last(), Some(Item::End(_))) {
+        return Err(Outcome::Failed(
+            "the stream did not end with an End item".into(),
+        ));
+    }
+    Ok(items)
+}
+
+/// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
+/// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
+#[test]
+fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
+    if !dir.is_dir() {
+        println!("corpus {} is absent: skipping", dir.display());
+        return;
+    }
+    let mut files = Vec::new();
+    ngc_files(&dir, &mut files);
+    files.sort();
+    let mut checked = 0;
+    let mut broken = Vec::new();
+    for path in &files {
+        let name = path
+            .strip_prefix(&dir)
+            .unwrap_or(path)
+            .display()
+            .to_string();
+        let Ok(items) = interpret(path, &name) else {
+            continue;
+        };
+        for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+            let config = PlannerConfig {
+                period_s: 0.004,
+                corner_acc_mm_s2: 4000.0,
+                path_acc_share: 0.75,
+                path_acc_mm_s2: f64::INFINITY,
+                max_jerk_mm_s3: Vector3::new(200_000.0, 200_000.0, 100_000.0),
+                profile,
+                chord_tol_mm: 0.001,
+                lookahead: 1000,
+            };
+            let result = plan_items_with(Vector3::zeros(), &items, &limits(), &config)
+                .map_err(|e| e.to_string())
+                .and_then(|plan| setpoints::limits_hold(plan, &limits(), &config));
+            match result {
+                Ok(()) => checked += 1,
+                Err(e) => broken.push(format!("{name} ({profile:?}): {e}")),
+            }
+        }
+    }
+    println!("{checked} plans checked");
+    assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
+    assert!(checked >= 2 * MIN_PLANNED, "only {checked} plans checked");
 }
 
 #[test]

@@ -752,7 +752,7 @@ impl Planner {
         let mut v_next = 0.0;
         for i in (0..n).rev() {
             let p = &self.window[i];
-            let reach = profile::max_start_speed(p.seg.length_mm, v_next, &p.limits).unwrap_or(0.0);
+            let reach = start_reach_mm_s(p.seg.length_mm, v_next, &p.limits);
             let cap = if i == 0 {
                 self.v_settled_mm_s
             } else {
@@ -826,19 +826,36 @@ impl Planner {
             v = v.min(t * cfg.corner_acc_mm_s2 / du_norm);
         }
         let dk = b.curvature_start - a.curvature_end;
+        // Elements shorter than a period's travel put several junctions in one period: their
+        // velocity changes add up within it (like the centripetal acceleration of the curve
+        // they approximate, |Δu|/L being its curvature). Up to `1 + v·T/L` junctions fall
+        // within one period, so each jump is held to the budget divided by that count; for
+        // S-curves also v³·|Δuᵢ|·|Δu| ≤ L²·budget (the jerk v³κ² of that curve).
+        let l_mm = a.seg.length_mm.min(b.seg.length_mm);
+        // The largest v with v·d·(1 + v·T/L) ≤ c.
+        let shared = |c: f64, d: f64| {
+            let k = t / l_mm;
+            let c = c.max(0.0) / d;
+            if k * c < 1e-12 {
+                c
+            } else {
+                (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
+            }
+        };
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
             let d = du[i].abs();
             if d > 0.0 {
-                v = v.min((t * acc_budget).max(0.0) / d);
+                v = v.min(shared(t * acc_budget, d));
             }
             if cfg.jerk_limited() {
                 let jerk_budget = 0.5
                     * (cfg.max_jerk_mm_s3[i] - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
                         .max(0.0);
                 if d > 0.0 {
-                    v = v.min(t * t * jerk_budget / d);
+                    v = v.min(shared(t * t * jerk_budget, d));
+                    v = v.min((l_mm * l_mm * jerk_budget / (d * du_norm)).cbrt());
                 }
                 let k = dk[i].abs();
                 if k > 0.0 {
@@ -978,6 +995,49 @@ impl Planner {
         p.seg.end_mm = e.end_mm;
         Ok(Some(p))
     }
+}
+
+/// The backward pass's highest start speed from which an element of `length_mm` can end at
+/// `v_end_mm_s`. For a trapezoid, [`profile::max_start_speed`]. A jerk-limited transition's
+/// length `d(va, vb) = (va + vb)/2 · t(va − vb)` is not monotone in the lower speed (slowing a
+/// little more can take less length), so a start speed found for one end speed could become
+/// infeasible when a longer window raises that end speed; the pass uses instead the bound
+/// `va · t(va − vb) ≥ d`, which decreases as `vb` rises: its largest `va` only grows with
+/// `vb`, and every speed it allows is reachable.
+fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, limits: &ProfileLimits) -> f64 {
+    if limits.is_trapezoid() {
+        return profile::max_start_speed(length_mm, v_end_mm_s, limits).unwrap_or(0.0);
+    }
+    let a = limits.a_max_mm_s2();
+    let j = match limits.shape() {
+        JerkShape::Square => limits.j_max_mm_s3(),
+        JerkShape::RaisedCosine => 0.5 * limits.j_max_mm_s3(),
+    };
+    let v_max = limits.v_max_mm_s();
+    let transition_s = |dv: f64| {
+        if dv >= a * a / j {
+            dv / a + a / j
+        } else {
+            2.0 * (dv / j).sqrt()
+        }
+    };
+    let fits = |va: f64| va * transition_s(va - v_end_mm_s) <= length_mm;
+    if fits(v_max) {
+        return v_max;
+    }
+    let (mut lo, mut hi) = (v_end_mm_s, v_max);
+    for _ in 0..64 {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if fits(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
 }
 
 /// The profile limits of an element, valid for [`profile`].
