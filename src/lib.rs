@@ -19,9 +19,11 @@
 //!    ahead to the next element in the plane); under G40, as here, the element passes through
 //!    unchanged.
 //! 3. [`gateway::plan_program`] checks the target against the axes' travel, then
-//!    [`planner::plan`] turns the element into a [`planner::Segment`]: a trapezoid (or triangle)
-//!    from rest to rest, its speed and acceleration limited by the feed and by each axis's limits
-//!    projected on the move's direction.
+//!    [`planner::plan_with`] (the look-ahead of [`planner::Planner`], configured by the
+//!    machine's `[planner]` table) turns the element into a [`planner::Segment`]: a speed
+//!    profile (trapezoid or S-curve) from its start to its end speed, limited by the feed and by
+//!    each axis's limits projected on the move's direction; this single move starts and ends at
+//!    rest, and a junction with a next move would keep the speed its velocity jump allows.
 //! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
 //!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
 //!    `filter` in the machine file passes its samples through [`interp::filter::AxisFilter`]
