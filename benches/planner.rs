@@ -108,9 +108,10 @@ fn bench(c: &mut Criterion) {
             };
             let n = plan(&its, &machine, &config);
             g.throughput(Throughput::Elements(n as u64));
-            g.bench_function(format!("look-ahead {name} {profile:?} ({n} segments)"), |b| {
-                b.iter(|| plan(black_box(&its), &machine, &config))
-            });
+            g.bench_function(
+                format!("look-ahead {name} {profile:?} ({n} segments)"),
+                |b| b.iter(|| plan(black_box(&its), &machine, &config)),
+            );
             g.bench_function(format!("parse+compensate+plan {name} {profile:?}"), |b| {
                 b.iter(|| front_end(black_box(text), &machine, &config))
             });

@@ -354,8 +354,12 @@ fn a_down_interface_says_how_to_bring_it_up() {
 
 /// Run `program` over vcan0 against `canmotion simdrive` processes told to misbehave.
 fn fault_run(inject: &str, program: &str) -> common::Outcome {
+    fault_run_on(common::machine(|t| t), inject, program)
+}
+
+/// [`fault_run`] on machine `m` (e.g. the demo in CSP).
+fn fault_run_on(m: canmotion::config::Machine, inject: &str, program: &str) -> common::Outcome {
     let _drives = simdrive_with(&[1, 2, 3], None, &["--inject", inject]);
-    let m = common::machine(|t| t);
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log.csv");
     let result = gateway::run(
@@ -380,8 +384,17 @@ const UML_MARGIN_S: f64 = 0.150;
 
 #[test]
 fn vcan0_following_error_fault_stops_the_group() {
+    following_error_fault(common::machine(|t| t));
+}
+
+#[test]
+fn vcan0_following_error_fault_stops_the_group_in_csp_too() {
+    following_error_fault(common::machine(common::csp));
+}
+
+fn following_error_fault(m: canmotion::config::Machine) {
     let _g = lock();
-    let o = fault_run("2:following-error@400ms", common::LONG);
+    let o = fault_run_on(m, "2:following-error@400ms", common::LONG);
     let f = common::failure(&o);
     assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
     assert!(
@@ -396,8 +409,17 @@ fn vcan0_following_error_fault_stops_the_group() {
 
 #[test]
 fn vcan0_silent_drive_is_detected_within_the_consumer_time_plus_one_cycle() {
+    silent_drive(common::machine(|t| t));
+}
+
+#[test]
+fn vcan0_silent_drive_is_detected_in_csp_too() {
+    silent_drive(common::machine(common::csp));
+}
+
+fn silent_drive(m: canmotion::config::Machine) {
     let _g = lock();
-    let o = fault_run("3:silent@300ms", common::LONG);
+    let o = fault_run_on(m, "3:silent@300ms", common::LONG);
     let f = common::failure(&o);
     assert!(f.message.starts_with("axis Z (node 3): "), "{f}");
     let d = common::detection_s(f, 0.3);
@@ -425,6 +447,27 @@ fn vcan0_reboot_mid_motion_is_detected_by_the_boot_up() {
 
 #[test]
 fn vcan0_killed_gateway_the_drives_stop_by_their_heartbeat_consumer() {
+    gateway_gone(|gw| {
+        gw.kill().unwrap();
+        let _ = gw.wait();
+    });
+}
+
+#[test]
+fn vcan0_hung_gateway_the_drives_stop_by_their_heartbeat_consumer() {
+    // A gateway that hangs (stopped, as by a debugger or a deadlock) sends nothing more, not
+    // even its heartbeat: the drives' consumers must stop them as for a killed one.
+    gateway_gone(|gw| {
+        let pid = libc::pid_t::try_from(gw.id()).unwrap();
+        // SAFETY: sending a signal to our own child process.
+        assert_eq!(unsafe { libc::kill(pid, libc::SIGSTOP) }, 0);
+    });
+}
+
+/// Starts a run, waits until every drive follows setpoints, makes the gateway go away with
+/// `gone`, then checks that every drive's heartbeat consumer (0x1016) sends its EMCY within its
+/// time plus a cycle and leaves the drive in Fault. The gateway is killed at the end.
+fn gateway_gone(gone: impl FnOnce(&mut std::process::Child)) {
     let _g = lock();
     let _drives = simdrive(&[1, 2, 3], None);
     let mut watch = Bus::SocketCan(IFACE.into()).open(&[]).unwrap();
@@ -466,9 +509,8 @@ fn vcan0_killed_gateway_the_drives_stop_by_their_heartbeat_consumer() {
             moving[i] = sw & 0x1000 != 0 && (i == 2 || pos.abs() > 1000);
         }
     }
-    gw.kill().unwrap();
+    gone(&mut gw);
     let killed = Instant::now();
-    let _ = gw.wait();
     // Each drive's consumer (0x1016 = 300 ms) must notice within its time plus a cycle.
     let mut emcy_at = [None; 3];
     while emcy_at.iter().any(|e: &Option<Duration>| e.is_none()) {
@@ -511,4 +553,6 @@ fn vcan0_killed_gateway_the_drives_stop_by_their_heartbeat_consumer() {
             );
         }
     });
+    let _ = gw.kill();
+    let _ = gw.wait();
 }
