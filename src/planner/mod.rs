@@ -1025,7 +1025,41 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, limits: &ProfileLimits) -> 
     if fits(v_max) {
         return v_max;
     }
-    let (mut lo, mut hi) = (v_end_mm_s, v_max);
+    // Closed form: with Δ = va − vb ≥ a²/j, va·(Δ/a + a/j) = L is a quadratic; below, with
+    // 2·va·√(Δ/j) = L, the cubic va³ − vb·va² = L²j/4, solved by Newton from the right (the
+    // cubic is convex there, so the iterates fall monotonically onto the root).
+    let (vb, l) = (v_end_mm_s, length_mm);
+    let c = a * a / j;
+    let b = c - vb;
+    let quadratic = 0.5 * (-b + (b * b + 4.0 * a * l).sqrt());
+    let guess = if quadratic - vb >= c {
+        quadratic
+    } else {
+        let k = 0.25 * l * l * j;
+        let mut x = vb + k.cbrt();
+        for _ in 0..12 {
+            let f = x * x * (x - vb) - k;
+            let df = x * (3.0 * x - 2.0 * vb);
+            if !(df > 0.0) {
+                break;
+            }
+            let next = x - f / df;
+            if !(next < x) {
+                break;
+            }
+            x = next;
+        }
+        x
+    };
+    // The bound must hold as computed: step down a few ulps if the root's last bit is high.
+    let mut va = guess.clamp(vb, v_max);
+    for _ in 0..8 {
+        if fits(va) {
+            return va;
+        }
+        va = (va - va * 4.0 * f64::EPSILON).max(vb);
+    }
+    let (mut lo, mut hi) = (v_end_mm_s, v_max.min(guess.max(vb)));
     for _ in 0..64 {
         let mid = 0.5 * (lo + hi);
         if mid <= lo || mid >= hi {
@@ -1691,6 +1725,32 @@ mod tests {
                     k += 1.0;
                 }
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// The S-curve backward bound: the returned start speed satisfies `va·t(va − vb) ≤ L`
+        /// and is the largest that does (a hair above fails, unless it is the speed cap).
+        #[test]
+        fn s_curve_start_reach_is_the_largest_speed_within_the_bound(
+            l in 1e-4..50.0f64,
+            vb in 0.0..150.0f64,
+            a in 50.0..5000.0f64,
+            j in 1e3..1e6f64,
+            smooth in proptest::bool::ANY,
+        ) {
+            let shape = if smooth { JerkShape::RaisedCosine } else { JerkShape::Square };
+            let lim = ProfileLimits::new(200.0, a, j, shape).unwrap();
+            let vb = vb.min(200.0);
+            let va = start_reach_mm_s(l, vb, &lim);
+            let je = if smooth { 0.5 * j } else { j };
+            let t = |dv: f64| if dv >= a * a / je { dv / a + a / je } else { 2.0 * (dv / je).sqrt() };
+            proptest::prop_assert!(va >= vb && va <= 200.0);
+            proptest::prop_assert!(va * t(va - vb) <= l, "{} over {}", va * t(va - vb), l);
+            let above = va * (1.0 + 1e-12);
+            proptest::prop_assert!(va == 200.0 || above * t(above - vb) > l);
+            // And the profile the settle step plans from it exists.
+            proptest::prop_assert!(profile::plan(l, va, vb, &lim).is_some());
         }
     }
 }

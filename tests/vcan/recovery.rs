@@ -57,8 +57,16 @@ fn run_recorded(
 
 #[test]
 fn vcan0_heartbeat_loss_alone_is_detected_within_the_consumer_time_plus_one_cycle() {
+    heartbeat_loss_alone(common::machine(|t| t));
+}
+
+#[test]
+fn vcan0_heartbeat_loss_alone_in_csp_too() {
+    heartbeat_loss_alone(common::machine(common::csp));
+}
+
+fn heartbeat_loss_alone(m: Machine) {
     let _g = lock();
-    let m = common::machine(|t| t);
     let (_d, o, frames) = run_recorded(&m, "3:no-heartbeat@300ms", common::LONG);
     let f = common::failure(&o);
     assert!(
