@@ -1040,11 +1040,11 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, limits: &ProfileLimits) -> 
         for _ in 0..12 {
             let f = x * x * (x - vb) - k;
             let df = x * (3.0 * x - 2.0 * vb);
-            if !(df > 0.0) {
+            if df.is_nan() || df <= 0.0 {
                 break;
             }
             let next = x - f / df;
-            if !(next < x) {
+            if next.is_nan() || next >= x {
                 break;
             }
             x = next;
