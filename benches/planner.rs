@@ -45,23 +45,29 @@ fn items(text: &str) -> Vec<Item> {
     .collect()
 }
 
-/// Plans every item, the look-ahead alone; returns the number of segments.
-fn plan(items: &[Item], machine: &Machine, config: &PlannerConfig) -> usize {
+/// Plans every item of `items`; returns the number of segments.
+fn plan_all<'a>(
+    items: impl Iterator<Item = std::borrow::Cow<'a, Item>>,
+    machine: &Machine,
+    config: &PlannerConfig,
+) -> usize {
     let mut p = Planner::with_config(Vector3::zeros(), &limits(machine), config).unwrap();
     let mut n = 0;
     for item in items {
-        p.push(item).unwrap();
-        while let Some(s) = p.pop() {
-            black_box(s);
-            n += 1;
-        }
+        p.push(&item).unwrap();
+        n += p.drain().map(black_box).count();
     }
     p.finish().unwrap();
-    while let Some(s) = p.pop() {
-        black_box(s);
-        n += 1;
-    }
-    n
+    n + p.drain().map(black_box).count()
+}
+
+/// The look-ahead alone, on items interpreted beforehand.
+fn plan(items: &[Item], machine: &Machine, config: &PlannerConfig) -> usize {
+    plan_all(
+        items.iter().map(std::borrow::Cow::Borrowed),
+        machine,
+        config,
+    )
 }
 
 /// Parse, compensate and plan the whole text.
@@ -71,21 +77,9 @@ fn front_end(text: &str, machine: &Machine, config: &PlannerConfig) -> usize {
         "bench.ngc",
         canmotion::gcode::Setup::new(Vector3::zeros()),
     );
-    let mut p = Planner::with_config(Vector3::zeros(), &limits(machine), config).unwrap();
-    let mut n = 0;
-    for item in Compensator::new(interp, "bench.ngc", CompOptions::default()) {
-        p.push(&item.unwrap()).unwrap();
-        while let Some(s) = p.pop() {
-            black_box(s);
-            n += 1;
-        }
-    }
-    p.finish().unwrap();
-    while let Some(s) = p.pop() {
-        black_box(s);
-        n += 1;
-    }
-    n
+    let items = Compensator::new(interp, "bench.ngc", CompOptions::default())
+        .map(|i| std::borrow::Cow::Owned(i.unwrap()));
+    plan_all(items, machine, config)
 }
 
 fn bench(c: &mut Criterion) {

@@ -127,18 +127,26 @@ fn interpret(path: &Path, name: &str) -> Result<Vec<Item>, Outcome> {
     Ok(items)
 }
 
-/// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
-/// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
-#[test]
-fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
+/// The corpus folder and its programs, sorted; `None` (said on stdout) when it is absent.
+fn corpus() -> Option<(PathBuf, Vec<PathBuf>)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
     if !dir.is_dir() {
         println!("corpus {} is absent: skipping", dir.display());
-        return;
+        return None;
     }
     let mut files = Vec::new();
     ngc_files(&dir, &mut files);
     files.sort();
+    Some((dir, files))
+}
+
+/// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
+/// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
+#[test]
+fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
+    let Some((dir, files)) = corpus() else {
+        return;
+    };
     let mut checked = 0;
     let mut broken = Vec::new();
     for path in &files {
@@ -177,14 +185,9 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
 
 #[test]
 fn corpus_plans_or_names_the_unsupported_feature() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
-    if !dir.is_dir() {
-        println!("corpus {} is absent: skipping", dir.display());
+    let Some((dir, files)) = corpus() else {
         return;
-    }
-    let mut files = Vec::new();
-    ngc_files(&dir, &mut files);
-    files.sort();
+    };
     assert!(!files.is_empty(), "no .ngc file under {}", dir.display());
 
     let mut planned = 0;

@@ -838,10 +838,10 @@ fn cyclic_thread(
     let mut port_err = None;
     let mut warnings: Vec<Warning> = Vec::new();
     let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
-    // For the progress display: the path speed of the setpoints and the largest following error.
+    // For the progress display: the path speed of the setpoints (the largest following error is
+    // the master's own figure).
     let on_path: Vec<bool> = machine.axes.iter().map(|a| a.xyz().is_some()).collect();
     let mut prev_cmd_mm: Option<[f64; crate::config::machine::MAX_AXES]> = None;
-    let mut max_ferr_mm = 0.0f64;
     loop {
         ticker.wait();
         // Feedback and error frames received since the last cycle.
@@ -927,14 +927,12 @@ fn cyclic_thread(
         out.clear();
         let rec = master.cycle(machine.sync_cob_id, &mut out);
         let mut feed2 = 0.0;
-        for (i, &p) in on_path.iter().enumerate() {
-            max_ferr_mm = max_ferr_mm.max(rec.ferr_mm[i].abs());
-            if let Some(prev) = &prev_cmd_mm
-                && p
-            {
+        if let Some(prev) = &prev_cmd_mm {
+            for (i, _) in on_path.iter().enumerate().filter(|(_, p)| **p) {
                 feed2 += (rec.cmd_mm[i] - prev[i]).powi(2);
             }
         }
+        let max_ferr_mm = master.max_ferr_mm.iter().fold(0.0f64, |m, f| m.max(*f));
         prev_cmd_mm = Some(rec.cmd_mm);
         progress::PROGRESS.store(
             rec.cycle,
