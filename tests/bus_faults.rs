@@ -14,6 +14,7 @@ use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
 
 fn run(inject: Option<(u8, Inject)>, program: &str) -> Outcome {
+    let _one = one_at_a_time();
     let machine = machine(|t| t);
     let bus = InProcBus::new();
     let dict = drive_dict(|t| t);

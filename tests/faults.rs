@@ -15,6 +15,7 @@ use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
 
 fn run(machine: Machine, inject: &[(u8, Inject)], program: &str) -> Outcome {
+    let _one = one_at_a_time();
     let bus = InProcBus::new();
     let dict = drive_dict(|t| t);
     let drives = machine

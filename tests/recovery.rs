@@ -25,14 +25,6 @@ const LINES_END: [i32; 3] = [150_000, 60_000, -6_000];
 /// Scheduling margin on a loaded machine (two cores shared with builds).
 const MARGIN_S: f64 = 0.040;
 
-/// One run at a time: each has a cyclic thread and simulated drives keeping real time, and the
-/// machine has two cores.
-static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 struct Rig {
     bus: Bus,
     _sims: runner::SimHandle,

@@ -111,6 +111,8 @@ pub mod index {
     pub const IP_TIME_PERIOD: u16 = 0x60C2;
     /// Interpolation data configuration (RECORD): sub 3 buffer organisation, sub 6 buffer clear.
     pub const IP_DATA_CONFIG: u16 = 0x60C4;
+    /// Max acceleration (UNSIGNED32), acceleration units: a limit in every mode.
+    pub const MAX_ACCELERATION: u16 = 0x60C5;
     /// Supported drive modes (UNSIGNED32), one bit per mode, see
     /// [`ModeOfOperation::supported_bit`](super::ModeOfOperation::supported_bit).
     pub const SUPPORTED_MODES: u16 = 0x6502;

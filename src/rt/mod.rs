@@ -109,17 +109,29 @@ pub fn make_realtime(priority: i32) -> RtSetup {
             std::io::Error::last_os_error()
         ));
     }
-    // SAFETY: locks the process's pages; no pointers involved.
-    let r = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
-    if r == 0 {
-        s.memory_locked = true;
-    } else {
-        s.notes.push(format!(
-            "mlockall failed ({})",
-            std::io::Error::last_os_error()
-        ));
+    match lock_memory() {
+        Ok(()) => s.memory_locked = true,
+        Err(e) => s.notes.push(format!("mlockall failed ({e})")),
     }
     s
+}
+
+/// Lock the process's memory, once per process: `MCL_FUTURE` keeps every later mapping locked,
+/// and a second `mlockall` would walk every mapping again under the process's memory-map lock,
+/// stalling any other thread that maps memory (another cyclic loop in the same process, as in
+/// the test binaries) for milliseconds.
+fn lock_memory() -> std::io::Result<()> {
+    static LOCKED: std::sync::OnceLock<Result<(), i32>> = std::sync::OnceLock::new();
+    let locked = *LOCKED.get_or_init(|| {
+        // SAFETY: locks the process's pages; no pointers involved.
+        let r = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+        if r == 0 {
+            Ok(())
+        } else {
+            Err(std::io::Error::last_os_error().raw_os_error().unwrap_or(0))
+        }
+    });
+    locked.map_err(std::io::Error::from_raw_os_error)
 }
 
 /// Cycle timing statistics kept by the loop.

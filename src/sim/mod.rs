@@ -25,7 +25,9 @@ use crate::canopen::emcy::{Emcy, code as emcy_code};
 use crate::canopen::od::Od;
 use crate::canopen::sdo_server::{SdoServer, SdoTarget};
 use crate::canopen::{AbortCode, NmtState, cob, nmt};
-use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
+use crate::cia402::{
+    PowerStateMachine, State, controlword as cw_bits, index as obj, statusword as sw,
+};
 use crate::config::DriveDictionary;
 use crate::config::machine::MapEntry;
 pub use inject::{Inject, Targeted};
@@ -35,6 +37,8 @@ const KP_PER_S: f64 = 200.0;
 /// Velocity feed-forward fraction: what remains gives a following error proportional to speed,
 /// as on a real servo.
 const K_FF: f64 = 0.95;
+/// The motor's acceleration capability (counts/s²) when the dictionary has no 0x60C5.
+const MOTOR_ACC_COUNTS_S2: f64 = 30_000_000.0;
 /// Physics integration step.
 const STEP: Duration = Duration::from_micros(250);
 /// EMCY code for a parameter the drive cannot run with (CiA 301: 0x6320 "parameter error").
@@ -897,7 +901,12 @@ impl SimDrive {
 
     fn step(&mut self, t: Duration, dt: f64, out: &mut Vec<Frame>) {
         let vmax = self.od.int(0x607F, 0).max(1) as f64;
-        let amax = self.od.int(0x6083, 0).max(1) as f64;
+        // 0x60C5 limits the acceleration in every mode (0x6083 is the profile modes' ramp); a
+        // dictionary without it gets the motor's own limit.
+        let amax = match self.od.get(obj::MAX_ACCELERATION, 0) {
+            Some(_) => self.od.int(obj::MAX_ACCELERATION, 0).max(1) as f64,
+            None => MOTOR_ACC_COUNTS_S2,
+        };
         match self.power.state() {
             State::OperationEnabled => {
                 let mut v_ff = 0.0;

@@ -1448,3 +1448,50 @@ fn a_recurring_fault_clears_on_reset_and_comes_back() {
     assert_eq!(b.state(), State::Fault);
     assert_eq!(b.emcy_count(0x2310), 2);
 }
+
+/// The largest following error (counts, read every ms) of an IP drive at 200 mm/s (1000
+/// counts/mm, 4 ms SYNC) whose master stalls once for `hold_ms`: the demand stops at the last
+/// setpoint, then the setpoints go on where they left off.
+fn error_after_a_stalled_master(max_acc: i64, hold_ms: u64) -> i64 {
+    let mut b = Bench::with(SimDrive::new(dict(), NODE).with_position(0));
+    b.set(0x1006, 0, 4000);
+    b.set(0x60C2, 1, 4);
+    b.set(0x60C2, 2, -3);
+    b.set(0x60C5, 0, max_acc);
+    b.set(0x6060, 0, 7);
+    b.set(0x6065, 0, 100_000_000); // no fault: measure
+    b.nmt(nmt::START, NODE);
+    b.enable();
+    b.set(0x60C1, 1, 0);
+    b.cw(0x1F);
+    let step = 800; // counts per 4 ms
+    let (mut sp, mut worst) = (0, 0);
+    for c in 0..150 {
+        sp += step * c.min(50) / 50; // 2 m/s² up to 200 mm/s, then steady
+        let gap = if c == 100 { 4 + hold_ms } else { 4 };
+        for _ in 0..gap {
+            b.advance(ms(1));
+            if c > 60 {
+                worst = worst.max(b.get(0x60F4, 0).abs());
+            }
+        }
+        b.rpdo(1, &cw_and_i32(0x1F, sp));
+        b.sync();
+    }
+    worst
+}
+
+#[test]
+fn a_stalled_master_stops_the_demand_and_0x60c5_bounds_the_motor_overshoot() {
+    let steady = error_after_a_stalled_master(30_000_000, 0);
+    // A 24 ms stall (six periods, as a virtual machine's host can cause): the demand holds, the
+    // motor brakes at 0x60C5 (3 g) and overshoots well within a 2 mm window.
+    let strong = error_after_a_stalled_master(30_000_000, 24);
+    assert!(
+        strong > 10 * steady && strong < 1000,
+        "{strong} (steady {steady})"
+    );
+    // At 1 g the same stall costs more than 2 mm: 0x60C5 is the limit in force.
+    let weak = error_after_a_stalled_master(10_000_000, 24);
+    assert!(weak > 2000, "{weak}");
+}
