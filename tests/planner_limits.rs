@@ -5,7 +5,8 @@
 //! Seeded random programs (proptest), trapezoid and S-curve modes.
 
 use canmotion::gcode::parse_program;
-use canmotion::planner::{Limits, PlannerConfig, ProfileKind, plan_with};
+use canmotion::interp::Interpolator;
+use canmotion::planner::{Limits, PlannerConfig, ProfileKind, SegmentPath, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -160,4 +161,128 @@ fn a_circle_of_tiny_lines_keeps_the_centripetal_acceleration() {
     text.push_str("M2\n");
     check(&text, ProfileKind::Trapezoid).unwrap();
     check(&text, ProfileKind::SCurve).unwrap();
+}
+
+/// Distance from `q` to the polyline through `points`.
+fn distance_to_polyline(q: Vector3<f64>, points: &[Vector3<f64>]) -> f64 {
+    points
+        .windows(2)
+        .map(|w| {
+            let d = w[1] - w[0];
+            let l2 = d.norm_squared();
+            let s = if l2 > 0.0 {
+                ((q - w[0]).dot(&d) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (w[0] + d * s - q).norm()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Lines under `G64 P<tol>`: the setpoints keep the limits and never leave the programmed
+/// polyline by more than the tolerance; the blend arcs are counted.
+fn check_blends(
+    offsets: &[(Vector3<f64>, f64)],
+    tol_mm: f64,
+    profile: ProfileKind,
+) -> Result<(usize, f64), TestCaseError> {
+    let mut text = format!("G21 G90 G17 G64 P{tol_mm:.4}\n");
+    let mut points = vec![Vector3::zeros()];
+    let mut at = Vector3::zeros();
+    for (d, f) in offsets {
+        let next = at + d;
+        let written: Vector3<f64> = next.map(|c| format!("{c:.6}").parse().unwrap());
+        if written == at {
+            continue;
+        }
+        at = written;
+        points.push(at);
+        text.push_str(&format!(
+            "G1 X{:.6} Y{:.6} Z{:.6} F{:.3}\n",
+            at.x,
+            at.y,
+            at.z,
+            f * 60.0
+        ));
+    }
+    text.push_str("M2\n");
+    let prog = parse_program(&text, "blend.ngc", Vector3::zeros())
+        .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
+    // A chord tolerance of 10 µm lets arcs run fast enough to be worth blending.
+    let cfg = PlannerConfig {
+        chord_tol_mm: 0.01,
+        ..config(profile)
+    };
+    let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    let arcs = plan
+        .segments()
+        .iter()
+        .filter(|s| matches!(s.path, SegmentPath::Arc(_)))
+        .count();
+    let mut interp = Interpolator::new(plan.clone(), T).unwrap();
+    let mut q = Vector3::zeros();
+    while !interp.is_finished() {
+        interp.update(&mut q);
+        let d = distance_to_polyline(q, &points);
+        if d > tol_mm + 1e-9 {
+            return Err(TestCaseError::fail(format!(
+                "sample {q:?} is {d} mm off the programmed path (G64 P{tol_mm})\n{text}"
+            )));
+        }
+    }
+    let duration_s = plan.duration_s();
+    setpoints::limits_hold(plan, &limits(), &cfg).map_err(TestCaseError::fail)?;
+    Ok((arcs, duration_s))
+}
+
+fn a_line() -> impl Strategy<Value = (Vector3<f64>, f64)> {
+    let len = prop_oneof![0.05..2.0f64, 2.0..40.0f64];
+    let dir = (-1.0..1.0f64, -1.0..1.0f64, -0.3..0.3f64);
+    (len, dir, 20.0..180.0f64).prop_map(|(l, (x, y, z), f)| {
+        let d = Vector3::new(x, y, z);
+        let d = if d.norm() < 1e-3 {
+            Vector3::x()
+        } else {
+            d.normalize()
+        };
+        (d * l, f)
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn blended_corners_stay_within_g64_p_and_the_limits(
+        lines in prop::collection::vec(a_line(), 2..25),
+        tol in prop_oneof![0.005..0.1f64, 0.1..3.0f64],
+        s_curve in any::<bool>(),
+    ) {
+        let profile = if s_curve { ProfileKind::SCurve } else { ProfileKind::Trapezoid };
+        check_blends(&lines, tol, profile)?;
+    }
+}
+
+#[test]
+fn a_square_under_g64_p_is_rounded_where_that_is_faster() {
+    let square: Vec<(Vector3<f64>, f64)> = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
+        .iter()
+        .map(|&(x, y)| (Vector3::new(x, y, 0.0) * 50.0, 150.0))
+        .collect();
+    for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+        let (sharp_arcs, sharp_s) = check_blends(&square, 0.0, profile).unwrap();
+        assert_eq!(sharp_arcs, 0, "G64 P0 keeps the corners");
+        // 1 µm would allow only arcs slower than the sharp corner's junction speed.
+        let (arcs, t) = check_blends(&square, 0.001, profile).unwrap();
+        assert_eq!((arcs, t), (0, sharp_s), "{profile:?}");
+        // 1 mm: never slower than the sharp corners.
+        let (arcs, t) = check_blends(&square, 1.0, profile).unwrap();
+        assert!(t <= sharp_s, "{profile:?}: {t} s against {sharp_s} s sharp");
+        if profile == ProfileKind::Trapezoid {
+            // With a trapezoid the three corners are rounded, and that pays.
+            assert_eq!(arcs, 3);
+            assert!(t < sharp_s - 0.01, "{t} s against {sharp_s} s sharp");
+        }
+    }
 }

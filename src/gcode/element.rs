@@ -53,8 +53,9 @@ pub enum BlendMode {
     ExactStop,
     /// G64: blending allowed, within the tolerances.
     Blend {
-        /// P: largest deviation from the programmed corner; 0 means no limit other than the
-        /// machine's best speed (LinuxCNC's G64 without P).
+        /// P: largest deviation from the programmed corner, where the planner may round a
+        /// corner between two lines with a tangent arc; 0 (also G64 without P) keeps every
+        /// corner exact (LinuxCNC would then deviate without limit).
         p_mm: f64,
         /// Q: naive-CAM tolerance (collinear short segments within it may be merged); 0
         /// disables the detector. Without Q it equals P, as in LinuxCNC.

@@ -49,7 +49,11 @@
 //! the step of the centripetal acceleration where an arc begins or ends:
 //! `v²·|Δ(N/r)ᵢ| ≤ T·(max_jerkᵢ − usedᵢ)/2`. Never grbl's junction deviation: it lets the
 //! velocity jump by several times `a_max·T` in one period, a shock for a servo that follows
-//! cyclic setpoints. (Blending corners with arcs within G64 P is the next step.)
+//! cyclic setpoints.
+//!
+//! Under G64 P (a tolerance), a corner between two lines may instead be rounded by a tangent
+//! arc within the tolerance (`shared/seeds` 001), where that is faster
+//! than the sharp corner. G64 without P, or P0, keeps the corner exact.
 //!
 //! # Look-ahead
 //!
@@ -568,6 +572,36 @@ pub fn plan_items_with<'a>(
     })
 }
 
+/// The time a corner taken at `v` costs over running through at `v_cruise`: slowing down
+/// and speeding up again by `Δv = v_cruise − v` takes `t = Δv/a + a/j` each way (`2√(Δv/j)`
+/// when the acceleration never reaches `a`) at the mean speed `(v_cruise + v)/2`, so the two
+/// lose `t·Δv/v_cruise` against cruising. An estimate for choosing between a sharp corner and
+/// a blend; the profiles are planned exactly afterwards.
+fn corner_cost_s(v_cruise: f64, v: f64, acc: f64, jerk: f64) -> f64 {
+    let dv = (v_cruise - v).max(0.0);
+    if dv == 0.0 || v_cruise <= 0.0 {
+        return 0.0;
+    }
+    let t = if jerk.is_finite() && dv < acc * acc / jerk {
+        2.0 * (dv / jerk).sqrt()
+    } else if jerk.is_finite() {
+        dv / acc + acc / jerk
+    } else {
+        dv / acc
+    };
+    t * dv / v_cruise
+}
+
+/// A corner's blend arc ([`Planner::blend_arc`]).
+struct Blend {
+    arc: Pending,
+    /// Distance from the corner to where the arc touches each line.
+    tangent_mm: f64,
+    /// Highest speeds where the arc begins and ends.
+    cap_in_mm_s: f64,
+    cap_out_mm_s: f64,
+}
+
 /// An element waiting in the look-ahead window.
 #[derive(Debug, Clone, Copy)]
 struct Pending {
@@ -577,6 +611,8 @@ struct Pending {
     blend: BlendMode,
     /// Highest speed allowed at its start (the junction with the element before).
     cap_start_mm_s: f64,
+    /// Length as programmed, before blends took some of it (each blend takes at most half).
+    full_length_mm: f64,
     tangent_start: Vector3<f64>,
     tangent_end: Vector3<f64>,
     /// Curvature vector `N/r` at the start and at the end (zero on lines).
@@ -646,10 +682,33 @@ impl Planner {
                 let Some(mut p) = self.element(e)? else {
                     return Ok(());
                 };
-                p.cap_start_mm_s = match self.window.back() {
-                    Some(prev) => self.junction_mm_s(prev, &p),
-                    None => 0.0,
+                let blend = match self.window.back() {
+                    Some(prev) => self.blend_arc(prev, &p)?,
+                    None => None,
                 };
+                match blend {
+                    None => {
+                        p.cap_start_mm_s = match self.window.back() {
+                            Some(prev) => self.junction_mm_s(prev, &p),
+                            None => 0.0,
+                        }
+                    }
+                    Some(Blend {
+                        mut arc,
+                        tangent_mm,
+                        cap_in_mm_s,
+                        cap_out_mm_s,
+                    }) => {
+                        let prev = self.window.back_mut().expect("a blend follows an element");
+                        prev.seg.end_mm = arc.seg.start_mm;
+                        prev.seg.length_mm -= tangent_mm;
+                        arc.cap_start_mm_s = cap_in_mm_s;
+                        p.seg.start_mm = arc.seg.end_mm;
+                        p.seg.length_mm -= tangent_mm;
+                        p.cap_start_mm_s = cap_out_mm_s;
+                        self.window.push_back(arc);
+                    }
+                }
                 self.position_mm = p.seg.end_mm;
                 self.window.push_back(p);
                 if self.window.len() >= self.config.lookahead {
@@ -866,6 +925,153 @@ impl Planner {
         v.max(0.0)
     }
 
+    /// The tangent arc that replaces the corner from line `a` into line `b` under G64 P
+    /// (`shared/seeds` 001), or `None` where the corner stays sharp: no tolerance (P0), not two
+    /// lines, no turn, or an arc no faster than the sharp corner's one-period junction speed.
+    ///
+    /// With the turn angle `θ` (the interior angle is `θ' = π − θ`), an arc of radius `r`
+    /// touches both lines at `r·tan(θ/2)` from the corner and passes `r/cos(θ/2) − r` from it,
+    /// so the tolerance `δ` allows `r ≤ δ·cos(θ/2)/(1 − cos(θ/2))` (001's
+    /// `r = δ sin(θ'/2)/(1 − sin(θ'/2))`), and each line gives at most half of its programmed
+    /// length (it may be blended at both ends). Within those bounds the radius is the smallest
+    /// that lets the arc reach the speed of its neighbours (a larger one would deviate more for
+    /// nothing): the centripetal limit grows as `√r`, the jerk of circular motion as `r^⅔`, so
+    /// `r_need = r_max · (v_target/v_arc(r_max))^1.5`. On the arc every axis's centripetal
+    /// acceleration and jerk stay within its share ([`arc_limits`]).
+    fn blend_arc(&self, a: &Pending, b: &Pending) -> Result<Option<Blend>, PlanError> {
+        let BlendMode::Blend { p_mm: tol_mm, .. } = a.blend else {
+            return Ok(None);
+        };
+        let (SegmentPath::Line { direction: u1 }, SegmentPath::Line { direction: u2 }) =
+            (a.seg.path, b.seg.path)
+        else {
+            return Ok(None);
+        };
+        if tol_mm.is_nan() || tol_mm <= 0.0 || self.config.corner_acc_mm_s2 == 0.0 {
+            return Ok(None);
+        }
+        let cos_turn = u1.dot(&u2).clamp(-1.0, 1.0);
+        let half = 0.5 * cos_turn.acos();
+        let (sin_h, cos_h) = half.sin_cos();
+        // Nearly straight on (nothing to gain) or nearly a reversal (no room for an arc).
+        if sin_h < 1e-6 || cos_h < 1e-3 {
+            return Ok(None);
+        }
+        let tan_h = sin_h / cos_h;
+        let r_tol = tol_mm * cos_h / (1.0 - cos_h);
+        let room_mm = 0.5 * a.full_length_mm.min(b.full_length_mm);
+        // What is left of `a` after a blend at its start must keep some length.
+        let room_mm = room_mm.min(a.seg.length_mm - 1e-9 * a.full_length_mm);
+        let r_max = r_tol.min(room_mm / tan_h);
+        if !(r_max > 0.0 && r_max.is_finite()) {
+            return Ok(None);
+        }
+        let corner = a.seg.end_mm;
+        let normal = u1.cross(&u2);
+        let line = b.seg.line;
+        let rapid = a.seg.rapid && b.seg.rapid;
+        let feed_mm_s = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
+        let arc_at = |r: f64| -> Result<Option<(Pending, f64)>, PlanError> {
+            let tangent_mm = r * tan_h;
+            let p1 = corner - u1 * tangent_mm;
+            let p2 = corner + u2 * tangent_mm;
+            let center = corner + (u2 - u1).normalize() * (r / cos_h);
+            let Some(geometry) = ArcGeometry::new(p1, p2, center, normal, 0) else {
+                return Ok(None);
+            };
+            let arc = self.arc_pending(line, rapid, (p1, p2), geometry, feed_mm_s, a.blend)?;
+            Ok(Some((arc, tangent_mm)))
+        };
+        let Some((mut arc, mut tangent_mm)) = arc_at(r_max)? else {
+            return Ok(None);
+        };
+        let v_arc = arc.limits.v_max_mm_s();
+        if v_arc > feed_mm_s {
+            let r = r_max * (feed_mm_s / v_arc).powf(1.5);
+            if let Some(smaller) = arc_at(r)? {
+                (arc, tangent_mm) = smaller;
+            }
+        }
+        // The speeds into and out of the arc: tangent, so only its curvature (S-curves) and
+        // the neighbours' limits bound them.
+        let cap_in_mm_s = self.junction_mm_s(a, &arc);
+        let cap_out_mm_s = self.junction_mm_s(&arc, b);
+        let v_blend = arc.limits.v_max_mm_s().min(cap_in_mm_s).min(cap_out_mm_s);
+        // Round the corner only where it is faster: the arc is run at a constant speed, which
+        // the chord tolerance and the centripetal limit may keep low, so a small arc can take
+        // longer than slowing down for the sharp corner (see `corner_cost_s`).
+        let v_sharp = self.junction_mm_s(a, b);
+        let (acc, jerk) = (
+            a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
+            a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
+        );
+        let room = a.full_length_mm.min(b.full_length_mm);
+        let v_cruise = feed_mm_s.min((v_sharp * v_sharp + acc * room).sqrt());
+        let arc_len = arc.seg.length_mm;
+        let blended = corner_cost_s(v_cruise, v_blend, acc, jerk) + arc_len / v_blend
+            - 2.0 * tangent_mm / v_cruise;
+        if !(v_blend > v_sharp && blended < corner_cost_s(v_cruise, v_sharp, acc, jerk)) {
+            return Ok(None);
+        }
+        Ok(Some(Blend {
+            arc,
+            tangent_mm,
+            cap_in_mm_s,
+            cap_out_mm_s,
+        }))
+    }
+
+    /// The pending element of an arc (or a corner's blend arc) from `ends.0` to `ends.1`.
+    fn arc_pending(
+        &self,
+        line: usize,
+        rapid: bool,
+        ends: (Vector3<f64>, Vector3<f64>),
+        arc: ArcGeometry,
+        feed_mm_s: f64,
+        blend: BlendMode,
+    ) -> Result<Pending, PlanError> {
+        let cfg = &self.config;
+        let length_mm = arc.length_mm;
+        if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
+            return Err(PlanError::Overflow { line });
+        }
+        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg);
+        let curvature = |s: f64| {
+            let at = arc.point_at(s);
+            let rel = at - arc.center_mm;
+            let radial = rel - arc.normal * rel.dot(&arc.normal);
+            let r = radial.norm();
+            if r > 0.0 {
+                -radial / (r * r)
+            } else {
+                Vector3::zeros()
+            }
+        };
+        let jerk_mm_s3 = if cfg.jerk_limited() {
+            a.jerk_mm_s3
+        } else {
+            f64::INFINITY
+        };
+        Ok(Pending {
+            seg: moving(line, rapid, ends, SegmentPath::Arc(arc), length_mm),
+            limits: profile_limits(cfg, a.v_max_mm_s, a.acc_mm_s2, jerk_mm_s3, line)?,
+            blend,
+            cap_start_mm_s: 0.0,
+            full_length_mm: length_mm,
+            tangent_start: arc.tangent_at(0.0),
+            tangent_end: arc.tangent_at(1.0),
+            curvature_start: curvature(0.0),
+            curvature_end: curvature(1.0),
+            acc_used_mm_s2: a.axis_acc_mm_s2,
+            jerk_used_mm_s3: if cfg.jerk_limited() {
+                a.axis_jerk_mm_s3
+            } else {
+                Vector3::zeros()
+            },
+        })
+    }
+
     /// The pending element of `e` (`None` for a zero-length line).
     fn element(&self, e: &Element) -> Result<Option<Pending>, PlanError> {
         let line = e.line;
@@ -930,14 +1136,16 @@ impl Planner {
                 let abs = direction.abs();
                 Pending {
                     seg: moving(
-                        e,
-                        self.position_mm,
+                        line,
+                        e.rapid,
+                        (self.position_mm, e.end_mm),
                         SegmentPath::Line { direction },
                         length_mm,
                     ),
                     limits: profile_limits(cfg, v_max_mm_s, acc_mm_s2, jerk_mm_s3, line)?,
                     blend: e.blend,
                     cap_start_mm_s: 0.0,
+                    full_length_mm: length_mm,
                     tangent_start: direction,
                     tangent_end: direction,
                     curvature_start: Vector3::zeros(),
@@ -952,44 +1160,14 @@ impl Planner {
             }
             ElementKind::Arc { .. } => {
                 let arc = e.arc().ok_or(PlanError::InvalidArc { line })?;
-                let length_mm = arc.length_mm;
-                if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
-                    return Err(PlanError::Overflow { line });
-                }
-                let a = arc_limits(&arc, feed_mm_s, limits, cfg);
-                let curvature = |s: f64| {
-                    let at = arc.point_at(s);
-                    let rel = at - arc.center_mm;
-                    let radial = rel - arc.normal * rel.dot(&arc.normal);
-                    let r = radial.norm();
-                    if r > 0.0 {
-                        -radial / (r * r)
-                    } else {
-                        Vector3::zeros()
-                    }
-                };
-                Pending {
-                    seg: moving(e, self.position_mm, SegmentPath::Arc(arc), length_mm),
-                    limits: profile_limits(
-                        cfg,
-                        a.v_max_mm_s,
-                        a.acc_mm_s2,
-                        jerk(a.jerk_mm_s3),
-                        line,
-                    )?,
-                    blend: e.blend,
-                    cap_start_mm_s: 0.0,
-                    tangent_start: arc.tangent_at(0.0),
-                    tangent_end: arc.tangent_at(1.0),
-                    curvature_start: curvature(0.0),
-                    curvature_end: curvature(1.0),
-                    acc_used_mm_s2: a.axis_acc_mm_s2,
-                    jerk_used_mm_s3: if cfg.jerk_limited() {
-                        a.axis_jerk_mm_s3
-                    } else {
-                        Vector3::zeros()
-                    },
-                }
+                self.arc_pending(
+                    line,
+                    e.rapid,
+                    (self.position_mm, e.end_mm),
+                    arc,
+                    feed_mm_s,
+                    e.blend,
+                )?
             }
         };
         p.seg.end_mm = e.end_mm;
@@ -1097,12 +1275,18 @@ fn profile_limits(
 }
 
 /// A moving segment's geometry, speeds not yet planned.
-fn moving(e: &Element, start_mm: Vector3<f64>, path: SegmentPath, length_mm: f64) -> Segment {
+fn moving(
+    line: usize,
+    rapid: bool,
+    (start_mm, end_mm): (Vector3<f64>, Vector3<f64>),
+    path: SegmentPath,
+    length_mm: f64,
+) -> Segment {
     Segment {
-        line: e.line,
-        rapid: e.rapid,
+        line,
+        rapid,
         start_mm,
-        end_mm: e.end_mm,
+        end_mm,
         path,
         length_mm,
         v_start_mm_s: 0.0,
