@@ -168,6 +168,7 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
                 profile,
                 chord_tol_mm: 0.001,
                 lookahead: 1000,
+                integer_periods: false,
             };
             let result = plan_items_with(Vector3::zeros(), &items, &limits(), &config)
                 .map_err(|e| e.to_string())

@@ -33,6 +33,7 @@ fn config(profile: ProfileKind) -> PlannerConfig {
         profile,
         chord_tol_mm: 0.001,
         lookahead: 64,
+        integer_periods: false,
     }
 }
 
@@ -124,9 +125,12 @@ fn program(moves: &[Move]) -> String {
 
 /// Plans `text` and checks its setpoints (see `common::setpoints`).
 fn check(text: &str, profile: ProfileKind) -> Result<(), TestCaseError> {
+    check_with(text, config(profile))
+}
+
+fn check_with(text: &str, cfg: PlannerConfig) -> Result<(), TestCaseError> {
     let prog = parse_program(text, "random.ngc", Vector3::zeros())
         .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
-    let cfg = config(profile);
     let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
     setpoints::limits_hold(plan, &limits(), &cfg).map_err(TestCaseError::fail)
 }
@@ -142,6 +146,12 @@ proptest! {
     #[test]
     fn s_curve_setpoints_keep_every_axis_within_its_limits(moves in prop::collection::vec(a_move(), 1..30)) {
         check(&program(&moves), ProfileKind::SCurve)?;
+    }
+
+    #[test]
+    fn with_integer_periods_too(moves in prop::collection::vec(a_move(), 1..20), s_curve in any::<bool>()) {
+        let profile = if s_curve { ProfileKind::SCurve } else { ProfileKind::Trapezoid };
+        check_with(&program(&moves), PlannerConfig { integer_periods: true, ..config(profile) })?;
     }
 }
 

@@ -55,6 +55,8 @@ struct RawPlanner {
     path_acc_mm_s2: Option<f64>,
     chord_tol_mm: Option<f64>,
     lookahead: Option<usize>,
+    #[serde(default)]
+    integer_periods: bool,
 }
 
 /// `[program]`: how programs are interpreted on this machine (all keys optional).
@@ -557,6 +559,7 @@ fn planner_config(
                 ));
             }
         },
+        integer_periods: raw.integer_periods,
     };
     config
         .validate()

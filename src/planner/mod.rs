@@ -147,6 +147,9 @@ pub struct PlannerConfig {
     pub chord_tol_mm: f64,
     /// Elements in the look-ahead window (at least 2).
     pub lookahead: usize,
+    /// 000's option: every moving element lasts a whole number of periods, its end point on a
+    /// sample, by lowering its cruise speed (never a boundary speed or a limit).
+    pub integer_periods: bool,
 }
 
 impl PlannerConfig {
@@ -162,6 +165,7 @@ impl PlannerConfig {
             profile: ProfileKind::Trapezoid,
             chord_tol_mm: 0.0,
             lookahead: 1000,
+            integer_periods: false,
         }
     }
 
@@ -642,6 +646,9 @@ pub struct Planner {
     back_mm_s: Vec<f64>,
     ready: VecDeque<Segment>,
     finished: bool,
+    /// Elements that could not be stretched to whole periods (see
+    /// [`PlannerConfig::integer_periods`]).
+    off_grid: usize,
 }
 
 impl Planner {
@@ -671,6 +678,7 @@ impl Planner {
             back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             ready: VecDeque::new(),
             finished: false,
+            off_grid: 0,
         })
     }
 
@@ -782,6 +790,12 @@ impl Planner {
         self.finished
     }
 
+    /// Moving elements that [`PlannerConfig::integer_periods`] could not stretch to a whole
+    /// number of periods (their boundary speeds left no slack).
+    pub fn off_grid(&self) -> usize {
+        self.off_grid
+    }
+
     /// Elements in the look-ahead window (pushed, not settled).
     pub fn pending(&self) -> usize {
         self.window.len()
@@ -853,7 +867,16 @@ impl Planner {
             v_start_mm_s: v0,
             v_end_mm_s: v1,
         };
-        let profile = profile::plan(p.seg.length_mm, v0, v1, &p.limits).ok_or(no_profile)?;
+        let mut profile = profile::plan(p.seg.length_mm, v0, v1, &p.limits).ok_or(no_profile)?;
+        if self.config.integer_periods {
+            // Where the boundary speeds leave no slack (a pure acceleration that fills the
+            // element), the element keeps its time-optimal duration and the next starts off the
+            // grid; counted in `off_grid`.
+            match profile.stretch_to_period(self.config.period_s) {
+                Ok((stretched, _)) => profile = stretched,
+                Err(_) => self.off_grid += 1,
+            }
+        }
         let mut seg = p.seg;
         seg.v_start_mm_s = v0;
         seg.v_end_mm_s = v1;
