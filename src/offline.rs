@@ -483,7 +483,7 @@ impl Setpoints {
         let mut p = Vector3::zeros();
         while !self.interp.needs_segments() {
             match self.interp.update(&mut p) {
-                Status::Working { .. } => self.row(p)?,
+                Status::Working { .. } | Status::Held { .. } => self.row(p)?,
                 Status::Finished => {
                     self.row(p)?;
                     break;

@@ -636,7 +636,9 @@ impl CyclicMaster {
             let mut p = Vector3::zeros();
             let status = self.motion.as_mut().map(|m| m.update(&mut p));
             match status {
-                Some(Status::Working { line }) => {
+                // A hold at standstill keeps streaming the held point: the drives stay
+                // enabled, following.
+                Some(Status::Working { line } | Status::Held { line }) => {
                     if let Some(prev) = self.line
                         && prev != line
                     {
