@@ -86,6 +86,10 @@ enum Command {
         /// picks the format.
         #[arg(long, value_name = "FILE.svg|FILE.png")]
         plot: Option<PathBuf>,
+        /// Feed override at planning time, 1 to 200 %: every programmed feed scaled by it
+        /// (capped by the machine's limits as usual), rapids up to 100 %.
+        #[arg(long, value_name = "PERCENT", value_parser = parse_plan_override)]
+        r#override: Option<f64>,
     },
     /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
     /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
@@ -222,6 +226,16 @@ enum SdoOp {
     },
 }
 
+/// `plan --override`: a percentage from 1 to 200.
+fn parse_plan_override(s: &str) -> Result<f64, String> {
+    let percent: f64 = s
+        .trim_end_matches('%')
+        .parse()
+        .map_err(|_| format!("'{s}' is not a percentage (e.g. 50 for 50 %)"))?;
+    canmotion::offline::check_override(percent / 100.0)?;
+    Ok(percent)
+}
+
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -318,6 +332,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             path,
             setpoints,
             plot,
+            r#override,
         } => {
             if let Some(p) = &plot {
                 canmotion::plot::PlotFormat::of(p)?;
@@ -330,6 +345,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 path_out: path,
                 setpoints_out: setpoints,
                 plot_out: plot,
+                feed_override: r#override.map(|p| p / 100.0),
             };
             let start_mm = nalgebra::Vector3::zeros();
             let summary = if program.as_os_str() == "-" {

@@ -1037,6 +1037,7 @@ mod tests {
                 path_out: None,
                 setpoints_out: Some(file.clone()),
                 plot_out: None,
+                feed_override: None,
             };
             crate::offline::plan_stream(&m, program.as_bytes(), "t.ngc", armed, &opts).unwrap();
             let text = std::fs::read_to_string(&file).unwrap();
