@@ -257,7 +257,8 @@ impl StopPoint {
             return None; // streaming never started
         }
         // The latest sample is the plan's point at that time (its end once finished).
-        let plan_time_s = interp.elapsed_s().min(interp.duration_s());
+        // Plan time, not wall time: an override or a hold makes them differ.
+        let plan_time_s = interp.plan_time_s().min(interp.duration_s());
         Some(StopPoint {
             plan_time_s,
             path_mm: interp.last_mm(),

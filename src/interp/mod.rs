@@ -653,6 +653,11 @@ impl Interpolator {
         self.period_s
     }
 
+    /// End point of the queued motion (the whole program's once closed).
+    pub fn queued_end_mm(&self) -> Vector3<f64> {
+        self.queued_end_mm
+    }
+
     /// End time of the queued motion (the whole program's duration once closed).
     pub fn duration_s(&self) -> f64 {
         self.queued_end_s
@@ -943,6 +948,40 @@ mod tests {
                 max_acc_mm_s2: Vector3::from(acc),
                 max_feed_mm_s: feed,
             })
+    }
+
+    proptest! {
+        /// Whatever the requests and whenever they come, `k` stays in `[0, 1]`, `|k'| ≤ D`
+        /// (by differences of `k` between samples, a `J·T²` of slack), each request moves `k`
+        /// on the next sample unless it is already there, and the plan time never goes back.
+        #[test]
+        fn k_stays_within_0_and_1_and_its_rate_within_the_ramp(
+            requests in proptest::collection::vec((1..120usize, 0.0..1.5f64, any::<bool>()), 1..20),
+        ) {
+            let plan = plan_moves(Vector3::zeros(), &[feed(1, v(1.0e4, 0.0, 0.0), 100.0)], &limits()).unwrap();
+            let ramp = OverrideRamp::new(2.0, 30.0).unwrap();
+            let t = 0.002;
+            let mut interp = Interpolator::new(plan, t).unwrap().with_override_ramp(ramp);
+            let mut p = Vector3::zeros();
+            let (mut k_prev, mut tau_prev) = (1.0, 0.0);
+            for (gap, fraction, hold) in requests {
+                if hold { interp.hold().unwrap() } else { interp.resume().unwrap() }
+                interp.set_override(fraction).unwrap();
+                let target = if hold { 0.0 } else { fraction.min(1.0) };
+                for i in 0..gap {
+                    interp.update(&mut p);
+                    let k = interp.effective_override();
+                    prop_assert!((0.0..=1.0).contains(&k), "k = {}", k);
+                    prop_assert!((k - k_prev).abs() <= 2.0 * t + 30.0 * t * t, "k from {} to {}", k_prev, k);
+                    if i == 0 && k_prev != target {
+                        prop_assert_ne!(k, k_prev, "k did not move towards {}", target);
+                    }
+                    prop_assert!(interp.plan_time_s() >= tau_prev);
+                    k_prev = k;
+                    tau_prev = interp.plan_time_s();
+                }
+            }
+        }
     }
 
     proptest! {
