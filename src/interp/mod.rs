@@ -184,7 +184,7 @@ impl OverrideRamp {
     ) -> Result<OverrideRamp, InterpError> {
         let s = config.path_acc_share;
         let free = 1.0 - s;
-        if !(free > 0.0) {
+        if free <= 0.0 || free.is_nan() {
             return Err(InterpError::NoOverrideBudget);
         }
         let jerk_limited = config.profile != ProfileKind::Trapezoid;
