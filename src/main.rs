@@ -52,6 +52,14 @@ enum Command {
         /// by --resume. Default: PROGRAM.resume beside the program file.
         #[arg(long, value_name = "FILE")]
         state: Option<PathBuf>,
+        /// Listen on this Unix-domain socket for feed override and hold commands, one per line
+        /// (`override 50`, `hold`, `resume`, `status`), each answered `ok ...` or `error: ...`.
+        #[arg(long, value_name = "PATH")]
+        control: Option<PathBuf>,
+        /// Do not read override and hold keys from standard input (they are read unless the
+        /// program comes from it or a resume asks there for its confirmation).
+        #[arg(long)]
+        no_keys: bool,
     },
     /// CiA 402 fault reset (controlword bit 7), verified: the statusword must leave Fault and
     /// stay out; reports 0x603F before and after. Exit status 1 if a fault did not clear.
@@ -86,6 +94,10 @@ enum Command {
         /// picks the format.
         #[arg(long, value_name = "FILE.svg|FILE.png")]
         plot: Option<PathBuf>,
+        /// Feed override at planning time, 1 to 200 %: every programmed feed scaled by it
+        /// (capped by the machine's limits as usual), rapids up to 100 %.
+        #[arg(long, value_name = "PERCENT", value_parser = parse_plan_override)]
+        r#override: Option<f64>,
     },
     /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
     /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
@@ -222,6 +234,16 @@ enum SdoOp {
     },
 }
 
+/// `plan --override`: a percentage from 1 to 200.
+fn parse_plan_override(s: &str) -> Result<f64, String> {
+    let percent: f64 = s
+        .trim_end_matches('%')
+        .parse()
+        .map_err(|_| format!("'{s}' is not a percentage (e.g. 50 for 50 %)"))?;
+    canmotion::offline::check_override(percent / 100.0)?;
+    Ok(percent)
+}
+
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -294,9 +316,17 @@ impl ProgressLine {
                     shown = true;
                 }
                 bar.set_position(line as u64);
+                let hold = match (p.hold, p.held) {
+                    (_, true) => "  HOLD",
+                    (true, false) => "  HOLD (stopping)",
+                    _ => "",
+                };
                 bar.set_message(format!(
-                    "feed {:8.3} mm/s  max following error {:.4} mm",
-                    p.feed_mm_s, p.max_following_error_mm
+                    "feed {:8.3} mm/s  override {:3.0} % (asked {:.0} %){hold}  max following error {:.4} mm",
+                    p.feed_mm_s,
+                    p.override_effective * 100.0,
+                    p.override_requested * 100.0,
+                    p.max_following_error_mm
                 ));
             }
             bar.finish_and_clear();
@@ -318,6 +348,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             path,
             setpoints,
             plot,
+            r#override,
         } => {
             if let Some(p) = &plot {
                 canmotion::plot::PlotFormat::of(p)?;
@@ -330,6 +361,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 path_out: path,
                 setpoints_out: setpoints,
                 plot_out: plot,
+                feed_override: r#override.map(|p| p / 100.0),
             };
             let start_mm = nalgebra::Vector3::zeros();
             let summary = if program.as_os_str() == "-" {
@@ -388,7 +420,10 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             resume,
             yes,
             state,
+            control,
+            no_keys,
         } => {
+            let program_on_stdin = program.as_ref().is_some_and(|p| p.as_os_str() == "-");
             let state_given = state.is_some();
             let state = state.or_else(|| match &program {
                 Some(p) if p.as_os_str() != "-" => {
@@ -441,6 +476,13 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 log: log.clone(),
                 simulate,
             };
+            let _control = control
+                .as_deref()
+                .map(gateway::control::ControlSocket::bind)
+                .transpose()?;
+            if !(no_keys || program_on_stdin || resume && !yes) {
+                gateway::control::spawn_stdin_keys();
+            }
             let progress = std::io::IsTerminal::is_terminal(&std::io::stderr())
                 .then(|| ProgressLine::start(opts.program_text.lines().count() as u64));
             let outcome = if resume {

@@ -31,11 +31,34 @@ pub struct PlanOptions {
     pub setpoints_out: Option<PathBuf>,
     /// A plot of the setpoints' feed, velocity, acceleration and jerk (`.svg` or `.png`).
     pub plot_out: Option<PathBuf>,
+    /// Feed override applied at planning time, as a fraction (`None`: 100 %): every
+    /// programmed feed is scaled by it and capped by the machine's limits as usual; rapids
+    /// follow it up to 100 % (they already run at the machine's fastest). Must lie in
+    /// `0.01..=2` (see [`check_override`]).
+    pub feed_override: Option<f64>,
+}
+
+/// Largest planning-time feed override (200 %).
+pub const MAX_PLAN_OVERRIDE: f64 = 2.0;
+
+/// Checks a planning-time override fraction: finite, 1 % to 200 %.
+pub fn check_override(fraction: f64) -> Result<f64, String> {
+    if (0.01..=MAX_PLAN_OVERRIDE).contains(&fraction) {
+        Ok(fraction)
+    } else {
+        Err(format!(
+            "feed override {} % must be between 1 % and {} %",
+            fraction * 100.0,
+            MAX_PLAN_OVERRIDE * 100.0
+        ))
+    }
 }
 
 /// What a plan amounts to.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlanSummary {
+    /// The planning-time feed override, when one was given.
+    pub feed_override: Option<f64>,
     /// Motion elements of the tool-centre path (lines and arcs, rapids included).
     pub elements: u64,
     /// Of which rapids (G0, G28/G30 moves).
@@ -81,6 +104,9 @@ pub enum OfflineError {
     /// The plot could not be made (its extension, or drawing it).
     #[error("{0}")]
     Plot(String),
+    /// The feed override is out of range.
+    #[error("{0}")]
+    Override(String),
     /// A planned segment did not continue the motion (a planner bug, reported, never sampled).
     #[error("{file}: {source}")]
     Sampling {
@@ -184,8 +210,14 @@ pub fn plan_stream<R: BufRead>(
         name,
         machine.program.compensation,
     );
+    let scale = opts.feed_override.unwrap_or(1.0);
+    check_override(scale).map_err(OfflineError::Override)?;
+    let mut plan_limits = limits(machine);
+    // Rapids run at `max_feed`: scaling it scales them, and caps the scaled feeds below 100 %
+    // exactly as the unscaled ones were capped (`min(x·f, x·max) = x·min(f, max)`).
+    plan_limits.max_feed_mm_s *= scale.min(1.0);
     let mut planner =
-        Planner::with_config(start_mm, &limits(machine), &machine.planner).map_err(|source| {
+        Planner::with_config(start_mm, &plan_limits, &machine.planner).map_err(|source| {
             GatewayError::Plan {
                 file: name.to_string(),
                 source,
@@ -210,6 +242,7 @@ pub fn plan_stream<R: BufRead>(
         None
     };
     let mut summary = PlanSummary {
+        feed_override: opts.feed_override,
         elements: 0,
         rapids: 0,
         arcs: 0,
@@ -239,6 +272,13 @@ pub fn plan_stream<R: BufRead>(
             Item::Note(_) => summary.notes += 1,
             Item::End(_) => {}
         }
+        let item = match item {
+            Item::Motion(mut e) if scale != 1.0 => {
+                e.feed_mm_s = e.feed_mm_s.map(|f| f * scale);
+                Item::Motion(e)
+            }
+            other => other,
+        };
         planner.push(&item).map_err(|source| GatewayError::Plan {
             file: name.to_string(),
             source,
@@ -338,7 +378,16 @@ impl PlanSummary {
             "length        {:.3} mm ({:.3} mm at feed)\n",
             self.length_mm, self.feed_length_mm
         );
-        s += &format!("program time  {:.3} s\n", self.program_s);
+        match self.feed_override {
+            Some(x) => {
+                s += &format!(
+                    "program time  {:.3} s at {:.0} % feed override\n",
+                    self.program_s,
+                    x * 100.0
+                )
+            }
+            None => s += &format!("program time  {:.3} s\n", self.program_s),
+        }
         s += &format!(
             "max feed      {:.3} mm/s ({:.0} mm/min); rapids up to {:.3} mm/s\n",
             self.max_feed_mm_s,
@@ -483,7 +532,7 @@ impl Setpoints {
         let mut p = Vector3::zeros();
         while !self.interp.needs_segments() {
             match self.interp.update(&mut p) {
-                Status::Working { .. } => self.row(p)?,
+                Status::Working { .. } | Status::Held { .. } => self.row(p)?,
                 Status::Finished => {
                     self.row(p)?;
                     break;

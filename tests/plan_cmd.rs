@@ -492,3 +492,81 @@ fn plan_setpoints_of_a_filtered_machine_end_at_the_program_end_within_the_limits
         }
     }
 }
+
+/// The `program time` of `plan`'s report, s.
+fn program_time_s(stdout: &str) -> f64 {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("program time"))
+        .unwrap_or_else(|| panic!("no program time in {stdout}"));
+    line.split_whitespace().nth(2).unwrap().parse().unwrap()
+}
+
+#[test]
+fn plan_override_scales_the_feeds_and_the_program_time() {
+    let dir = tempfile::tempdir().unwrap();
+    // Feed-limited: long lines at 10 mm/s, where acceleration takes a few ms of 20 s.
+    let program = write(
+        dir.path(),
+        "slow.ngc",
+        "G21 G90 G1 X100 F600\nG1 Y100\nG1 X0 Y0\nM2\n",
+    );
+    let time_at = |percent: Option<&str>| {
+        let mut cmd = canmotion();
+        cmd.arg("plan").arg(&program);
+        if let Some(p) = percent {
+            cmd.arg("--override").arg(p);
+        }
+        let out = cmd.output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(
+            out.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        if let Some(p) = percent {
+            assert!(
+                stdout.contains(&format!("at {p} % feed override")),
+                "{stdout}"
+            );
+        }
+        program_time_s(&stdout)
+    };
+    let full = time_at(None);
+    let half = time_at(Some("50"));
+    let double = time_at(Some("200"));
+    assert!((full - 34.14).abs() < 0.1, "{full} s at 100 %");
+    assert!(
+        (half / full - 2.0).abs() < 0.01,
+        "50 %: {half} s against {full} s"
+    );
+    assert!(
+        (full / double - 2.0).abs() < 0.01,
+        "200 %: {double} s against {full} s"
+    );
+    assert_eq!(time_at(Some("100")), full);
+}
+
+#[test]
+fn plan_override_out_of_range_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let program = write(dir.path(), "p.ngc", PROGRAM);
+    for bad in ["0", "300", "0.5", "fast"] {
+        let out = canmotion()
+            .arg("plan")
+            .arg(&program)
+            .arg("--override")
+            .arg(bad)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--override {bad} accepted");
+        assert!(stderr.contains("--override"), "{stderr}");
+        let why = if bad == "fast" {
+            "is not a percentage".to_string()
+        } else {
+            "must be between 1 % and 200 %".to_string()
+        };
+        assert!(stderr.contains(&why), "--override {bad}: {stderr}");
+    }
+}

@@ -248,3 +248,106 @@ fn run_streams_the_compensated_tool_centre_path() {
         );
     }
 }
+
+/// Waits for `cond` on the progress figures, up to `within`; panics with `what` past it.
+fn wait_for(
+    what: &str,
+    within: std::time::Duration,
+    cond: impl Fn(&gateway::progress::ProgressSnapshot) -> bool,
+) -> gateway::progress::ProgressSnapshot {
+    let deadline = std::time::Instant::now() + within;
+    loop {
+        let p = gateway::progress::PROGRESS.read();
+        if cond(&p) {
+            return p;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{what}: not within {within:?}; now {p:?}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// One line to the control socket, its answer back.
+fn control(path: &std::path::Path, line: &str) -> String {
+    use std::io::{BufRead, Write};
+    let mut s =
+        std::os::unix::net::UnixStream::connect(path).expect("connect to the control socket");
+    writeln!(s, "{line}").unwrap();
+    let mut answer = String::new();
+    std::io::BufReader::new(s).read_line(&mut answer).unwrap();
+    answer.trim_end().to_string()
+}
+
+#[test]
+fn a_hold_from_the_control_socket_stops_the_drives_on_the_path_and_a_resume_finishes() {
+    let _one = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("hold.csv");
+    let sock = dir.path().join("control.sock");
+    let socket = gateway::control::ControlSocket::bind(&sock).unwrap();
+    let m = machine(|t| t);
+    let run = {
+        let log = log.clone();
+        let m = m.clone();
+        std::thread::spawn(move || {
+            let bus = Bus::InProc(InProcBus::new());
+            gateway::run(&m, &bus, &opts(LONG, true, Some(log)))
+        })
+    };
+    let secs = std::time::Duration::from_secs;
+    wait_for("streaming at speed", secs(20), |p| p.feed_mm_s > 20.0);
+    assert_eq!(control(&sock, "hold"), "ok override 100 %, hold");
+    let held = wait_for("standstill in the hold", secs(10), |p| p.held);
+    assert_eq!(held.override_effective, 0.0);
+    // The run goes on, held, for 100 cycles: the drives stay enabled, following.
+    wait_for("100 cycles held", secs(10), |p| {
+        p.cycle >= held.cycle + 100 && p.held
+    });
+    assert!(!run.is_finished(), "the run ended during the hold");
+    assert_eq!(control(&sock, "override 80"), "ok override 80 %, hold");
+    assert!(control(&sock, "override 300").starts_with("error: override 300 %"));
+    assert_eq!(control(&sock, "resume"), "ok override 80 %");
+    let s = run
+        .join()
+        .unwrap()
+        .expect("the run finishes after the resume");
+    drop(socket);
+    assert!(!sock.exists(), "the socket is removed");
+    // Ends at the program's end (X150 Y150 Z-4: 1000, 1000 and 2000 counts/mm).
+    let end = [150_000, 150_000, -8000];
+    for (i, want) in end.iter().enumerate() {
+        assert_eq!(s.target_counts[i], *want, "axis {}", s.axes[i]);
+        assert!((s.final_counts[i] - want).abs() <= 1, "axis {}", s.axes[i]);
+    }
+    // The log: 100 cycles or more of constant setpoints strictly inside the line.
+    let text = std::fs::read_to_string(&log).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    let cmd = |r: &Vec<f64>| [r[2], r[3], r[4]];
+    let mut longest = (0usize, [0.0; 3]);
+    let mut run_len = 0;
+    for w in rows.windows(2) {
+        let p = cmd(&w[1]);
+        let inside = p[0] > 1.0 && p[0] < 149.0;
+        run_len = if cmd(&w[0]) == p && inside {
+            run_len + 1
+        } else {
+            0
+        };
+        if run_len > longest.0 {
+            longest = (run_len, p);
+        }
+    }
+    assert!(longest.0 >= 100, "held {} cycles at most", longest.0);
+    let p = longest.1;
+    // On the diagonal: Z = -4·X/150 (within the log's rounding).
+    assert!(
+        (p[0] - p[1]).abs() < 1e-3 && (p[2] + 4.0 * p[0] / 150.0).abs() < 1e-3,
+        "{p:?}"
+    );
+}

@@ -198,6 +198,8 @@ pub struct CyclicMaster {
     last_ferr_mm: Vec<f64>,
     /// Cycles spent streaming.
     pub streaming_cycles: u64,
+    /// The feed override and hold the operator wants (given to the motion once supplied).
+    override_wanted: (f64, bool),
 }
 
 impl CyclicMaster {
@@ -238,6 +240,7 @@ impl CyclicMaster {
             max_ferr_mm: vec![0.0; n],
             last_ferr_mm: vec![0.0; n],
             streaming_cycles: 0,
+            override_wanted: (1.0, false),
             axes,
         }
     }
@@ -347,6 +350,26 @@ impl CyclicMaster {
     /// Supply the motion once [`Phase::Armed`]: an interpolator planned from [`Self::armed_mm`].
     pub fn supply_motion(&mut self, interp: Interpolator) {
         self.motion = Some(interp);
+        if self.override_wanted != (1.0, false) {
+            self.apply_override();
+        }
+    }
+
+    /// The operator wants the feed override `fraction` (1 = 100 %) and, with `hold`, a feed
+    /// hold: the motion's override ramps there from the next cycle (on the motion supplied
+    /// later, from its start). A hold keeps the drives enabled, streaming the held point. A
+    /// motion without an override ramp ignores it.
+    pub fn set_override(&mut self, fraction: f64, hold: bool) {
+        self.override_wanted = (fraction, hold);
+        self.apply_override();
+    }
+
+    fn apply_override(&mut self) {
+        let (fraction, hold) = self.override_wanted;
+        if let Some(m) = self.motion.as_mut() {
+            let _ = m.set_override(fraction);
+            let _ = if hold { m.hold() } else { m.resume() };
+        }
     }
 
     /// Feed a received frame; TPDOs of our axes update their feedback, a boot-up message of one
@@ -636,7 +659,9 @@ impl CyclicMaster {
             let mut p = Vector3::zeros();
             let status = self.motion.as_mut().map(|m| m.update(&mut p));
             match status {
-                Some(Status::Working { line }) => {
+                // A hold at standstill keeps streaming the held point: the drives stay
+                // enabled, following.
+                Some(Status::Working { line } | Status::Held { line }) => {
                     if let Some(prev) = self.line
                         && prev != line
                     {
@@ -1035,6 +1060,7 @@ mod tests {
                 path_out: None,
                 setpoints_out: Some(file.clone()),
                 plot_out: None,
+                feed_override: None,
             };
             crate::offline::plan_stream(&m, program.as_bytes(), "t.ngc", armed, &opts).unwrap();
             let text = std::fs::read_to_string(&file).unwrap();

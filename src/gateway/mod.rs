@@ -1,6 +1,7 @@
 //! The gateway: start the drives up over SDO, stream the program's setpoints on SYNC from the
 //! cyclic thread, watch the drives, and bring everything down in order.
 
+pub mod control;
 pub mod cyclic;
 pub mod cyclic_bus;
 pub mod io;
@@ -18,7 +19,7 @@ use nalgebra::Vector3;
 use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
-use crate::interp::Interpolator;
+use crate::interp::{Interpolator, OverrideRamp};
 use crate::planner::{Limits, Plan, PlanError};
 use crate::rt::{self, Ticker, Timing};
 use cyclic::{CycleRecord, CyclicMaster, Phase};
@@ -257,7 +258,8 @@ impl StopPoint {
             return None; // streaming never started
         }
         // The latest sample is the plan's point at that time (its end once finished).
-        let plan_time_s = interp.elapsed_s().min(interp.duration_s());
+        // Plan time, not wall time: an override or a hold makes them differ.
+        let plan_time_s = interp.plan_time_s().min(interp.duration_s());
         Some(StopPoint {
             plan_time_s,
             path_mm: interp.last_mm(),
@@ -631,6 +633,9 @@ async fn run_async(
     opts: &RunOptions,
     source: &mut dyn MotionSource,
 ) -> Result<Summary, GatewayError> {
+    // The feed override's ramp (none when the planner keeps no acceleration for it).
+    let ramp = OverrideRamp::for_machine(&limits(machine), &machine.planner);
+    control::CONTROL.reset(ramp.is_ok());
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
     let start_counts = startup::start(machine, bus, &mut io).await?;
@@ -704,9 +709,14 @@ async fn run_async(
     let plan_result = match armed_rx.await {
         Ok(armed_mm) => {
             let r = source.plan(machine, armed_mm).and_then(|plan| {
-                Interpolator::new(plan, machine.cycle_s()).map_err(|e| {
-                    GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
-                })
+                Interpolator::new(plan, machine.cycle_s())
+                    .map(|i| match ramp {
+                        Ok(r) => i.with_override_ramp(r),
+                        Err(_) => i,
+                    })
+                    .map_err(|e| {
+                        GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
+                    })
             });
             match r {
                 Ok(interp) => {
@@ -842,8 +852,13 @@ fn cyclic_thread(
     // the master's own figure).
     let on_path: Vec<bool> = machine.axes.iter().map(|a| a.xyz().is_some()).collect();
     let mut prev_cmd_mm: Option<[f64; crate::config::machine::MAX_AXES]> = None;
+    let mut control_seen = 0u64;
     loop {
         ticker.wait();
+        // Override and hold from the operator: atomics only, applied from this cycle's sample.
+        if let Some((fraction, hold)) = control::CONTROL.poll(&mut control_seen) {
+            master.set_override(fraction, hold);
+        }
         // Feedback and error frames received since the last cycle.
         if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {
             port_err.get_or_insert(e);
@@ -940,6 +955,14 @@ fn cyclic_thread(
             feed2.sqrt() / master.period_s(),
             max_ferr_mm,
         );
+        if let Some(m) = master.motion() {
+            progress::PROGRESS.store_override(
+                m.effective_override(),
+                m.requested_override(),
+                m.is_held(),
+                m.is_standing_still(),
+            );
+        }
         // Wall-clock instants of arming and of a failure: cycle counts do not see the periods
         // an overrun skipped.
         if master.bit12_cycle.is_some() && bit12_ns.is_none() {

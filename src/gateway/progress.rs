@@ -20,6 +20,11 @@ pub struct Progress {
     feed_mm_s: AtomicU64,
     /// `f64` bits.
     max_following_error_mm: AtomicU64,
+    /// `f64` bits: effective and requested feed override.
+    override_effective: AtomicU64,
+    override_requested: AtomicU64,
+    /// Bit 0: hold asked; bit 1: standing still in it.
+    hold: AtomicU64,
 }
 
 /// What [`Progress::read`] returns.
@@ -33,6 +38,14 @@ pub struct ProgressSnapshot {
     pub feed_mm_s: f64,
     /// Largest following error of any axis since the run started.
     pub max_following_error_mm: f64,
+    /// Effective feed override (fraction; ramps towards the requested one).
+    pub override_effective: f64,
+    /// Requested feed override (fraction).
+    pub override_requested: f64,
+    /// A feed hold is asked for.
+    pub hold: bool,
+    /// The hold has brought the motion to standstill.
+    pub held: bool,
 }
 
 impl Progress {
@@ -42,7 +55,20 @@ impl Progress {
             line: AtomicU64::new(0),
             feed_mm_s: AtomicU64::new(0),
             max_following_error_mm: AtomicU64::new(0),
+            override_effective: AtomicU64::new(0x3FF0_0000_0000_0000),
+            override_requested: AtomicU64::new(0x3FF0_0000_0000_0000),
+            hold: AtomicU64::new(0),
         }
+    }
+
+    /// Stores the motion's feed override figures (the cyclic thread).
+    pub fn store_override(&self, effective: f64, requested: f64, hold: bool, held: bool) {
+        self.override_effective
+            .store(effective.to_bits(), Ordering::Relaxed);
+        self.override_requested
+            .store(requested.to_bits(), Ordering::Relaxed);
+        self.hold
+            .store(u64::from(hold) | u64::from(held) << 1, Ordering::Relaxed);
     }
 
     /// Stores one cycle's figures (the cyclic thread).
@@ -71,6 +97,10 @@ impl Progress {
             max_following_error_mm: f64::from_bits(
                 self.max_following_error_mm.load(Ordering::Relaxed),
             ),
+            override_effective: f64::from_bits(self.override_effective.load(Ordering::Relaxed)),
+            override_requested: f64::from_bits(self.override_requested.load(Ordering::Relaxed)),
+            hold: self.hold.load(Ordering::Relaxed) & 1 != 0,
+            held: self.hold.load(Ordering::Relaxed) & 2 != 0,
         }
     }
 }
@@ -87,13 +117,18 @@ mod tests {
         let p = Progress::new();
         assert_eq!(p.read().line, None);
         p.store(7, Some(12), 25.5, 0.004);
+        p.store_override(0.25, 0.5, true, false);
         assert_eq!(
             p.read(),
             ProgressSnapshot {
                 cycle: 7,
                 line: Some(12),
                 feed_mm_s: 25.5,
-                max_following_error_mm: 0.004
+                max_following_error_mm: 0.004,
+                override_effective: 0.25,
+                override_requested: 0.5,
+                hold: true,
+                held: false,
             }
         );
     }

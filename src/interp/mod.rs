@@ -20,6 +20,55 @@
 //! (the planner keeps every settled segment ending at a speed it can stop from, so that holding
 //! is a planning failure to report, never a normal event).
 //!
+//! # Feed override and feed hold
+//!
+//! The sample times above are *plan* times. With an [`OverrideRamp`] configured
+//! ([`Interpolator::with_override_ramp`]), the plan-time cursor `τ` advances by `k·T` per cycle
+//! instead of `T`: `k ∈ [0, 1]` is the effective override, so every axis moves at `k` times its
+//! planned speed along the same path. [`Interpolator::set_override`] asks for a new value,
+//! [`Interpolator::hold`] for `k = 0` (the motion stops on the path, wherever it is: not at a
+//! segment end) and [`Interpolator::resume`] for the requested value again. A change is planned
+//! at once from the state of the latest sample and moves `k` from the very next
+//! [`update`](Interpolator::update): within one cycle.
+//!
+//! `k` never steps: it follows a jerk-limited ramp (an S-curve in `k`: `|k'| ≤ D`, `|k''| ≤ J`,
+//! [`OverrideRamp`]), replanned from the current `k` and `k'` whenever the request changes, and it
+//! never leaves `[0, 1]`: a ramp reaches its target without overshoot, and one replanned in
+//! flight goes no further than where the current one would have stopped. With the plan's path
+//! quantities of each axis (`v`, `a`, `j` at plan time `τ`), the setpoints' derivatives are
+//!
+//! - velocity `k·v`,
+//! - acceleration `k²·a + k'·v`,
+//! - jerk `k³·j + 3k·k'·a + k''·v`.
+//!
+//! The planner lets its profiles use the share `s` ([`crate::planner::PlannerConfig::path_acc_share`])
+//! of each axis's acceleration `A` and jerk `Jₐ`, and bounds every axis's speed by
+//! `V = min(max_vel, max_feed)`. [`OverrideRamp::for_machine`] takes the ramp's rates from the
+//! share `1 − s` left over:
+//!
+//! - `D ≤ (1 − s)·A/V`, so `|k'·v| ≤ (1 − s)·A` and, with `k ≤ 1`, `|k²·a| ≤ s·A`: the sum is
+//!   within `A`;
+//! - for S-curves also `D ≤ (1 − s)·Jₐ/(6·s·A)` and `J ≤ (1 − s)·Jₐ/(2·V)`, so
+//!   `|3k·k'·a| ≤ (1 − s)·Jₐ/2` and `|k''·v| ≤ (1 − s)·Jₐ/2`, and with `|k³·j| ≤ s·Jₐ` the sum
+//!   is within `Jₐ`.
+//!
+//! At a junction the planner spends what its profiles leave of an axis's acceleration on the
+//! velocity vector's turn within one period. Sampled with steps of `k·T` in plan time, that
+//! turn's contribution to the second (third) difference scales with `k` (`k²`), so a ramp
+//! down frees `(1 − k)·A` for the `k'·v` term; while `k` leaves 1, `k'` and `1 − k` grow together
+//! from 0 (the ramp is an S-curve) and the excess, at most `J·v²/(2A)` per axis, is far below a
+//! percent of `A` for any realistic `J` (`tests/override_limits.rs` checks random programs
+//! against the limits within 1 %).
+//!
+//! Above 100 % the runtime override is clamped to 100 %: time scaling by `k > 1` multiplies the
+//! planned acceleration by `k²` and the jerk by `k³`, and the plan already uses the whole share
+//! `s` of them where it accelerates hardest, so any `k > 1` breaks a limit somewhere. Feeds
+//! above the programmed ones need a new plan (`canmotion plan --override`).
+//!
+//! A dwell is scaled like the motion (it lasts `1/k` as long, and a hold pauses it). The end of
+//! a closed queue is still exact: the sample whose `τ` reaches it is the last segment's end
+//! point, bit for bit.
+//!
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
 pub mod filter;
@@ -28,7 +77,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use crate::planner::{Plan, Segment};
+use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment};
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
 /// that rounding in `k · period_s` never adds one extra period of standing still.
@@ -47,6 +96,12 @@ pub enum Status {
     Starved,
     /// The sample is the plan's final point (this call and every later one).
     Finished,
+    /// A hold (or a 0 % override) has brought the motion to standstill on the path: the same
+    /// sample as the previous one, on a segment of this source line, until a resume.
+    Held {
+        /// 1-based source line of the segment the motion stopped on.
+        line: usize,
+    },
 }
 
 /// Why an interpolator could not be built or fed.
@@ -67,6 +122,253 @@ pub enum InterpError {
         /// The segment's source line.
         line: usize,
     },
+    /// An override that is not a finite fraction of at least 0.
+    #[error("feed override {fraction} must be a finite fraction of at least 0 (1 = 100 %)")]
+    InvalidOverride {
+        /// The offending fraction.
+        fraction: f64,
+    },
+    /// The override or a hold was asked of an interpolator without an override ramp.
+    #[error("feed override and hold need an override ramp, and this motion has none")]
+    NoOverrideRamp,
+    /// Ramp rates that are not finite and positive.
+    #[error(
+        "override ramp rates {rate_per_s} /s and {rate_change_per_s2} /s² must be finite and greater than zero"
+    )]
+    InvalidOverrideRamp {
+        /// `D`.
+        rate_per_s: f64,
+        /// `J`.
+        rate_change_per_s2: f64,
+    },
+    /// The planner keeps nothing of the axes' acceleration for an override ramp.
+    #[error(
+        "planner path_acc_share = 1 leaves no acceleration for a feed override or hold ramp: set it below 1 (0.75 is the default)"
+    )]
+    NoOverrideBudget,
+}
+
+/// How fast the effective override `k` may change: `|k'| ≤ max_rate_per_s` and
+/// `|k''| ≤ max_rate_change_per_s2` (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OverrideRamp {
+    max_rate_per_s: f64,
+    max_rate_change_per_s2: f64,
+}
+
+impl OverrideRamp {
+    /// A ramp with these rates (`D` in 1/s, `J` in 1/s²), both finite and positive.
+    pub fn new(
+        max_rate_per_s: f64,
+        max_rate_change_per_s2: f64,
+    ) -> Result<OverrideRamp, InterpError> {
+        let ok = |x: f64| x > 0.0 && x.is_finite();
+        if !(ok(max_rate_per_s) && ok(max_rate_change_per_s2)) {
+            return Err(InterpError::InvalidOverrideRamp {
+                rate_per_s: max_rate_per_s,
+                rate_change_per_s2: max_rate_change_per_s2,
+            });
+        }
+        Ok(OverrideRamp {
+            max_rate_per_s,
+            max_rate_change_per_s2,
+        })
+    }
+
+    /// The fastest ramp that keeps every axis within its limits on top of the plans of
+    /// `config` (see the module documentation for the bounds). Without a jerk limit (a
+    /// trapezoid planner without finite axis jerks), `k'` still ramps up over four periods.
+    pub fn for_machine(
+        limits: &Limits,
+        config: &PlannerConfig,
+    ) -> Result<OverrideRamp, InterpError> {
+        let s = config.path_acc_share;
+        let free = 1.0 - s;
+        if free <= 0.0 || free.is_nan() {
+            return Err(InterpError::NoOverrideBudget);
+        }
+        let jerk_limited = config.profile != ProfileKind::Trapezoid;
+        let mut d = f64::INFINITY;
+        let mut j = f64::INFINITY;
+        for i in 0..3 {
+            let v = limits.max_vel_mm_s[i].min(limits.max_feed_mm_s);
+            let a = limits.max_acc_mm_s2[i];
+            let jerk = config.max_jerk_mm_s3[i];
+            d = d.min(free * a / v);
+            if jerk.is_finite() {
+                if jerk_limited {
+                    d = d.min(free * jerk / (6.0 * s * a));
+                }
+                j = j.min(free * jerk / (2.0 * v));
+            }
+        }
+        if !j.is_finite() {
+            j = d / (4.0 * config.period_s);
+        }
+        OverrideRamp::new(d, j)
+    }
+
+    /// `D`: the largest `|k'|`, 1/s.
+    pub fn max_rate_per_s(&self) -> f64 {
+        self.max_rate_per_s
+    }
+
+    /// `J`: the largest `|k''|`, 1/s².
+    pub fn max_rate_change_per_s2(&self) -> f64 {
+        self.max_rate_change_per_s2
+    }
+
+    /// Duration of a ramp between two overrides, starting and ending with `k' = 0` (e.g. a
+    /// hold from a steady override `from` to 0).
+    pub fn ramp_time_s(&self, from: f64, to: f64) -> f64 {
+        let (d, j) = (self.max_rate_per_s, self.max_rate_change_per_s2);
+        let delta = (to - from).abs();
+        if delta >= d * d / j {
+            delta / d + d / j
+        } else {
+            2.0 * (delta / j).sqrt()
+        }
+    }
+}
+
+/// The effective override `k` against time since a ramp started: three phases of constant
+/// `k''` (to the peak `k'`, at it, back to 0), then `k` constant at the target. `τ` is
+/// integrated exactly, so the plan time never drifts.
+#[derive(Debug, Clone, Copy)]
+struct KProfile {
+    /// Samples counted when the ramp started (its time 0), and the plan time then.
+    n0: u64,
+    tau0_s: f64,
+    /// State at the start of each phase: `k`, `k'`, and `∫k dt` since the ramp started.
+    k: [f64; 3],
+    rate: [f64; 3],
+    integral_s: [f64; 3],
+    /// `k''` and duration of each phase.
+    rate_change: [f64; 3],
+    dur_s: [f64; 3],
+    /// The target and `∫k dt` over the whole ramp.
+    k_end: f64,
+    integral_end_s: f64,
+}
+
+/// `k`, `k'` and `∫k dt` at some time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct KState {
+    k: f64,
+    rate: f64,
+    integral_s: f64,
+    /// The ramp is over (`k` is the target, `k' = 0`).
+    done: bool,
+}
+
+impl KProfile {
+    /// `k = k0` from the start, forever.
+    fn steady(n0: u64, tau0_s: f64, k0: f64) -> KProfile {
+        KProfile {
+            n0,
+            tau0_s,
+            k: [k0; 3],
+            rate: [0.0; 3],
+            integral_s: [0.0; 3],
+            rate_change: [0.0; 3],
+            dur_s: [0.0; 3],
+            k_end: k0,
+            integral_end_s: 0.0,
+        }
+    }
+
+    /// The time-optimal ramp from `k0`, `k' = rate0` to `target` with `k' = 0` at the end.
+    fn plan(n0: u64, tau0_s: f64, k0: f64, rate0: f64, target: f64, r: &OverrideRamp) -> KProfile {
+        let (dm, jm) = (r.max_rate_per_s, r.max_rate_change_per_s2);
+        // Where k settles if k' goes to 0 at once.
+        let k_settle = k0 + rate0 * rate0.abs() / (2.0 * jm);
+        let sigma = if target > k_settle {
+            1.0
+        } else if target < k_settle {
+            -1.0
+        } else {
+            0.0
+        };
+        // Peak k' (signed): from rate0 to the peak and back to 0 covers target − k0.
+        let peak = if sigma == 0.0 {
+            0.0
+        } else {
+            let (kk, rr, gg) = (sigma * k0, sigma * rate0, sigma * target);
+            sigma
+                * ((2.0 * jm * (gg - kk) + rr * rr) / 2.0)
+                    .max(0.0)
+                    .sqrt()
+                    .min(dm)
+        };
+        let t1 = (peak - rate0).abs() / jm;
+        let t3 = peak.abs() / jm;
+        let dk1 = 0.5 * (rate0 + peak) * t1;
+        let dk3 = 0.5 * peak * t3;
+        let t2 = if peak != 0.0 {
+            ((target - k0 - dk1 - dk3) / peak).max(0.0)
+        } else {
+            0.0
+        };
+        let mut p = KProfile {
+            n0,
+            tau0_s,
+            k: [k0; 3],
+            rate: [rate0; 3],
+            integral_s: [0.0; 3],
+            rate_change: [(peak - rate0).signum() * jm, 0.0, -peak.signum() * jm],
+            dur_s: [t1, t2, t3],
+            k_end: target,
+            integral_end_s: 0.0,
+        };
+        if t1 == 0.0 {
+            p.rate_change[0] = 0.0;
+        }
+        if t3 == 0.0 {
+            p.rate_change[2] = 0.0;
+        }
+        for i in 0..3 {
+            let end = p.phase_at(i, p.dur_s[i]);
+            if i < 2 {
+                p.k[i + 1] = end.k;
+                p.rate[i + 1] = end.rate;
+                p.integral_s[i + 1] = end.integral_s;
+            } else {
+                p.integral_end_s = end.integral_s;
+            }
+        }
+        p
+    }
+
+    /// The state `t_s` into phase `i`.
+    fn phase_at(&self, i: usize, t_s: f64) -> KState {
+        let (k, r, j) = (self.k[i], self.rate[i], self.rate_change[i]);
+        KState {
+            k: (k + r * t_s + 0.5 * j * t_s * t_s).clamp(0.0, 1.0),
+            rate: r + j * t_s,
+            integral_s: self.integral_s[i]
+                + k * t_s
+                + 0.5 * r * t_s * t_s
+                + j * t_s * t_s * t_s / 6.0,
+            done: false,
+        }
+    }
+
+    /// The state `t_s` after the ramp started.
+    fn at(&self, t_s: f64) -> KState {
+        let mut t = t_s;
+        for i in 0..3 {
+            if t < self.dur_s[i] {
+                return self.phase_at(i, t);
+            }
+            t -= self.dur_s[i];
+        }
+        KState {
+            k: self.k_end,
+            rate: 0.0,
+            integral_s: self.integral_end_s + self.k_end * t,
+            done: true,
+        }
+    }
 }
 
 /// Samples planned segments at a fixed period. See the module documentation.
@@ -86,6 +388,17 @@ pub struct Interpolator {
     /// Source line of the segment of the latest sample (or of the first queued before any).
     line: Option<usize>,
     finished: bool,
+    /// The override ramp; `None`: no override, `k = 1` always.
+    ramp: Option<OverrideRamp>,
+    /// The override asked for (may exceed 1; clamped to 1 in effect).
+    requested: f64,
+    /// A hold is asked for.
+    held: bool,
+    /// `k` against time since the latest change.
+    k_profile: KProfile,
+    /// `k` at the latest sample, and its plan time.
+    last_k: KState,
+    last_tau_s: f64,
 }
 
 impl Interpolator {
@@ -115,7 +428,124 @@ impl Interpolator {
             last_mm: start_mm,
             line: None,
             finished: false,
+            ramp: None,
+            requested: 1.0,
+            held: false,
+            k_profile: KProfile::steady(0, 0.0, 1.0),
+            last_k: KState {
+                k: 1.0,
+                rate: 0.0,
+                integral_s: 0.0,
+                done: true,
+            },
+            last_tau_s: 0.0,
         })
+    }
+
+    /// Allows [`set_override`](Self::set_override), [`hold`](Self::hold) and
+    /// [`resume`](Self::resume), with `k` ramping within `ramp`.
+    pub fn with_override_ramp(mut self, ramp: OverrideRamp) -> Interpolator {
+        self.ramp = Some(ramp);
+        self
+    }
+
+    /// Asks for the feed override `fraction` (1 = 100 %; above 1 counts as 1, see the module
+    /// documentation). `k` starts moving towards it with the next [`update`](Self::update)
+    /// (during a hold, on [`resume`](Self::resume)).
+    pub fn set_override(&mut self, fraction: f64) -> Result<(), InterpError> {
+        if !(fraction >= 0.0 && fraction.is_finite()) {
+            return Err(InterpError::InvalidOverride { fraction });
+        }
+        if self.ramp.is_none() {
+            return Err(InterpError::NoOverrideRamp);
+        }
+        self.requested = fraction;
+        self.retarget();
+        Ok(())
+    }
+
+    /// Feed hold: `k` ramps down to 0 and the motion stops on the path; [`Status::Held`] once
+    /// it stands still.
+    pub fn hold(&mut self) -> Result<(), InterpError> {
+        if self.ramp.is_none() {
+            return Err(InterpError::NoOverrideRamp);
+        }
+        self.held = true;
+        self.retarget();
+        Ok(())
+    }
+
+    /// Ends a hold: `k` ramps back up to the requested override.
+    pub fn resume(&mut self) -> Result<(), InterpError> {
+        if self.ramp.is_none() {
+            return Err(InterpError::NoOverrideRamp);
+        }
+        self.held = false;
+        self.retarget();
+        Ok(())
+    }
+
+    /// The override asked for with [`set_override`](Self::set_override) (1 by default).
+    pub fn requested_override(&self) -> f64 {
+        self.requested
+    }
+
+    /// The effective override `k` of the latest sample (0 while held, 1 without override).
+    pub fn effective_override(&self) -> f64 {
+        self.last_k.k
+    }
+
+    /// Whether a hold is asked for (the motion may still be ramping down; see
+    /// [`is_standing_still`](Self::is_standing_still)).
+    pub fn is_held(&self) -> bool {
+        self.held
+    }
+
+    /// Whether `k` has ramped down to 0 and stays there (a hold, or a 0 % override, done).
+    pub fn is_standing_still(&self) -> bool {
+        self.last_k.done && self.last_k.k == 0.0
+    }
+
+    /// The override ramp, if any.
+    pub fn override_ramp(&self) -> Option<OverrideRamp> {
+        self.ramp
+    }
+
+    /// The target of `k`: 0 in a hold, else the requested override up to 1.
+    fn k_target(&self) -> f64 {
+        if self.held {
+            0.0
+        } else {
+            self.requested.min(1.0)
+        }
+    }
+
+    /// Replans `k` from the latest sample's state towards the current target.
+    fn retarget(&mut self) {
+        let Some(ramp) = self.ramp else { return };
+        let target = self.k_target();
+        let now = self.k_at(self.samples);
+        if now.done && now.k == target {
+            return;
+        }
+        let tau_s = self.tau_at(self.samples);
+        self.k_profile = KProfile::plan(self.samples, tau_s, now.k, now.rate, target, &ramp);
+    }
+
+    /// `k` at the sample numbered `n`.
+    fn k_at(&self, n: u64) -> KState {
+        let p = &self.k_profile;
+        p.at(n.saturating_sub(p.n0) as f64 * self.period_s)
+    }
+
+    /// Plan time of the sample numbered `n` (never before the latest sample's).
+    fn tau_at(&self, n: u64) -> f64 {
+        let tau_s = self.k_profile.tau0_s + self.k_at(n).integral_s;
+        if n > self.samples {
+            tau_s.max(self.last_tau_s)
+        } else {
+            tau_s
+        }
     }
 
     /// Queues the next segment: it must start exactly where and when the last queued one ended
@@ -143,7 +573,9 @@ impl Interpolator {
     /// Whether the next sample's time lies beyond the queued segments of an open queue: the
     /// producer must push (or close) before the next [`update`](Self::update).
     pub fn needs_segments(&self) -> bool {
-        !self.closed && self.next_time_s() >= self.queued_end_s - END_SNAP_PERIODS * self.period_s
+        !self.closed
+            && self.tau_at(self.samples.saturating_add(1))
+                >= self.queued_end_s - END_SNAP_PERIODS * self.period_s
     }
 
     /// Produces the next sample into `out_mm`: the position one period after the previous
@@ -153,23 +585,32 @@ impl Interpolator {
             *out_mm = self.last_mm;
             return Status::Finished;
         }
-        // Exact for any realistic count (< 2^53 samples).
-        let t_s = self.next_time_s();
+        // Exact for any realistic count (< 2^53 samples); without override `τ = n·T`.
+        let n = self.samples.saturating_add(1);
+        let k = self.k_at(n);
+        let t_s = self.tau_at(n);
         let snap_s = END_SNAP_PERIODS * self.period_s;
         while let Some(seg) = self.queue.front() {
             // The last segment of an open queue is kept: it is what a starved call holds to.
             if t_s < seg.end_time_s() - snap_s {
-                self.samples = self.samples.saturating_add(1);
+                self.samples = n;
+                self.last_k = k;
+                self.last_tau_s = t_s;
                 self.line = Some(seg.line);
                 self.last_mm = seg.position_at(t_s - seg.start_time_s);
                 *out_mm = self.last_mm;
+                if k.done && k.k == 0.0 {
+                    return Status::Held { line: seg.line };
+                }
                 return Status::Working { line: seg.line };
             }
             self.line = Some(seg.line);
             self.queue.pop_front();
         }
         if self.closed {
-            self.samples = self.samples.saturating_add(1);
+            self.samples = n;
+            self.last_k = k;
+            self.last_tau_s = t_s.min(self.queued_end_s);
             self.finished = true;
             self.last_mm = self.queued_end_mm;
             *out_mm = self.last_mm;
@@ -190,9 +631,16 @@ impl Interpolator {
         self.last_mm
     }
 
-    /// Time of the latest sample since the start: `k · period_s` after `k` samples.
+    /// Time of the latest sample since the start: `n · period_s` after `n` samples (real
+    /// time: a hold or an override below 100 % makes it run ahead of the plan time).
     pub fn elapsed_s(&self) -> f64 {
         self.samples as f64 * self.period_s
+    }
+
+    /// Plan time of the latest sample (`τ`; equal to [`elapsed_s`](Self::elapsed_s) without
+    /// override, at most the plan's duration once finished).
+    pub fn plan_time_s(&self) -> f64 {
+        self.last_tau_s
     }
 
     /// Whether the final point has been produced.
@@ -203,6 +651,11 @@ impl Interpolator {
     /// The interpolation period.
     pub fn period_s(&self) -> f64 {
         self.period_s
+    }
+
+    /// End point of the queued motion (the whole program's once closed).
+    pub fn queued_end_mm(&self) -> Vector3<f64> {
+        self.queued_end_mm
     }
 
     /// End time of the queued motion (the whole program's duration once closed).
@@ -216,16 +669,12 @@ impl Interpolator {
     }
 
     /// Number of calls to [`update`](Self::update) needed to reach [`Status::Finished`]
-    /// from the start (1 for a plan without motion), once the queue is closed.
+    /// from the start (1 for a plan without motion), once the queue is closed, at 100 %.
     pub fn total_samples(&self) -> u64 {
         let periods = self.queued_end_s / self.period_s;
         let k = (periods - END_SNAP_PERIODS).ceil().max(1.0);
         // Saturating float-to-int cast: a plan too long to count is "forever".
         k as u64
-    }
-
-    fn next_time_s(&self) -> f64 {
-        self.samples.saturating_add(1) as f64 * self.period_s
     }
 }
 
@@ -350,7 +799,7 @@ mod tests {
             .iter()
             .filter_map(|(_, s)| match s {
                 Status::Working { line } => Some(*line),
-                Status::Finished | Status::Starved => None,
+                Status::Finished | Status::Starved | Status::Held { .. } => None,
             })
             .collect();
         lines.dedup();
@@ -499,6 +948,40 @@ mod tests {
                 max_acc_mm_s2: Vector3::from(acc),
                 max_feed_mm_s: feed,
             })
+    }
+
+    proptest! {
+        /// Whatever the requests and whenever they come, `k` stays in `[0, 1]`, `|k'| ≤ D`
+        /// (by differences of `k` between samples, a `J·T²` of slack), each request moves `k`
+        /// on the next sample unless it is already there, and the plan time never goes back.
+        #[test]
+        fn k_stays_within_0_and_1_and_its_rate_within_the_ramp(
+            requests in proptest::collection::vec((1..120usize, 0.0..1.5f64, any::<bool>()), 1..20),
+        ) {
+            let plan = plan_moves(Vector3::zeros(), &[feed(1, v(1.0e4, 0.0, 0.0), 100.0)], &limits()).unwrap();
+            let ramp = OverrideRamp::new(2.0, 30.0).unwrap();
+            let t = 0.002;
+            let mut interp = Interpolator::new(plan, t).unwrap().with_override_ramp(ramp);
+            let mut p = Vector3::zeros();
+            let (mut k_prev, mut tau_prev) = (1.0, 0.0);
+            for (gap, fraction, hold) in requests {
+                if hold { interp.hold().unwrap() } else { interp.resume().unwrap() }
+                interp.set_override(fraction).unwrap();
+                let target = if hold { 0.0 } else { fraction.min(1.0) };
+                for i in 0..gap {
+                    interp.update(&mut p);
+                    let k = interp.effective_override();
+                    prop_assert!((0.0..=1.0).contains(&k), "k = {}", k);
+                    prop_assert!((k - k_prev).abs() <= 2.0 * t + 30.0 * t * t, "k from {} to {}", k_prev, k);
+                    if i == 0 && k_prev != target {
+                        prop_assert_ne!(k, k_prev, "k did not move towards {}", target);
+                    }
+                    prop_assert!(interp.plan_time_s() >= tau_prev);
+                    k_prev = k;
+                    tau_prev = interp.plan_time_s();
+                }
+            }
+        }
     }
 
     proptest! {

@@ -9,10 +9,23 @@ use nalgebra::Vector3;
 /// Checks the samples of `plan` against `limits` and `config` within 1 % (and a nanometre of
 /// rounding per sample): no NaN, velocity, acceleration and, unless trapezoid, jerk per axis,
 /// and the last sample exactly the plan's end. The error names the sample and the axis.
+#[allow(dead_code)] // not every test binary samples without override
 pub fn limits_hold(plan: Plan, limits: &Limits, config: &PlannerConfig) -> Result<(), String> {
+    let interp = Interpolator::new(plan, config.period_s).map_err(|e| e.to_string())?;
+    limits_hold_driven(interp, limits, config, &mut |_, _| Ok(()))
+}
+
+/// [`limits_hold`] of an interpolator that `drive` may act on (override, hold, resume) before
+/// each sample `k` (1, 2, ...); an error of `drive` ends the check with it.
+#[allow(dead_code)] // not every test binary drives the override
+pub fn limits_hold_driven(
+    mut interp: Interpolator,
+    limits: &Limits,
+    config: &PlannerConfig,
+    drive: &mut dyn FnMut(u64, &mut Interpolator) -> Result<(), String>,
+) -> Result<(), String> {
     let t = config.period_s;
-    let end = plan.end_mm();
-    let mut interp = Interpolator::new(plan, t).map_err(|e| e.to_string())?;
+    let end = interp.queued_end_mm();
     // The last four samples (oldest first).
     let mut s = [Vector3::zeros(); 4];
     s[3] = interp.last_mm();
@@ -21,8 +34,9 @@ pub fn limits_hold(plan: Plan, limits: &Limits, config: &PlannerConfig) -> Resul
     let jerk = config.profile != ProfileKind::Trapezoid;
     while !interp.is_finished() {
         let mut q = Vector3::zeros();
-        interp.update(&mut q);
         k += 1;
+        drive(k, &mut interp)?;
+        interp.update(&mut q);
         if !q.iter().all(|c| c.is_finite()) {
             return Err(format!("sample {k}: {q:?}"));
         }
