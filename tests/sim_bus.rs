@@ -99,6 +99,9 @@ fn end_to_end(m: canmotion::config::Machine) {
 
 #[test]
 fn a_missing_node_is_named() {
+    // Every run resets the process's control state (`gateway::control::CONTROL`), which the
+    // hold test relies on: one run at a time.
+    let _one = one_at_a_time();
     let m = machine(|t| t);
     let bus = InProcBus::new();
     let dict = drive_dict(|t| t);
@@ -118,6 +121,7 @@ fn a_missing_node_is_named() {
 
 #[test]
 fn a_wrong_identity_is_refused_before_any_motion() {
+    let _one = one_at_a_time();
     let m = machine(|t| t);
     let bus = InProcBus::new();
     let good = drive_dict(|t| t);
@@ -172,6 +176,7 @@ fn following_error_fault(m: canmotion::config::Machine) {
 
 #[test]
 fn a_program_that_does_not_parse_moves_nothing() {
+    let _one = one_at_a_time();
     let m = machine(|t| t);
     let bus = Bus::InProc(InProcBus::new());
     // Line 3 is bad: no motion may start, so no drive is even touched.
@@ -187,6 +192,7 @@ fn a_program_that_does_not_parse_moves_nothing() {
 
 #[test]
 fn a_move_out_of_travel_is_refused_before_motion() {
+    let _one = one_at_a_time();
     let m = machine(|t| t);
     let bus = Bus::InProc(InProcBus::new());
     let err = gateway::run(
