@@ -7,7 +7,7 @@
 
 use canmotion::gcode::parse_program;
 use canmotion::interp::{Interpolator, OverrideRamp, Status};
-use canmotion::planner::{Plan, ProfileKind, plan_with};
+use canmotion::planner::{Plan, PlannerConfig, ProfileKind, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -59,9 +59,17 @@ fn check(
     schedule: &[(u64, Command)],
     final_override: f64,
 ) -> Result<(), TestCaseError> {
+    check_with(text, config(profile), schedule, final_override)
+}
+
+fn check_with(
+    text: &str,
+    cfg: PlannerConfig,
+    schedule: &[(u64, Command)],
+    final_override: f64,
+) -> Result<(), TestCaseError> {
     let prog = parse_program(text, "random.ngc", Vector3::zeros())
         .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
-    let cfg = config(profile);
     let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
     let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
     let interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
@@ -144,6 +152,18 @@ proptest! {
         final_override in 0.2..=1.0f64,
     ) {
         check(&program(&moves), ProfileKind::Smooth, &schedule, final_override)?;
+    }
+
+    #[test]
+    fn blended_corners_keep_the_limits_under_override_and_hold(
+        moves in prop::collection::vec(a_move(), 1..30),
+        schedule in a_schedule(),
+        final_override in 0.2..=1.0f64,
+    ) {
+        // G64 P0.5 with a chord tolerance of 10 µm: many corners become arcs (trapezoid).
+        let cfg = PlannerConfig { chord_tol_mm: 0.01, ..config(ProfileKind::Trapezoid) };
+        let text = program(&moves).replacen("G64", "G64 P0.5", 1);
+        check_with(&text, cfg, &schedule, final_override)?;
     }
 }
 

@@ -467,20 +467,19 @@ impl Interpolator {
     /// Feed hold: `k` ramps down to 0 and the motion stops on the path; [`Status::Held`] once
     /// it stands still.
     pub fn hold(&mut self) -> Result<(), InterpError> {
-        if self.ramp.is_none() {
-            return Err(InterpError::NoOverrideRamp);
-        }
-        self.held = true;
-        self.retarget();
-        Ok(())
+        self.set_held(true)
     }
 
     /// Ends a hold: `k` ramps back up to the requested override.
     pub fn resume(&mut self) -> Result<(), InterpError> {
+        self.set_held(false)
+    }
+
+    fn set_held(&mut self, held: bool) -> Result<(), InterpError> {
         if self.ramp.is_none() {
             return Err(InterpError::NoOverrideRamp);
         }
-        self.held = false;
+        self.held = held;
         self.retarget();
         Ok(())
     }
