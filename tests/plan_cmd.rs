@@ -14,6 +14,22 @@ fn canmotion() -> Command {
     Command::new(env!("CARGO_BIN_EXE_canmotion"))
 }
 
+/// `canmotion plan ARGS...`, which must succeed; its standard output.
+fn plan_ok<I, S>(args: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let out = canmotion().arg("plan").args(args).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
@@ -54,21 +70,13 @@ fn plan_writes_a_continuous_path_and_setpoints_within_the_limits() {
     let program = write(dir.path(), "p.ngc", PROGRAM);
     let path = dir.path().join("path.jsonl");
     let setpoints = dir.path().join("sp.csv");
-    let out = canmotion()
-        .arg("plan")
-        .arg(&program)
-        .arg("--path")
-        .arg(&path)
-        .arg("--setpoints")
-        .arg(&setpoints)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = plan_ok([
+        &program,
+        Path::new("--path"),
+        &path,
+        Path::new("--setpoints"),
+        &setpoints,
+    ]);
     assert!(
         stdout.contains("elements      7 (2 rapids, 2 arcs), 1 dwells"),
         "{stdout}"
@@ -202,20 +210,13 @@ fn the_machine_files_offsets_and_g28_position_apply() {
         "G21 G90\nG0 X1 Y2 Z3\nG55 G0 X1\nG28\nM2\n",
     );
     let path = dir.path().join("path.jsonl");
-    let out = canmotion()
-        .arg("plan")
-        .arg(&program)
-        .arg("--machine")
-        .arg(&machine)
-        .arg("--path")
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    plan_ok([
+        &program,
+        Path::new("--machine"),
+        &machine,
+        Path::new("--path"),
+        &path,
+    ]);
     let ends: Vec<[f64; 3]> = std::fs::read_to_string(&path)
         .unwrap()
         .lines()
@@ -245,17 +246,11 @@ fn plan_path(program: &str, machine: Option<&Path>) -> Vec<Record> {
     let dir = tempfile::tempdir().unwrap();
     let file = write(dir.path(), "square.ngc", program);
     let path = dir.path().join("path.jsonl");
-    let mut cmd = canmotion();
-    cmd.arg("plan").arg(&file).arg("--path").arg(&path);
+    let mut args = vec![file.as_path(), Path::new("--path"), &path];
     if let Some(m) = machine {
-        cmd.arg("--machine").arg(m);
+        args.extend([Path::new("--machine"), m]);
     }
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    plan_ok(args);
     let point = |v: &serde_json::Value| -> [f64; 3] {
         let a = v.as_array().unwrap();
         [0, 1, 2].map(|i| a[i].as_f64().unwrap())
@@ -401,20 +396,11 @@ fn g42_mirrors_g41_and_outside_corners_can_be_arcs() {
 fn setpoint_rows(dir: &Path, machine: Option<&Path>) -> Vec<Vec<f64>> {
     let program = write(dir, "p.ngc", PROGRAM);
     let setpoints = dir.join("sp.csv");
-    let mut cmd = canmotion();
-    cmd.arg("plan")
-        .arg(&program)
-        .arg("--setpoints")
-        .arg(&setpoints);
+    let mut args = vec![program.as_path(), Path::new("--setpoints"), &setpoints];
     if let Some(m) = machine {
-        cmd.arg("--machine").arg(m);
+        args.extend([Path::new("--machine"), m]);
     }
-    let out = cmd.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    plan_ok(args);
     std::fs::read_to_string(&setpoints)
         .unwrap()
         .lines()
@@ -512,18 +498,11 @@ fn plan_override_scales_the_feeds_and_the_program_time() {
         "G21 G90 G1 X100 F600\nG1 Y100\nG1 X0 Y0\nM2\n",
     );
     let time_at = |percent: Option<&str>| {
-        let mut cmd = canmotion();
-        cmd.arg("plan").arg(&program);
+        let mut args = vec![program.as_os_str()];
         if let Some(p) = percent {
-            cmd.arg("--override").arg(p);
+            args.extend([std::ffi::OsStr::new("--override"), std::ffi::OsStr::new(p)]);
         }
-        let out = cmd.output().unwrap();
-        let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-        assert!(
-            out.status.success(),
-            "{stdout}{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let stdout = plan_ok(args);
         if let Some(p) = percent {
             assert!(
                 stdout.contains(&format!("at {p} % feed override")),
