@@ -277,6 +277,34 @@ fn accel_bound(
 }
 
 /// Lowers the feeds of `blocks` to the velocity and acceleration limits (see the module docs).
+/// One step of a pass: lowers block `k`'s feed to what each axis's acceleration allows from
+/// its neighbour (the previous block going forward, the next going backward; none across a
+/// rest). Whether it changed.
+fn lower_to_bound(lim: &AxisLimits, blocks: &mut [Block], k: usize, forward: bool) -> bool {
+    let b = &blocks[k];
+    let (tangent, neighbour) = if forward {
+        let prev = (!b.after_rest && k > 0).then(|| &blocks[k - 1]);
+        (
+            &b.start_tangent,
+            prev.map(|p| (&p.end_tangent, p.feed_mm_s)),
+        )
+    } else {
+        let next = (!b.before_rest && k + 1 < blocks.len()).then(|| &blocks[k + 1]);
+        (
+            &b.end_tangent,
+            next.map(|n| (&n.start_tangent, n.feed_mm_s)),
+        )
+    };
+    match accel_bound(lim, b.length_mm, tangent, neighbour) {
+        Some((bound, axis)) if over(b.feed_mm_s, bound) => {
+            blocks[k].feed_mm_s = bound;
+            blocks[k].cause = Some(Cause::Acceleration(axis));
+            true
+        }
+        _ => false,
+    }
+}
+
 fn run_passes(lim: &AxisLimits, blocks: &mut [Block]) {
     // At most this many forward + backward sweeps; each lowering is by more than the tolerance,
     // so the passes end, and in practice within a few sweeps.
@@ -284,36 +312,10 @@ fn run_passes(lim: &AxisLimits, blocks: &mut [Block]) {
     for _ in 0..MAX_SWEEPS {
         let mut changed = false;
         for k in 0..blocks.len() {
-            let prev = (!blocks[k].after_rest && k > 0)
-                .then(|| (blocks[k - 1].end_tangent, blocks[k - 1].feed_mm_s));
-            let b = &blocks[k];
-            if let Some((bound, axis)) = accel_bound(
-                lim,
-                b.length_mm,
-                &b.start_tangent,
-                prev.as_ref().map(|(t, f)| (t, *f)),
-            ) && over(b.feed_mm_s, bound)
-            {
-                blocks[k].feed_mm_s = bound;
-                blocks[k].cause = Some(Cause::Acceleration(axis));
-                changed = true;
-            }
+            changed |= lower_to_bound(lim, blocks, k, true);
         }
         for k in (0..blocks.len()).rev() {
-            let next = (!blocks[k].before_rest && k + 1 < blocks.len())
-                .then(|| (blocks[k + 1].start_tangent, blocks[k + 1].feed_mm_s));
-            let b = &blocks[k];
-            if let Some((bound, axis)) = accel_bound(
-                lim,
-                b.length_mm,
-                &b.end_tangent,
-                next.as_ref().map(|(t, f)| (t, *f)),
-            ) && over(b.feed_mm_s, bound)
-            {
-                blocks[k].feed_mm_s = bound;
-                blocks[k].cause = Some(Cause::Acceleration(axis));
-                changed = true;
-            }
+            changed |= lower_to_bound(lim, blocks, k, false);
         }
         if !changed {
             return;

@@ -128,7 +128,8 @@ fn interpret(path: &Path, name: &str) -> Result<Vec<Item>, Outcome> {
 }
 
 /// The corpus folder and its programs, sorted; `None` (said on stdout) when it is absent.
-fn corpus() -> Option<(PathBuf, Vec<PathBuf>)> {
+/// The corpus directory and its programs, each with its name (the path below the directory).
+fn corpus() -> Option<(PathBuf, Vec<(PathBuf, String)>)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
     if !dir.is_dir() {
         println!("corpus {} is absent: skipping", dir.display());
@@ -137,25 +138,31 @@ fn corpus() -> Option<(PathBuf, Vec<PathBuf>)> {
     let mut files = Vec::new();
     ngc_files(&dir, &mut files);
     files.sort();
-    Some((dir, files))
+    let named = files
+        .into_iter()
+        .map(|path| {
+            let name = path
+                .strip_prefix(&dir)
+                .unwrap_or(&path)
+                .display()
+                .to_string();
+            (path, name)
+        })
+        .collect();
+    Some((dir, named))
 }
 
 /// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
 /// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
 #[test]
 fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
-    let Some((dir, files)) = corpus() else {
+    let Some((_, files)) = corpus() else {
         return;
     };
     let mut checked = 0;
     let mut broken = Vec::new();
-    for path in &files {
-        let name = path
-            .strip_prefix(&dir)
-            .unwrap_or(path)
-            .display()
-            .to_string();
-        let Ok(items) = interpret(path, &name) else {
+    for (path, name) in &files {
+        let Ok(items) = interpret(path, name) else {
             continue;
         };
         for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
@@ -194,13 +201,8 @@ fn corpus_plans_or_names_the_unsupported_feature() {
     let mut planned = 0;
     let mut failures = Vec::new();
     let mut features: BTreeMap<String, usize> = BTreeMap::new();
-    for path in &files {
-        let name = path
-            .strip_prefix(&dir)
-            .unwrap_or(path)
-            .display()
-            .to_string();
-        let outcome = std::panic::catch_unwind(|| run(path, &name))
+    for (path, name) in &files {
+        let outcome = std::panic::catch_unwind(|| run(path, name))
             .unwrap_or_else(|_| Outcome::Failed("PANIC".into()));
         match outcome {
             Outcome::Planned { elements } => {
