@@ -881,6 +881,23 @@ impl SimDrive {
         self.refresh();
     }
 
+    /// Time in which the simulated world did not run (the thread that runs it was descheduled
+    /// for `d`): the motor, its following-error timer and the setpoint being interpolated resume
+    /// where they stopped, instead of moving through time in which nothing updated the demand.
+    /// Everything else (the heartbeat producer, the SYNC and heartbeat consumers, event timers)
+    /// stays on the caller's clock, as a real drive's would.
+    pub fn skip(&mut self, d: Duration) {
+        if let Some(t) = &mut self.last_physics {
+            *t += d;
+        }
+        if let Some(t) = &mut self.ferr_since {
+            *t += d;
+        }
+        if let Some(ip) = &mut self.interp {
+            ip.at += d;
+        }
+    }
+
     /// Integrate the motor from the last update to `now`.
     fn physics(&mut self, now: Duration, out: &mut Vec<Frame>) {
         let Some(mut t) = self.last_physics else {

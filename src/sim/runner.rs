@@ -92,44 +92,16 @@ fn filters_of(drives: &[SimDrive]) -> Vec<crate::bus::Filter> {
     f
 }
 
-/// The simulated drives' clock: wall time, less the time their own thread was frozen.
+/// A wake-up later than its deadline by more than this means the simulated world did not run.
 ///
 /// A real drive has its own processor; the simulated one shares the PC (or a virtual machine's
-/// CPUs, which the host deschedules for 10 ms and more). A wake-up that comes later than its
-/// deadline by more than [`SimClock::FROZEN_AFTER`] means the simulated world did not run, and
-/// charging that time to the motor would move it against a demand that the drive, frozen too,
-/// never updated: a following error that no drive would have. The time is left out instead. A
-/// master that is late while the drives' thread runs on time is still seen as late (missing
-/// SYNCs, a stopping demand, a lost heartbeat), as on real hardware.
-struct SimClock {
-    epoch: Instant,
-    frozen: Duration,
-}
-
-impl SimClock {
-    /// Lateness beyond which a wake-up counts as a frozen simulated world.
-    const FROZEN_AFTER: Duration = Duration::from_millis(2);
-
-    fn new(epoch: Instant) -> Self {
-        SimClock {
-            epoch,
-            frozen: Duration::ZERO,
-        }
-    }
-
-    fn now(&self) -> Duration {
-        self.epoch.elapsed().saturating_sub(self.frozen)
-    }
-
-    /// The thread was due to run by `due` at the latest (a frame or its deadline) and ran at
-    /// `ran`.
-    fn woke(&mut self, due: Instant, ran: Instant) {
-        let late = ran.saturating_duration_since(due);
-        if late > Self::FROZEN_AFTER {
-            self.frozen += late;
-        }
-    }
-}
+/// CPUs, which the host deschedules for 10 ms and more). Charging that time to the motor would
+/// move it against a demand that the drive, frozen too, never updated: a following error that no
+/// drive would have. The motor skips it instead ([`SimDrive::skip`]). The drives' timers stay on
+/// wall time: their heartbeats are not shifted by the freezes, and a master that is late while
+/// the drives' thread runs on time is still seen as late (missing SYNCs, a stopping demand, a
+/// lost heartbeat), as on real hardware.
+const FROZEN_AFTER: Duration = Duration::from_millis(2);
 
 fn run(
     mut drives: Vec<SimDrive>,
@@ -144,7 +116,6 @@ fn run(
     let mut filters = filters_of(&drives);
     // A simulated drive has no controller: injected error frames are sent, never received.
     port.set_error_mask(0)?;
-    let mut clock = SimClock::new(epoch);
     while !stop.load(Ordering::Relaxed) {
         for f in out.drain(..) {
             port.send(&f)?;
@@ -152,16 +123,22 @@ fn run(
         for e in drives.iter_mut().flat_map(|d| d.take_bus_errors()) {
             port.send_error(&e)?;
         }
-        let now = clock.now();
+        let now = epoch.elapsed();
         let next = drives.iter().map(|d| d.poll_at(now)).min().unwrap_or(now);
         let wait = next.saturating_sub(now).min(Duration::from_millis(20));
         let due = Instant::now() + wait;
         let mut got = port.recv_timeout(wait)?;
-        clock.woke(due, Instant::now());
+        let ran = Instant::now();
+        let late = ran.saturating_duration_since(due);
+        if late > FROZEN_AFTER {
+            for d in &mut drives {
+                d.skip(late);
+            }
+        }
         // Handle everything queued, in order, before polling. Frames queued together arrived
         // together: one clock reading serves the batch (a system call saved per frame matters
         // inside User-Mode Linux, where each costs ~20 µs).
-        let now = clock.now();
+        let now = ran.duration_since(epoch);
         while let Some(f) = got {
             for d in &mut drives {
                 d.handle(now, &f, &mut out);

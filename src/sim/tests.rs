@@ -1495,3 +1495,57 @@ fn a_stalled_master_stops_the_demand_and_0x60c5_bounds_the_motor_overshoot() {
     let weak = error_after_a_stalled_master(10_000_000, 24);
     assert!(weak > 2000, "{weak}");
 }
+
+/// The simulated drives share the PC with the master; when their thread is descheduled, the
+/// runner tells them ([`SimDrive::skip`]). The motor then resumes where it stopped, while the
+/// heartbeat stays on its wall-clock grid: a freeze delays at most the beat that fell due in it.
+#[test]
+fn a_frozen_drive_skips_the_time_in_its_motor_but_not_in_its_heartbeat() {
+    let mut b = Bench::with(SimDrive::new(dict(), NODE).with_position(0));
+    b.set(0x1006, 0, 4000);
+    b.set(0x60C2, 1, 4);
+    b.set(0x60C2, 2, -3);
+    b.set(0x1017, 0, 100);
+    b.set(0x6060, 0, 7);
+    b.nmt(nmt::START, NODE);
+    b.enable();
+    b.set(0x60C1, 1, 0);
+    b.cw(0x1F);
+    b.clear();
+    let t0 = b.now;
+    let step = 400; // counts per 4 ms: 100 mm/s at 1000 counts/mm
+    let mut sp = 0;
+    let mut before_freeze = None;
+    for c in 0..150 {
+        sp += step * c.min(25) / 25;
+        if c == 80 {
+            // The drives' thread is descheduled for 30 ms; the master's frames queue meanwhile
+            // and are handled together at the wake-up, as the runner does.
+            before_freeze = Some(b.get(0x6064, 0));
+            b.now += ms(30);
+            b.drive.skip(ms(30));
+            assert_eq!(
+                b.get(0x6064, 0),
+                before_freeze.unwrap(),
+                "the motor moved through frozen time"
+            );
+        } else {
+            b.advance(ms(4));
+        }
+        b.rpdo(1, &cw_and_i32(0x1F, sp));
+        b.sync();
+    }
+    assert!(before_freeze.is_some());
+    assert_eq!(b.state(), State::OperationEnabled, "{:?}", b.emcys());
+    // The heartbeat grid from before the freeze holds after it: every beat but the one that fell
+    // due in the freeze is on t0 + k·100 ms.
+    let hb = b.heartbeats();
+    assert!(hb.len() >= 5, "{hb:?}");
+    let off_grid: Vec<_> = hb
+        .iter()
+        .filter(|(t, _)| !(*t - t0).as_millis().is_multiple_of(100))
+        .collect();
+    assert!(off_grid.len() <= 1, "heartbeats off the grid: {off_grid:?}");
+    let gaps = hb.windows(2).map(|w| w[1].0 - w[0].0).max().unwrap();
+    assert!(gaps <= ms(130), "{gaps:?}");
+}
