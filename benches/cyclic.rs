@@ -4,6 +4,11 @@
 //! and the conversion of the 6 setpoints to counts. The machine is
 //! `dictionaries/machines/bench-6ax-2ms.toml` (6 axes, 2 ms cycle).
 //!
+//! A second group runs the same cycle (no filter) at a feed override of 200 %, on the machine's
+//! own look-ahead plan of that program and of a circle of 0.05 mm segments: above 100 % every
+//! cycle checks that the override can still come down under the plan's ceiling in time, a walk
+//! over the segments ahead (most of them on the tiny-segment circle).
+//!
 //! `cargo bench --bench cyclic`
 
 use std::hint::black_box;
@@ -11,8 +16,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use canmotion::config::Machine;
-use canmotion::interp::Interpolator;
 use canmotion::interp::filter::{AxisFilter, FilterKind, FilterSpec};
+use canmotion::interp::{Interpolator, OverrideRamp};
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 
@@ -119,5 +124,61 @@ fn bench_cycle(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench_cycle);
+/// A circle of radius 20 mm as 2,513 lines of 0.05 mm at 50 mm/s.
+fn tiny_circle() -> String {
+    let n = 2513;
+    let mut text = String::from("G21 G90 G17 G64\nG0 X20 Y0\n");
+    for i in 1..=n {
+        let a = std::f64::consts::TAU * i as f64 / n as f64;
+        text += &format!("G1 X{:.6} Y{:.6} F3000\n", 20.0 * a.cos(), 20.0 * a.sin());
+    }
+    text + "M2\n"
+}
+
+fn bench_override(c: &mut Criterion) {
+    let m = machine();
+    let period_s = m.cycle_s();
+    let start = Vector3::zeros();
+    let limits = canmotion::gateway::limits(&m);
+    let ramp = OverrideRamp::for_machine(&limits, &m.planner).unwrap();
+    for (name, text) in [
+        ("pocket", PROGRAM.to_string()),
+        ("tiny circle", tiny_circle()),
+    ] {
+        let program = canmotion::gcode::parse_program(&text, "bench.ngc", start).unwrap();
+        let plan = canmotion::planner::plan_with(&program, &limits, &m.planner).unwrap();
+        let mut fresh = Interpolator::new(plan, period_s)
+            .unwrap()
+            .with_override_ramp(ramp);
+        fresh.set_override(2.0).unwrap();
+        c.bench_function(&format!("cyclic/6 axes/override 200 %/{name}"), |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                let mut done = 0;
+                while done < iters {
+                    let mut interp = fresh.clone();
+                    let mut p = Vector3::zeros();
+                    let mut counts = [0i32; 6];
+                    let t0 = Instant::now();
+                    while done < iters {
+                        let status = black_box(interp.update(&mut p));
+                        let x = inputs(black_box(&p));
+                        for (i, a) in m.axes.iter().enumerate() {
+                            counts[i] = a.mm_to_counts(x[i]);
+                        }
+                        black_box(&counts);
+                        done += 1;
+                        if status == canmotion::interp::Status::Finished {
+                            break;
+                        }
+                    }
+                    total += t0.elapsed();
+                }
+                total
+            })
+        });
+    }
+}
+
+criterion_group!(benches, bench_cycle, bench_override);
 criterion_main!(benches);

@@ -1,12 +1,13 @@
 //! What an operator relies on from the feed override and the feed hold while a program runs:
-//! whatever the program and whenever the override changes (0 to 100 %) or a hold or resume
+//! whatever the program and whenever the override changes (0 to 200 %) or a hold or resume
 //! comes, the setpoints keep every axis within its velocity and acceleration limits and, with
-//! S-curves, its jerk limit (finite differences, within 1 %, as in `planner_limits`); the
-//! change moves the effective override on the very next cycle; the program still ends
-//! exactly on its end point.
+//! S-curves, its jerk limit (finite differences, within 1 %, as in `planner_limits`), and the
+//! path within the machine's max feed; the change moves the effective override on the very
+//! next cycle (above 100 %, where the plan leaves room); the program still ends exactly on its
+//! end point.
 
 use canmotion::gcode::parse_program;
-use canmotion::interp::{Interpolator, OverrideRamp, Status};
+use canmotion::interp::{Interpolator, MAX_OVERRIDE, OverrideRamp, Status};
 use canmotion::planner::{Plan, PlannerConfig, ProfileKind, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;
@@ -30,7 +31,7 @@ enum Command {
 
 fn a_command() -> impl Strategy<Value = Command> {
     prop_oneof![
-        3 => prop_oneof![Just(0.0), Just(1.0), 0.0..=1.0f64].prop_map(Command::Override),
+        4 => prop_oneof![Just(0.0), Just(1.0), Just(2.0), 0.0..=2.0f64].prop_map(Command::Override),
         1 => Just(Command::Hold),
         1 => Just(Command::Resume),
     ]
@@ -78,9 +79,11 @@ fn check_with(
     // (k before the command, the command's target) of the command applied before the sample.
     let mut pending: Option<(f64, f64)> = None;
     let mut drive = |k: u64, interp: &mut Interpolator| -> Result<(), String> {
+        // Above 100 % the plan may keep `k` where it is (it accelerates there).
         if let Some((before, target)) = pending.take()
             && !interp.is_finished()
             && before != target
+            && (target <= 1.0 || before < 1.0)
             && interp.effective_override() == before
         {
             return Err(format!(
@@ -111,7 +114,7 @@ fn check_with(
             let target = if interp.is_held() {
                 0.0
             } else {
-                interp.requested_override().min(1.0)
+                interp.requested_override().min(MAX_OVERRIDE)
             };
             pending = Some((before, target));
         }
@@ -131,7 +134,7 @@ proptest! {
     fn trapezoid_setpoints_keep_the_limits_under_override_and_hold(
         moves in prop::collection::vec(a_move(), 1..30),
         schedule in a_schedule(),
-        final_override in 0.2..=1.0f64,
+        final_override in 0.2..=2.0f64,
     ) {
         check(&program(&moves), ProfileKind::Trapezoid, &schedule, final_override)?;
     }
@@ -140,7 +143,7 @@ proptest! {
     fn s_curve_setpoints_keep_the_limits_under_override_and_hold(
         moves in prop::collection::vec(a_move(), 1..30),
         schedule in a_schedule(),
-        final_override in 0.2..=1.0f64,
+        final_override in 0.2..=2.0f64,
     ) {
         check(&program(&moves), ProfileKind::SCurve, &schedule, final_override)?;
     }
@@ -149,7 +152,7 @@ proptest! {
     fn smooth_setpoints_keep_the_limits_under_override_and_hold(
         moves in prop::collection::vec(a_move(), 1..30),
         schedule in a_schedule(),
-        final_override in 0.2..=1.0f64,
+        final_override in 0.2..=2.0f64,
     ) {
         check(&program(&moves), ProfileKind::Smooth, &schedule, final_override)?;
     }
@@ -158,7 +161,7 @@ proptest! {
     fn blended_corners_keep_the_limits_under_override_and_hold(
         moves in prop::collection::vec(a_move(), 1..30),
         schedule in a_schedule(),
-        final_override in 0.2..=1.0f64,
+        final_override in 0.2..=2.0f64,
     ) {
         // G64 P0.5 with a chord tolerance of 10 µm: many corners become arcs (trapezoid).
         let cfg = PlannerConfig { chord_tol_mm: 0.01, ..config(ProfileKind::Trapezoid) };
@@ -264,29 +267,102 @@ fn half_override_takes_twice_the_time_on_the_same_path() {
     assert_eq!(p, Vector3::new(50.0, 0.0, 0.0));
 }
 
-/// Above 100 % the runtime override stays at 100 % (time scaling above 1 breaks limits the
-/// plan already uses); it is still what was asked for that the getter reports.
-#[test]
-fn overrides_above_100_percent_run_at_100_percent() {
-    let text = "G21 G90 G1 X50 F6000\nM2\n";
-    let prog = parse_program(text, "fast.ngc", Vector3::zeros()).unwrap();
-    let cfg = config(ProfileKind::Trapezoid);
+/// Runs `text` with the override set to `fraction` before the first sample, checking the
+/// limits; the number of cycles, the highest speed of each axis, and the highest effective
+/// override while the plan time is within the first segment's acceleration.
+fn run_at(text: &str, profile: ProfileKind, fraction: f64) -> (u64, Vector3<f64>, f64) {
+    let prog = parse_program(text, "over.ngc", Vector3::zeros()).unwrap();
+    let cfg = config(profile);
     let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    let total = Interpolator::new(plan.clone(), T).unwrap().total_samples();
+    let first = plan.segments()[0];
+    let accel_end_s = first.start_time_s + first.profile.unwrap().phase_start_times_s()[3];
     let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
-    let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
-    interp.set_override(1.5).unwrap();
-    assert_eq!(interp.requested_override(), 1.5);
-    let mut p = Vector3::zeros();
-    let mut cycles = 0;
+    let mut interp = Interpolator::new(plan.clone(), T)
+        .unwrap()
+        .with_override_ramp(ramp);
+    interp.set_override(fraction).unwrap();
+    let (mut p, mut prev) = (Vector3::zeros(), Vector3::zeros());
+    let (mut cycles, mut fastest, mut k_accel) = (0, Vector3::zeros(), 0.0f64);
     loop {
         cycles += 1;
-        if interp.update(&mut p) == Status::Finished {
+        let status = interp.update(&mut p);
+        fastest = fastest.sup(&((p - prev).abs() / T));
+        prev = p;
+        if interp.plan_time_s() <= accel_end_s {
+            k_accel = k_accel.max(interp.effective_override());
+        }
+        if status == Status::Finished {
             break;
         }
-        assert_eq!(interp.effective_override(), 1.0);
     }
-    assert_eq!(cycles, total);
+    assert_eq!(p, plan.end_mm());
+    let interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
+    let mut schedule = |k: u64, i: &mut Interpolator| {
+        if k == 1 {
+            i.set_override(fraction).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    };
+    setpoints::limits_hold_driven(interp, &limits(), &cfg, &mut schedule).unwrap();
+    (cycles, fastest, k_accel)
+}
+
+/// Above 100 % a feed-limited line runs faster: its cruise at the programmed feed times the
+/// override, and the whole program in less time, within the limits. While the plan accelerates
+/// the override stays at 100 % (the plan uses the axes' acceleration there).
+#[test]
+fn an_override_above_100_percent_speeds_up_the_cruise_within_the_limits() {
+    for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+        // X at 50 mm/s (F3000) on a 200 mm/s axis: 150 % gives 75 mm/s.
+        let text = "G21 G90 G1 X200 F3000\nM2\n";
+        let (at_100, fastest_100, _) = run_at(text, profile, 1.0);
+        let (at_150, fastest_150, k_accel) = run_at(text, profile, 1.5);
+        assert_eq!(
+            k_accel, 1.0,
+            "{profile:?}: above 100 % while the plan accelerates"
+        );
+        assert!(
+            (fastest_100.x - 50.0).abs() < 0.01,
+            "{profile:?}: {fastest_100:?}"
+        );
+        assert!(
+            (fastest_150.x - 75.0).abs() < 0.01,
+            "{profile:?}: {fastest_150:?} at 150 %"
+        );
+        // The cruise is most of the line: the time shrinks by about a third.
+        let ratio = at_150 as f64 / at_100 as f64;
+        assert!(
+            ratio > 0.66 && ratio < 0.75,
+            "{profile:?}: {at_150} against {at_100} cycles"
+        );
+    }
+}
+
+/// The override goes no faster than the machine: Y at 100 mm/s (F6000) on a 150 mm/s axis
+/// reaches 150 mm/s at 200 %, not 200.
+#[test]
+fn an_override_above_100_percent_stops_at_the_axis_speed_limit() {
+    for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+        let (_, fastest, _) = run_at("G21 G90 G1 Y300 F6000\nM2\n", profile, 2.0);
+        let vy = limits().max_vel_mm_s.y;
+        assert!(
+            fastest.y <= vy * (1.0 + 1e-9) && fastest.y > 0.99 * vy,
+            "{profile:?}: {fastest:?}"
+        );
+    }
+}
+
+/// The requested value is reported as asked, and bad values are refused.
+#[test]
+fn the_requested_override_is_reported_and_bad_values_refused() {
+    let prog = parse_program("G21 G1 X5 F600\nM2\n", "r.ngc", Vector3::zeros()).unwrap();
+    let cfg = config(ProfileKind::Trapezoid);
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
+    let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
+    interp.set_override(2.5).unwrap();
+    assert_eq!(interp.requested_override(), 2.5);
+    assert_eq!(MAX_OVERRIDE, 2.0);
     assert!(interp.set_override(f64::NAN).is_err());
     assert!(interp.set_override(-0.1).is_err());
     let mut bare = Interpolator::new(Plan::at_rest(Vector3::zeros()), T).unwrap();

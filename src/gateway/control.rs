@@ -8,10 +8,10 @@
 //! a time per process, as for [`super::progress::PROGRESS`]: the state lives in one static,
 //! [`CONTROL`], reset when a run starts.
 //!
-//! Commands, one per line: `override P` (P in percent, 0 to 200; above 100 % the run goes at
-//! 100 %, see [`crate::interp`]), `hold`, `resume`, `status`; or a line of keys, each applied in
-//! turn: `+` / `-` (10 % up or down, within 0 to 100 %), `0` to `9` (0 to 90 %), `f` (100 %),
-//! space or `h` (hold / resume).
+//! Commands, one per line: `override P` (P in percent, 0 to 200; above 100 % the motion goes
+//! faster where the plan and the machine leave room, see [`crate::interp`]), `hold`, `resume`,
+//! `status`; or a line of keys, each applied in turn: `+` / `-` (10 % up or down, within 0 to
+//! 200 %), `0` to `9` (0 to 90 %), `f` (100 %), space or `h` (hold / resume).
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-/// Highest override accepted at run time, 200 % (run at 100 %).
-pub const MAX_REQUEST: f64 = 2.0;
+/// Highest override accepted at run time, 200 %.
+pub const MAX_REQUEST: f64 = crate::interp::MAX_OVERRIDE;
 
 /// The wanted override and hold of the run in progress (see the module documentation).
 #[derive(Debug)]
@@ -113,8 +113,8 @@ impl Control {
             _ if line.chars().all(|c| "+-0123456789fh ".contains(c)) => {
                 for c in line.chars() {
                     match c {
-                        '+' => requested = (requested.min(1.0) + 0.1).min(1.0),
-                        '-' => requested = (requested.min(1.0) - 0.1).max(0.0),
+                        '+' => requested = (requested + 0.1).min(MAX_REQUEST),
+                        '-' => requested = (requested - 0.1).max(0.0),
                         // Tenths are exact in decimal: round away the binary remainder.
                         '0'..='9' => requested = f64::from(c as u8 - b'0') / 10.0,
                         'f' => requested = 1.0,
@@ -144,9 +144,6 @@ impl Control {
 
 fn describe(requested: f64, held: bool) -> String {
     let mut s = format!("override {:.0} %", requested * 100.0);
-    if requested > 1.0 {
-        s += " (runs at 100 %: higher feeds need a new plan, plan --override)";
-    }
     if held {
         s += ", hold";
     }
@@ -261,16 +258,14 @@ mod tests {
         c.apply_line("9-").unwrap();
         assert_eq!(c.wanted(), (0.8, false));
         c.apply_line("f+").unwrap();
-        assert_eq!(c.wanted(), (1.0, false));
+        assert_eq!(c.wanted(), (1.1, false));
+        c.apply_line("f++++++++++++").unwrap();
+        assert_eq!(c.wanted(), (2.0, false), "+ stops at 200 %");
         c.apply_line(" ").unwrap();
-        assert_eq!(c.wanted(), (1.0, true));
+        assert_eq!(c.wanted(), (2.0, true));
         c.apply_line("h0").unwrap();
         assert_eq!(c.wanted(), (0.0, false));
-        assert!(
-            c.apply_line("override 150")
-                .unwrap()
-                .contains("runs at 100 %")
-        );
+        assert_eq!(c.apply_line("override 150").unwrap(), "ok override 150 %");
         for bad in ["override 201", "override x", "stop", ""] {
             assert!(
                 c.apply_line(bad)

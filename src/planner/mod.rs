@@ -335,6 +335,13 @@ pub struct Segment {
     pub v_peak_mm_s: f64,
     /// Path speed at the end.
     pub v_end_mm_s: f64,
+    /// Highest path speed the machine allows on this element whatever the programmed feed
+    /// (max feed, each axis's speed, and on arcs the centripetal, chord and jerk limits): the
+    /// ceiling of a feed override above 100 % ([`crate::interp`]). 0 for dwells and stops.
+    pub v_limit_mm_s: f64,
+    /// Highest path speed the machine allows through the junction at the start, whatever the
+    /// programmed feeds (0 where the motion stops there).
+    pub v_start_limit_mm_s: f64,
     /// The speed profile along the path (`None` for dwells and stops).
     pub profile: Option<SpeedProfile>,
     /// Duration of a dwell or stop (0 for moves: their profile has the duration).
@@ -601,9 +608,9 @@ struct Blend {
     arc: Pending,
     /// Distance from the corner to where the arc touches each line.
     tangent_mm: f64,
-    /// Highest speeds where the arc begins and ends.
-    cap_in_mm_s: f64,
-    cap_out_mm_s: f64,
+    /// Highest speeds where the arc begins and ends ([`Planner::junction_caps`]).
+    cap_in: (f64, f64),
+    cap_out: (f64, f64),
 }
 
 /// An element waiting in the look-ahead window.
@@ -615,6 +622,10 @@ struct Pending {
     blend: BlendMode,
     /// Highest speed allowed at its start (the junction with the element before).
     cap_start_mm_s: f64,
+    /// The same and the element's own speed limit, by the machine alone (the programmed feed
+    /// aside): [`Segment::v_start_limit_mm_s`], [`Segment::v_limit_mm_s`].
+    cap_start_limit_mm_s: f64,
+    v_limit_mm_s: f64,
     /// Length as programmed, before blends took some of it (each blend takes at most half).
     full_length_mm: f64,
     tangent_start: Vector3<f64>,
@@ -696,24 +707,24 @@ impl Planner {
                 };
                 match blend {
                     None => {
-                        p.cap_start_mm_s = match self.window.back() {
-                            Some(prev) => self.junction_mm_s(prev, &p),
-                            None => 0.0,
+                        (p.cap_start_mm_s, p.cap_start_limit_mm_s) = match self.window.back() {
+                            Some(prev) => self.junction_caps(prev, &p),
+                            None => (0.0, 0.0),
                         }
                     }
                     Some(Blend {
                         mut arc,
                         tangent_mm,
-                        cap_in_mm_s,
-                        cap_out_mm_s,
+                        cap_in,
+                        cap_out,
                     }) => {
                         let prev = self.window.back_mut().expect("a blend follows an element");
                         prev.seg.end_mm = arc.seg.start_mm;
                         prev.seg.length_mm -= tangent_mm;
-                        arc.cap_start_mm_s = cap_in_mm_s;
+                        (arc.cap_start_mm_s, arc.cap_start_limit_mm_s) = cap_in;
                         p.seg.start_mm = arc.seg.end_mm;
                         p.seg.length_mm -= tangent_mm;
-                        p.cap_start_mm_s = cap_out_mm_s;
+                        (p.cap_start_mm_s, p.cap_start_limit_mm_s) = cap_out;
                         self.window.push_back(arc);
                     }
                 }
@@ -880,6 +891,8 @@ impl Planner {
         let mut seg = p.seg;
         seg.v_start_mm_s = v0;
         seg.v_end_mm_s = v1;
+        seg.v_limit_mm_s = p.v_limit_mm_s;
+        seg.v_start_limit_mm_s = p.cap_start_limit_mm_s;
         seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
         seg.profile = Some(profile);
         seg.start_time_s = self.time_s;
@@ -894,6 +907,22 @@ impl Planner {
 
     /// Highest speed through the junction from `a` into `b` (see the module documentation).
     fn junction_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
+        self.junction_caps(a, b).0
+    }
+
+    /// Highest speed through the junction from `a` into `b`: under the elements' feeds, and
+    /// by the machine alone (the ceiling of an override above 100 %). The junction's own
+    /// limits do not depend on the feed, so the first is the second under both elements'
+    /// speed limits.
+    fn junction_caps(&self, a: &Pending, b: &Pending) -> (f64, f64) {
+        let v = self.junction_limit_mm_s(a, b);
+        let fed = v.min(a.limits.v_max_mm_s()).min(b.limits.v_max_mm_s());
+        (fed, v.min(a.v_limit_mm_s).min(b.v_limit_mm_s))
+    }
+
+    /// The junction's own speed limit from its geometry and the axes' budgets (not the
+    /// elements' speed limits).
+    fn junction_limit_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
         let cfg = &self.config;
         if cfg.corner_acc_mm_s2 == 0.0
             || matches!(a.blend, BlendMode::ExactStop | BlendMode::ExactPath)
@@ -901,7 +930,7 @@ impl Planner {
             return 0.0;
         }
         let t = cfg.period_s;
-        let mut v = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
+        let mut v = f64::INFINITY;
         let du = b.tangent_start - a.tangent_end;
         let du_norm = du.norm();
         if du_norm > 0.0 {
@@ -1017,9 +1046,9 @@ impl Planner {
         }
         // The speeds into and out of the arc: tangent, so only its curvature (S-curves) and
         // the neighbours' limits bound them.
-        let cap_in_mm_s = self.junction_mm_s(a, &arc);
-        let cap_out_mm_s = self.junction_mm_s(&arc, b);
-        let v_blend = arc.limits.v_max_mm_s().min(cap_in_mm_s).min(cap_out_mm_s);
+        let cap_in = self.junction_caps(a, &arc);
+        let cap_out = self.junction_caps(&arc, b);
+        let v_blend = arc.limits.v_max_mm_s().min(cap_in.0).min(cap_out.0);
         // Round the corner only where it is faster: the arc is run at a constant speed, which
         // the chord tolerance and the centripetal limit may keep low, so a small arc can take
         // longer than slowing down for the sharp corner (see `corner_cost_s`).
@@ -1039,8 +1068,8 @@ impl Planner {
         Ok(Some(Blend {
             arc,
             tangent_mm,
-            cap_in_mm_s,
-            cap_out_mm_s,
+            cap_in,
+            cap_out,
         }))
     }
 
@@ -1081,6 +1110,8 @@ impl Planner {
             limits: profile_limits(cfg, a.v_max_mm_s, a.acc_mm_s2, jerk_mm_s3, line)?,
             blend,
             cap_start_mm_s: 0.0,
+            cap_start_limit_mm_s: 0.0,
+            v_limit_mm_s: a.v_limit_mm_s,
             full_length_mm: length_mm,
             tangent_start: arc.tangent_at(0.0),
             tangent_end: arc.tangent_at(1.0),
@@ -1144,17 +1175,18 @@ impl Planner {
                     return Err(PlanError::Overflow { line });
                 }
                 let direction = unit_scaled / norm_scaled;
-                let mut v_max_mm_s = feed_mm_s;
+                let mut v_limit_mm_s = limits.max_feed_mm_s;
                 let mut acc_mm_s2 = cfg.path_acc_mm_s2;
                 let mut jerk_mm_s3 = f64::INFINITY;
                 for i in 0..3 {
                     let u = direction[i].abs();
                     if u > 0.0 {
-                        v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / u);
+                        v_limit_mm_s = v_limit_mm_s.min(limits.max_vel_mm_s[i] / u);
                         acc_mm_s2 = acc_mm_s2.min(share * limits.max_acc_mm_s2[i] / u);
                         jerk_mm_s3 = jerk_mm_s3.min(share * cfg.max_jerk_mm_s3[i] / u);
                     }
                 }
+                let v_max_mm_s = v_limit_mm_s.min(feed_mm_s);
                 let jerk_mm_s3 = jerk(jerk_mm_s3);
                 let abs = direction.abs();
                 Pending {
@@ -1168,6 +1200,8 @@ impl Planner {
                     limits: profile_limits(cfg, v_max_mm_s, acc_mm_s2, jerk_mm_s3, line)?,
                     blend: e.blend,
                     cap_start_mm_s: 0.0,
+                    cap_start_limit_mm_s: 0.0,
+                    v_limit_mm_s,
                     full_length_mm: length_mm,
                     tangent_start: direction,
                     tangent_end: direction,
@@ -1315,6 +1349,8 @@ fn moving(
         v_start_mm_s: 0.0,
         v_peak_mm_s: 0.0,
         v_end_mm_s: 0.0,
+        v_limit_mm_s: 0.0,
+        v_start_limit_mm_s: 0.0,
         profile: None,
         hold_s: 0.0,
         start_time_s: 0.0,
@@ -1339,6 +1375,8 @@ fn still(
         v_start_mm_s: 0.0,
         v_peak_mm_s: 0.0,
         v_end_mm_s: 0.0,
+        v_limit_mm_s: 0.0,
+        v_start_limit_mm_s: 0.0,
         profile: None,
         hold_s: duration_s,
         start_time_s,
@@ -1348,6 +1386,8 @@ fn still(
 /// Limits along an arc (see the module documentation).
 struct ArcLimits {
     v_max_mm_s: f64,
+    /// The same at the machine's max feed (whatever the feed asked for).
+    v_limit_mm_s: f64,
     /// Path (tangential) acceleration.
     acc_mm_s2: f64,
     /// Path (tangential) jerk.
@@ -1366,7 +1406,7 @@ fn arc_limits(
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
     let share = cfg.path_acc_share;
-    let mut v_max_mm_s = feed_mm_s;
+    let mut v_max_mm_s = limits.max_feed_mm_s;
     let mut acc_budget_mm_s2 = f64::INFINITY;
     let mut jerk_budget_mm_s3 = f64::INFINITY;
     let mut acc_share = Vector3::zeros();
@@ -1391,11 +1431,15 @@ fn arc_limits(
         v_max_mm_s =
             v_max_mm_s.min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / cfg.period_s);
     }
+    if cfg.jerk_limited() {
+        // v³/r² ≤ J/4 (and 3 v a_t / r ≤ J/4 below).
+        v_max_mm_s = v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt());
+    }
+    let v_limit_mm_s = v_max_mm_s;
+    let v_max_mm_s = v_max_mm_s.min(feed_mm_s);
     let mut acc_mm_s2 = (0.5 * acc_budget_mm_s2).min(cfg.path_acc_mm_s2);
     let mut jerk_mm_s3 = 0.5 * jerk_budget_mm_s3;
     if cfg.jerk_limited() {
-        // v³/r² ≤ J/4 and 3 v a_t / r ≤ J/4.
-        v_max_mm_s = v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt());
         if v_max_mm_s > 0.0 {
             acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 * radius_mm / (12.0 * v_max_mm_s));
         }
@@ -1404,6 +1448,7 @@ fn arc_limits(
     }
     ArcLimits {
         v_max_mm_s,
+        v_limit_mm_s,
         acc_mm_s2,
         jerk_mm_s3,
         axis_acc_mm_s2: acc_share * acc_budget_mm_s2,

@@ -45,6 +45,10 @@ pub fn limits_hold_driven(
         let d1 = s[3] - s[2];
         let d2 = s[3] - 2.0 * s[2] + s[1];
         let d3 = s[3] - 3.0 * s[2] + 3.0 * s[1] - s[0];
+        let feed = d1.norm() / t;
+        if feed > limits.max_feed_mm_s * slack + round / t {
+            return Err(format!("sample {k}: path speed {feed} mm/s"));
+        }
         for i in 0..3 {
             let v = d1[i].abs() / t;
             if v > limits.max_vel_mm_s[i] * slack + round / t {
