@@ -1,8 +1,13 @@
 //! Planning throughput (issue 4): segments per second of the look-ahead alone (the items are
-//! interpreted beforehand), and of the whole front end (parse + compensate + plan), on
+//! interpreted beforehand), of the whole front end (parse + compensate + plan), and of the
+//! whole pipeline up to the setpoints (parse + compensate + plan + interpolate: every cycle of
+//! the program sampled as `run` streams it), on
 //! LinuxCNC's `performance/circle_small_segments_ncd.ngc` (when `../shared/corpus` is present)
 //! and on a generated program of 1,000,000 tiny segments, with the demo machine's planner in
 //! trapezoid and S-curve mode.
+//!
+//! Each program's duration is printed first, for the ratio of the time it runs to the time the
+//! pipeline takes.
 //!
 //! `cargo bench --bench planner`
 
@@ -14,6 +19,7 @@ use canmotion::compensation::{CompOptions, Compensator};
 use canmotion::config::Machine;
 use canmotion::gateway::limits;
 use canmotion::gcode::{Interpreter, Item};
+use canmotion::interp::{Interpolator, Status};
 use canmotion::planner::{Planner, PlannerConfig, ProfileKind};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;
@@ -45,20 +51,49 @@ fn items(text: &str) -> Vec<Item> {
     .collect()
 }
 
-/// Plans every item of `items`; returns the number of segments.
+/// Plans every item of `items`; returns the number of segments. With `sample`, every segment
+/// goes on to an interpolator at the machine's cycle, which samples all it can as it comes.
 fn plan_all<'a>(
     items: impl Iterator<Item = std::borrow::Cow<'a, Item>>,
     machine: &Machine,
     config: &PlannerConfig,
+    sample: bool,
 ) -> usize {
     let mut p = Planner::with_config(Vector3::zeros(), &limits(machine), config).unwrap();
+    let mut interp = Interpolator::streaming(Vector3::zeros(), machine.cycle_s()).unwrap();
+    let mut at = Vector3::zeros();
     let mut n = 0;
+    let mut take = |p: &mut Planner, interp: &mut Interpolator| {
+        let mut n = 0;
+        for seg in p.drain() {
+            n += 1;
+            if sample {
+                interp.push(seg).unwrap();
+                while !interp.needs_segments() {
+                    if interp.update(&mut at) == Status::Finished {
+                        break;
+                    }
+                    black_box(&at);
+                }
+            } else {
+                black_box(seg);
+            }
+        }
+        n
+    };
     for item in items {
         p.push(&item).unwrap();
-        n += p.drain().map(black_box).count();
+        n += take(&mut p, &mut interp);
     }
     p.finish().unwrap();
-    n + p.drain().map(black_box).count()
+    n += take(&mut p, &mut interp);
+    if sample {
+        interp.close();
+        while interp.update(&mut at) != Status::Finished {
+            black_box(&at);
+        }
+    }
+    n
 }
 
 /// The look-ahead alone, on items interpreted beforehand.
@@ -67,11 +102,12 @@ fn plan(items: &[Item], machine: &Machine, config: &PlannerConfig) -> usize {
         items.iter().map(std::borrow::Cow::Borrowed),
         machine,
         config,
+        false,
     )
 }
 
-/// Parse, compensate and plan the whole text.
-fn front_end(text: &str, machine: &Machine, config: &PlannerConfig) -> usize {
+/// Parse, compensate and plan the whole text (and sample it, with `sample`).
+fn front_end(text: &str, machine: &Machine, config: &PlannerConfig, sample: bool) -> usize {
     let interp = Interpreter::new(
         BufReader::new(text.as_bytes()),
         "bench.ngc",
@@ -79,7 +115,7 @@ fn front_end(text: &str, machine: &Machine, config: &PlannerConfig) -> usize {
     );
     let items = Compensator::new(interp, "bench.ngc", CompOptions::default())
         .map(|i| std::borrow::Cow::Owned(i.unwrap()));
-    plan_all(items, machine, config)
+    plan_all(items, machine, config, sample)
 }
 
 fn bench(c: &mut Criterion) {
@@ -101,14 +137,26 @@ fn bench(c: &mut Criterion) {
                 ..machine.planner
             };
             let n = plan(&its, &machine, &config);
+            let duration_s = {
+                let mut p =
+                    Planner::with_config(Vector3::zeros(), &limits(&machine), &config).unwrap();
+                its.iter().for_each(|i| p.push(i).unwrap());
+                p.finish().unwrap();
+                p.time_s()
+            };
+            println!("{name} {profile:?}: {n} segments, the program runs {duration_s:.1} s");
             g.throughput(Throughput::Elements(n as u64));
             g.bench_function(
                 format!("look-ahead {name} {profile:?} ({n} segments)"),
                 |b| b.iter(|| plan(black_box(&its), &machine, &config)),
             );
             g.bench_function(format!("parse+compensate+plan {name} {profile:?}"), |b| {
-                b.iter(|| front_end(black_box(text), &machine, &config))
+                b.iter(|| front_end(black_box(text), &machine, &config, false))
             });
+            g.bench_function(
+                format!("parse+compensate+plan+interpolate {name} {profile:?}"),
+                |b| b.iter(|| front_end(black_box(text), &machine, &config, true)),
+            );
         }
     }
     g.finish();
