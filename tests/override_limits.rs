@@ -170,9 +170,10 @@ proptest! {
     }
 }
 
-/// A hold in the middle of a long line at full speed: standstill within the time the ramp
-/// predicts (plus a period of rounding), on the line and short of its end, at the same point
-/// cycle after cycle; a resume takes the program to its exact end.
+/// A hold in the middle of a long line at full speed: standstill within the time a ramp with
+/// the acceleration and jerk the cruise leaves unused predicts (plus a period of rounding), on
+/// the line and short of its end, at the same point cycle after cycle; a resume takes the
+/// program to its exact end.
 #[test]
 fn a_hold_stops_on_the_path_in_the_predicted_time_and_a_resume_finishes() {
     for profile in [
@@ -194,7 +195,24 @@ fn a_hold_stops_on_the_path_in_the_predicted_time_and_a_resume_finishes() {
         }
         assert_eq!(interp.effective_override(), 1.0);
         interp.hold().unwrap();
-        let predicted_s = ramp.ramp_time_s(1.0, 0.0);
+        // The hold ramps down on the cruise, with the acceleration and jerk the profile leaves
+        // unused there: `|k'|·v ≤ a`, `|k''|·v ≤ j` (`k'` over four periods for trapezoids).
+        let limits_on_line = *reference.segments()[0].profile.unwrap().limits();
+        let (a, j) = (limits_on_line.a_max_mm_s2(), limits_on_line.j_max_mm_s3());
+        let d = a / 100.0;
+        let quiet = OverrideRamp::new(
+            d,
+            if j.is_finite() {
+                j / 100.0
+            } else {
+                d / (4.0 * T)
+            },
+        );
+        let predicted_s = quiet.unwrap().ramp_time_s(1.0, 0.0);
+        assert!(
+            predicted_s < 0.6 * ramp.ramp_time_s(1.0, 0.0),
+            "{profile:?}"
+        );
         let mut cycles = 0u64;
         let line = loop {
             cycles += 1;

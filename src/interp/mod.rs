@@ -61,6 +61,20 @@
 //! percent of `A` for any realistic `J` (`tests/override_limits.rs` checks random programs
 //! against the limits within 1 %).
 //!
+//! # Quiet ramps
+//!
+//! On the cruise of a line the profile uses none of the path acceleration `a` and jerk `j` it
+//! may use there (each axis `|uᵢ|·a`, `|uᵢ|·j`, which the junctions' budgets leave aside), so a
+//! ramp of `k` that runs on such cruises only may take them: `|k'|·v ≤ a` and `|k''|·v ≤ j`
+//! (`k'` over four periods without a jerk limit), far more than `D` and `J` when the speed is
+//! below the machine's. A ramp to a target at or below 1 (a hold, a lower override, a resume)
+//! uses these rates where it fits: its whole span of plan time, a period's travel either side,
+//! on quiet stretches, at the lowest rates among them; with a jerk limit within one segment's
+//! cruise (at a junction `k'·v` would turn with the path, a step of acceleration). A hold at
+//! full speed on a line then stops about as fast as the plan itself could brake. While such a
+//! ramp runs, a new target waits for its end (its `k'` may exceed `D`) unless a quiet ramp to it
+//! fits too.
+//!
 //! # Above 100 %
 //!
 //! Time scaling by `k > 1` multiplies the planned acceleration by `k²` and the jerk by `k³`, and
@@ -97,7 +111,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment};
+use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment, SegmentPath};
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
 /// that rounding in `k · period_s` never adds one extra period of standing still.
@@ -272,6 +286,8 @@ struct KProfile {
     /// The target and `∫k dt` over the whole ramp.
     k_end: f64,
     integral_end_s: f64,
+    /// Planned with the quiet rates (valid on straight cruises only).
+    quiet: bool,
 }
 
 /// `k`, `k'` and `∫k dt` at some time.
@@ -297,6 +313,7 @@ impl KProfile {
             dur_s: [0.0; 3],
             k_end: k0,
             integral_end_s: 0.0,
+            quiet: false,
         }
     }
 
@@ -342,6 +359,7 @@ impl KProfile {
             dur_s: [t1, t2, t3],
             k_end: target,
             integral_end_s: 0.0,
+            quiet: false,
         };
         if t1 == 0.0 {
             p.rate_change[0] = 0.0;
@@ -480,6 +498,48 @@ fn lows_of(seg: &Segment, next: Option<&Segment>, out: &mut VecDeque<Low>) {
     }
 }
 
+/// A straight cruise, where the profile uses none of the acceleration and jerk it may use: a
+/// ramp of `k` may take them instead, `|k'| ≤ rate` and `|k''| ≤ rate_change` (see "Quiet
+/// ramps" in the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Quiet {
+    from_s: f64,
+    to_s: f64,
+    rate_per_s: f64,
+    rate_change_per_s2: f64,
+    /// A ramp may go on into the next segment's quiet stretch: without a jerk limit only (with
+    /// one, `k'·v` turning with the path at a junction would step the acceleration).
+    joins: bool,
+}
+
+/// The quiet stretch of a segment, if it has one: the cruise of a line, where `|k'|·v ≤ a` and
+/// `|k''|·v ≤ j` with the profile's own path limits `a` and `j` keep every axis within what the
+/// profile may use there (`|uᵢ|·a`, `|uᵢ|·j`). Without a jerk limit `k'` ramps over four periods.
+fn quiet_of(seg: &Segment, period_s: f64, out: &mut VecDeque<Quiet>) {
+    let (Some(p), SegmentPath::Line { .. }) = (&seg.profile, seg.path) else {
+        return;
+    };
+    let times = p.phase_start_times_s();
+    let v = p.v_cruise_mm_s();
+    if !(times[4] > times[3] && v > 0.0) {
+        return;
+    }
+    let rate_per_s = (p.limits().a_max_mm_s2() / v).min(1.0 / period_s);
+    let j = p.limits().j_max_mm_s3();
+    let rate_change_per_s2 = if j.is_finite() {
+        (j / v).min(1.0 / (period_s * period_s))
+    } else {
+        rate_per_s / (4.0 * period_s)
+    };
+    out.push_back(Quiet {
+        from_s: seg.start_time_s + times[3],
+        to_s: seg.start_time_s + times[4],
+        rate_per_s,
+        rate_change_per_s2,
+        joins: !j.is_finite(),
+    });
+}
+
 /// Samples planned segments at a fixed period. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct Interpolator {
@@ -512,6 +572,10 @@ pub struct Interpolator {
     /// `lows_until_s` (the last queued segment's waits for its successor, or the close).
     lows: VecDeque<Low>,
     lows_until_s: f64,
+    /// The straight cruises of the queued plan, in time order.
+    quiets: VecDeque<Quiet>,
+    /// A change of the target waits for the quiet ramp in flight to end.
+    deferred: bool,
 }
 
 impl Interpolator {
@@ -522,6 +586,7 @@ impl Interpolator {
         let segs = plan.segments();
         for (i, seg) in segs.iter().enumerate() {
             lows_of(seg, segs.get(i + 1), &mut interp.lows);
+            quiet_of(seg, period_s, &mut interp.quiets);
         }
         interp.lows_until_s = plan.duration_s();
         interp.queued_end_mm = plan.end_mm();
@@ -559,6 +624,8 @@ impl Interpolator {
             last_tau_s: 0.0,
             lows: VecDeque::new(),
             lows_until_s: 0.0,
+            quiets: VecDeque::new(),
+            deferred: false,
         })
     }
 
@@ -646,7 +713,7 @@ impl Interpolator {
     fn govern(&mut self) {
         let Some(ramp) = self.ramp else { return };
         let want = self.k_target();
-        if want <= 1.0 {
+        if want <= 1.0 || self.deferred {
             // A ramp to 1 or below stays under the ramp to 1 that was checked.
             return;
         }
@@ -733,11 +800,79 @@ impl Interpolator {
         let Some(ramp) = self.ramp else { return };
         let target = self.k_target();
         let now = self.k_at(self.samples);
+        self.deferred = false;
         if now.done && now.k == target {
             return;
         }
         let tau_s = self.tau_at(self.samples);
+        if target <= 1.0
+            && let Some(quiet) = self.quiet_ramp(now, tau_s, target, &ramp)
+        {
+            self.k_profile = quiet;
+            return;
+        }
+        if self.k_profile.quiet && !now.done {
+            // `k'` may be beyond the ramp's own rate: the quiet ramp runs to its end first.
+            self.deferred = true;
+            return;
+        }
         self.k_profile = KProfile::plan(self.samples, tau_s, now.k, now.rate, target, &ramp);
+    }
+
+    /// A ramp from `now` (plan time `tau_s`) to `target` faster than `ramp`, where it runs on
+    /// straight cruises only, a period's travel either side included, at the lowest quiet rates
+    /// of the cruises it runs on; `None` where there is none.
+    fn quiet_ramp(
+        &self,
+        now: KState,
+        tau_s: f64,
+        target: f64,
+        ramp: &OverrideRamp,
+    ) -> Option<KProfile> {
+        let step_s = MAX_OVERRIDE * self.period_s;
+        let mut rates = (f64::INFINITY, f64::INFINITY);
+        let mut span_s = 0.0;
+        for _ in 0..4 {
+            rates = self.quiet_rates(tau_s - step_s, tau_s + span_s + step_s, rates)?;
+            if rates.0 <= ramp.max_rate_per_s || rates.1 <= ramp.max_rate_change_per_s2 {
+                return None;
+            }
+            let quiet = OverrideRamp {
+                max_rate_per_s: rates.0,
+                max_rate_change_per_s2: rates.1,
+            };
+            let mut p = KProfile::plan(self.samples, tau_s, now.k, now.rate, target, &quiet);
+            p.quiet = true;
+            if p.integral_end_s <= span_s {
+                return Some(p);
+            }
+            span_s = p.integral_end_s;
+        }
+        None
+    }
+
+    /// The lowest quiet rates (no higher than `at_most`) over `[from, to]` of plan time, if
+    /// quiet stretches cover it without a gap.
+    fn quiet_rates(&self, from_s: f64, to_s: f64, at_most: (f64, f64)) -> Option<(f64, f64)> {
+        const EPS_S: f64 = 1e-9;
+        let mut covered_s = from_s;
+        let mut rates = at_most;
+        let mut joins = true;
+        for q in &self.quiets {
+            if q.to_s < from_s {
+                continue;
+            }
+            if q.from_s > covered_s + EPS_S || (q.from_s > from_s && !(joins && q.joins)) {
+                return None;
+            }
+            joins = q.joins;
+            rates = (rates.0.min(q.rate_per_s), rates.1.min(q.rate_change_per_s2));
+            covered_s = q.to_s;
+            if covered_s >= to_s {
+                return Some(rates);
+            }
+        }
+        None
     }
 
     /// `k` at the sample numbered `n`.
@@ -771,6 +906,7 @@ impl Interpolator {
         }
         if let Some(prev) = self.queue.back() {
             lows_of(prev, Some(&segment), &mut self.lows);
+            quiet_of(prev, self.period_s, &mut self.quiets);
             self.lows_until_s = prev.end_time_s();
         }
         self.queue.push_back(segment);
@@ -783,6 +919,7 @@ impl Interpolator {
             && let Some(last) = self.queue.back()
         {
             lows_of(last, None, &mut self.lows);
+            quiet_of(last, self.period_s, &mut self.quiets);
             self.lows_until_s = self.queued_end_s;
         }
         self.closed = true;
@@ -803,10 +940,19 @@ impl Interpolator {
             *out_mm = self.last_mm;
             return Status::Finished;
         }
+        let behind_s = self.last_tau_s - MAX_OVERRIDE * self.period_s;
         while let Some(low) = self.lows.front()
-            && low.to_s + MAX_OVERRIDE * self.period_s < self.last_tau_s
+            && low.to_s < behind_s
         {
             self.lows.pop_front();
+        }
+        while let Some(quiet) = self.quiets.front()
+            && quiet.to_s < behind_s
+        {
+            self.quiets.pop_front();
+        }
+        if self.deferred && self.k_at(self.samples).done {
+            self.retarget();
         }
         if self.ramp.is_some() && self.k_target() > 1.0 {
             self.govern();
@@ -1177,8 +1323,9 @@ mod tests {
     }
 
     proptest! {
-        /// Whatever the requests and whenever they come, `k` stays in `[0, 2]`, `|k'| ≤ D`
-        /// (by differences of `k` between samples, a `J·T²` of slack), each request moves `k`
+        /// Whatever the requests and whenever they come, `k` stays in `[0, 2]`, `|k'| ≤ D` or
+        /// the quiet rate of the cruise (by differences of `k` between samples, a `J·T²` of
+        /// slack), each request moves `k`
         /// on the next sample unless it is already there (or, above 1, while the plan still
         /// accelerates), and the plan time never goes back.
         #[test]
@@ -1189,6 +1336,10 @@ mod tests {
             let plan = plan_moves(Vector3::zeros(), &[feed(1, v(1.0e4, 0.0, 0.0), 50.0)], &limits()).unwrap();
             let ramp = OverrideRamp::new(2.0, 30.0).unwrap();
             let t = 0.002;
+            // On the cruise a ramp may use the path acceleration the profile leaves unused there
+            // ("Quiet ramps"), over four periods (no jerk limit).
+            let quiet_d = plan.segments()[0].profile.unwrap().limits().a_max_mm_s2() / 50.0;
+            let (d, j) = (quiet_d.max(2.0), (quiet_d / (4.0 * t)).max(30.0));
             let mut interp = Interpolator::new(plan, t).unwrap().with_override_ramp(ramp);
             let mut p = Vector3::zeros();
             let (mut k_prev, mut tau_prev) = (1.0, 0.0);
@@ -1201,7 +1352,7 @@ mod tests {
                     interp.update(&mut p);
                     let k = interp.effective_override();
                     prop_assert!((0.0..=MAX_OVERRIDE).contains(&k), "k = {}", k);
-                    prop_assert!((k - k_prev).abs() <= 2.0 * t + 30.0 * t * t, "k from {} to {}", k_prev, k);
+                    prop_assert!((k - k_prev).abs() <= d * t + j * t * t, "k from {} to {}", k_prev, k);
                     if i == 0 && k_prev != target && !(accelerating && target > 1.0 && k_prev >= 1.0) {
                         prop_assert_ne!(k, k_prev, "k did not move towards {}", target);
                     }
