@@ -64,7 +64,10 @@
 //! - otherwise (one transition at `amax` and the other not, or neither with `v0 ≠ v1`): `D` is a
 //!   quartic in `√(vp − vi)`, or a sum of two different square roots; no closed form worth its
 //!   rounding, so a **bracketed solve**: safeguarded Newton on `D(vp) − L` inside the regime's
-//!   bracket, falling back to bisection.
+//!   bracket, falling back to bisection, seeded by Newton in `x = √(vp − max(v0, v1))`, in
+//!   which `D` is convex (in `vp` it has a vertical tangent at `max(v0, v1)`, which made the
+//!   bracketed Newton fall back to bisection on short segments whose peak is barely above a
+//!   boundary speed, the look-ahead's common case).
 //!
 //! The closed forms only seed the same bracketed refinement (one or two Newton steps), which
 //! returns a peak with `D(vp) ≤ L` *as computed*; the remainder `L − D(vp)` (zero, a few ulps,
@@ -329,6 +332,64 @@ impl Kin {
         )
     }
 
+    /// Duration `t(Δ)` of a speed change `Δ = x² + δ` (`δ ≥ 0`) and its derivative in `x`
+    /// (finite jerk only).
+    #[inline]
+    fn time_in_x(&self, x: f64, delta: f64) -> (f64, f64) {
+        let dv = x * x + delta;
+        if dv >= self.v_a {
+            (dv / self.a + self.a_over_j, 2.0 * x / self.a)
+        } else {
+            let tj = (dv / self.j).sqrt();
+            let slope = if tj > 0.0 {
+                2.0 * x / (self.j * tj)
+            } else {
+                2.0 / self.j.sqrt()
+            };
+            (2.0 * tj, slope)
+        }
+    }
+
+    /// A close estimate of the root of `D(vp) = l` (finite jerk, `D(max(v0, v1)) ≤ l`), the
+    /// seed of the bracketed solve. With `m = max(v0, v1)`, `n = min(v0, v1)` and
+    /// `vp = m + x²`, `D = (2m + x²)/2 · t(x²) + (n + m + x²)/2 · t(x² + m − n)` is increasing
+    /// and convex in `x ≥ 0` in every regime (`t` is C¹, `2√(Δ/j)` then `Δ/a + a/j`; the mean
+    /// speeds and `t(x² + δ)` are increasing and convex in `x`), unlike in `vp`, where it has
+    /// a vertical tangent at `m`: Newton from an upper bound of the root falls monotonically
+    /// onto it, from the smallest of three bounds: `t(Δ) ≥ 2√(Δ/j)` gives
+    /// `D ≥ (3m + n + 2x²)·x/√j` and `D ≥ 2x³/√j`, and convexity `D ≥ D(0) + D′(0⁺)·x`.
+    fn peak_seed(&self, l: f64, v0: f64, v1: f64) -> f64 {
+        let (m, n) = (v0.max(v1), v0.min(v1));
+        let delta = m - n;
+        let f = |x: f64| {
+            let (th, dth) = self.time_in_x(x, 0.0);
+            let (tl, dtl) = self.time_in_x(x, delta);
+            let (mh, ml) = (0.5 * (2.0 * m + x * x), 0.5 * (n + m + x * x));
+            (mh * th + ml * tl - l, x * (th + tl) + mh * dth + ml * dtl)
+        };
+        let (f0, df0) = f(0.0);
+        if f0.is_nan() || f0 >= 0.0 {
+            return m;
+        }
+        let q = l * self.j.sqrt();
+        let mut x = (q / (3.0 * m + n)).min(-f0 / df0);
+        if x.is_nan() || 2.0 * x * x * x > q {
+            x = (0.5 * q).cbrt();
+        }
+        for _ in 0..60 {
+            let (fx, dfx) = f(x);
+            if !(fx > 0.0 && dfx > 0.0) {
+                break;
+            }
+            let step = fx / dfx;
+            x -= step;
+            if step <= 1e-14 * x {
+                break;
+            }
+        }
+        m + x * x
+    }
+
     /// Largest `w ∈ [v, vmax]` with `d(v, w) ≤ l` (the caller checked `v ≤ vmax`).
     fn reach(&self, l: f64, v: f64, vmax: f64) -> f64 {
         if self.length(v, vmax) <= l {
@@ -485,7 +546,11 @@ fn peak_speed(k: &Kin, l: f64, v0: f64, v1: f64, vmax: f64) -> (f64, PeakMethod)
         let x = cubic_root(2.0 * v0, 0.5 * l * k.j.sqrt());
         (v0 + x * x, PeakMethod::Cubic)
     } else {
-        (mid, PeakMethod::Bracketed)
+        // Just above `left` when the root is within rounding of it (the bracket's refinement
+        // then ends at once on `left`).
+        let seed = k.peak_seed(l, v0, v1);
+        let seed = if seed > left { seed } else { left.next_up() };
+        (seed, PeakMethod::Bracketed)
     };
     let f = |vp: f64| {
         let (d, slope) = k.two_lengths(v0, vp, v1);
