@@ -60,7 +60,8 @@
 //! - both transitions reach `amax`: `D` is a quadratic in `vp`, solved in **closed form**
 //!   `vp = (−vA + √((vA − v0 − v1)² + (v0 − v1)² + 4·amax·L))/2` (also the trapezoid);
 //! - neither reaches `amax` and `v0 = v1`: with `x = √(vp − v0)`, `x³ + 2·v0·x = L·√j/2`, a
-//!   depressed cubic with one real root, solved in **closed form** (hyperbolic Cardano);
+//!   depressed cubic with one real root, solved by **Newton from an upper bound**, on which
+//!   the cubic's convexity makes the iterates fall monotonically onto the root in a few steps;
 //! - otherwise (one transition at `amax` and the other not, or neither with `v0 ≠ v1`): `D` is a
 //!   quartic in `√(vp − vi)`, or a sum of two different square roots; no closed form worth its
 //!   rounding, so a **bracketed solve**: safeguarded Newton on `D(vp) − L` inside the regime's
@@ -76,7 +77,8 @@
 //!
 //! **Reachability** ([`max_end_speed`], [`max_start_speed`]): the largest `v1 ≥ v0` with
 //! `d(v0, v1) ≤ L`, capped at `vmax`; both in **closed form** (`d` is a quadratic in `Δ` when
-//! `amax` is reached, a depressed cubic in `√Δ` otherwise), then adjusted by a few ulps with the
+//! `amax` is reached) or by the same monotone Newton on a depressed cubic in `√Δ` (otherwise),
+//! then refined and adjusted by a few ulps with the
 //! very predicate [`plan`] uses, so that a returned speed is always feasible in [`plan`] and the
 //! next one up is not. `d` being symmetric, the two functions are the same function; both are
 //! provided for the look-ahead's two passes. Feasible speeds *above* the known one form an
@@ -204,7 +206,7 @@ pub enum PeakMethod {
     AtVmax,
     /// Both transitions reach `amax` (or a trapezoid): closed-form quadratic.
     Quadratic,
-    /// Neither transition reaches `amax` and `v0 = v1`: closed-form cubic.
+    /// Neither transition reaches `amax` and `v0 = v1`: a depressed cubic (monotone Newton).
     Cubic,
     /// Bracketed solve (safeguarded Newton / bisection).
     Bracketed,
@@ -395,7 +397,7 @@ impl Kin {
         if self.length(v, vmax) <= l {
             return vmax;
         }
-        // Closed form of d(v, v + Δ) = l.
+        // Δ with d(v, v + Δ) = l: a quadratic, or a depressed cubic in √Δ.
         let dv = if self.v_a == 0.0 || l >= self.length(v, v + self.v_a) {
             // (2v + Δ)/2 · (Δ/a + a/j) = l ⇔ Δ² + (2v + vA)Δ + 2v·vA − 2a·l = 0.
             let p = 2.0 * v + self.v_a;
@@ -419,28 +421,32 @@ impl Kin {
     }
 }
 
-/// The real root `x ≥ 0` of `x³ + p·x = q` (`p, q ≥ 0`), by the hyperbolic form of Cardano's
-/// formula (no cancellation), polished by Newton.
+/// The real root `x ≥ 0` of `x³ + p·x = q` (`p, q ≥ 0`), by Newton from the smaller of two
+/// upper bounds, `q/p` (as `x³ ≥ 0`) and `∛q` (as `p·x ≥ 0`; `cbrt` only when it is the
+/// smaller): the cubic is increasing and convex for `x ≥ 0`, so the iterates fall monotonically
+/// onto the root, within a few steps from the better bound (cheaper than the hyperbolic form of
+/// Cardano's formula, whose `asinh` and `sinh` cost more than the steps).
 fn cubic_root(p: f64, q: f64) -> f64 {
     if q.is_nan() || q <= 0.0 {
         return 0.0;
     }
-    let z = if p > 0.0 {
-        1.5 * q / p * (3.0 / p).sqrt()
+    let linear = q / p;
+    let mut x = if linear * linear * linear <= q {
+        linear
     } else {
-        f64::INFINITY
-    };
-    let mut x = if z < 1.0e30 {
-        2.0 * (p / 3.0).sqrt() * (z.asinh() / 3.0).sinh()
-    } else {
-        // p ≪ q^(2/3): x³ ≈ q.
         q.cbrt()
     };
-    for _ in 0..2 {
+    for _ in 0..200 {
+        let f = x * (x * x + p) - q;
         let df = 3.0 * x * x + p;
-        if df > 0.0 && df.is_finite() {
-            x -= (x * (x * x + p) - q) / df;
+        if !(f > 0.0 && df > 0.0 && df.is_finite()) {
+            break;
         }
+        let next = x - f / df;
+        if next.is_nan() || next >= x {
+            break;
+        }
+        x = next;
     }
     x.max(0.0)
 }

@@ -970,3 +970,24 @@ fn seeded_peak_matches_a_bisection() {
         .unwrap_or_else(|e| panic!("{e}"));
     assert!(bracketed.load(Relaxed) > 10_000);
 }
+
+/// The cubic's Newton from an upper bound finds the root a bisection finds, over the scales of
+/// `p` and `q` the solves meet (and beyond).
+#[test]
+fn cubic_root_matches_a_bisection() {
+    let mut runner = TestRunner::new(config(100_000));
+    let scale = prop_oneof![Just(0.0), (-12.0..12.0f64).prop_map(|e| 10f64.powf(e))];
+    runner
+        .run(&(scale, -12.0..12.0f64), |(p, lq)| {
+            let q = 10f64.powf(lq);
+            let x = cubic_root(p, q);
+            let hi = q.cbrt().min(if p > 0.0 { q / p } else { f64::INFINITY }) * 2.0;
+            let reference = bisect(0.0, hi, |x| x * (x * x + p) <= q);
+            ensure!(
+                (x - reference).abs() <= 4.0 * f64::EPSILON * reference,
+                "cubic_root({p}, {q}) = {x}, bisection {reference}"
+            );
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+}
