@@ -839,9 +839,16 @@ impl Planner {
         let mut settled = 0;
         while settled < n {
             let i = settled;
-            let p = self.window[i];
-            let fwd = profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0);
+            // By reference: an element is large, and `settle` copies only its segment.
+            let p = &self.window[i];
             let back = self.back_mm_s[i + 1];
+            // The forward reach is at least `v0`: below it, `back` is the end speed and the
+            // reach itself is not needed (`fwd > back`, whatever its value).
+            let fwd = if back < v0 {
+                v0
+            } else {
+                profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0)
+            };
             let v1 = fwd.min(back);
             let last = i + 1 == n;
             let fixed = all
@@ -850,7 +857,7 @@ impl Planner {
             if !fixed {
                 break;
             }
-            self.settle(&p, v0, v1)?;
+            self.settle(i, v0, v1)?;
             v0 = v1;
             settled += 1;
         }
@@ -859,14 +866,17 @@ impl Planner {
         Ok(())
     }
 
-    fn settle(&mut self, p: &Pending, v0: f64, v1: f64) -> Result<(), PlanError> {
-        let line = p.seg.line;
+    /// Settles the window's element `i` with the boundary speeds `v0`, `v1`.
+    fn settle(&mut self, i: usize, v0: f64, v1: f64) -> Result<(), PlanError> {
+        let mut seg = self.window[i].seg;
+        let limits = self.window[i].limits;
+        let line = seg.line;
         let no_profile = PlanError::NoProfile {
             line,
             v_start_mm_s: v0,
             v_end_mm_s: v1,
         };
-        let mut profile = profile::plan(p.seg.length_mm, v0, v1, &p.limits).ok_or(no_profile)?;
+        let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
         if self.config.integer_periods {
             // Where the boundary speeds leave no slack (a pure acceleration that fills the
             // element), the element keeps its time-optimal duration and the next starts off the
@@ -876,7 +886,6 @@ impl Planner {
                 Err(_) => self.off_grid += 1,
             }
         }
-        let mut seg = p.seg;
         seg.v_start_mm_s = v0;
         seg.v_end_mm_s = v1;
         seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
