@@ -334,24 +334,6 @@ impl Kin {
         )
     }
 
-    /// Duration `t(Δ)` of a speed change `Δ = x² + δ` (`δ ≥ 0`) and its derivative in `x`
-    /// (finite jerk only).
-    #[inline]
-    fn time_in_x(&self, x: f64, delta: f64) -> (f64, f64) {
-        let dv = x * x + delta;
-        if dv >= self.v_a {
-            (dv / self.a + self.a_over_j, 2.0 * x / self.a)
-        } else {
-            let tj = (dv / self.j).sqrt();
-            let slope = if tj > 0.0 {
-                2.0 * x / (self.j * tj)
-            } else {
-                2.0 / self.j.sqrt()
-            };
-            (2.0 * tj, slope)
-        }
-    }
-
     /// A close estimate of the root of `D(vp) = l` (finite jerk, `D(max(v0, v1)) ≤ l`), the
     /// seed of the bracketed solve. With `m = max(v0, v1)`, `n = min(v0, v1)` and
     /// `vp = m + x²`, `D = (2m + x²)/2 · t(x²) + (n + m + x²)/2 · t(x² + m − n)` is increasing
@@ -363,9 +345,23 @@ impl Kin {
     fn peak_seed(&self, l: f64, v0: f64, v1: f64) -> f64 {
         let (m, n) = (v0.max(v1), v0.min(v1));
         let delta = m - n;
+        let sqrt_j = self.j.sqrt();
+        let (rj, ra) = (1.0 / sqrt_j, 1.0 / self.a);
+        // t(x² + δ) and its derivative in x.
+        let t = |x: f64, delta: f64| {
+            let dv = x * x + delta;
+            if dv >= self.v_a {
+                (dv * ra + self.a_over_j, 2.0 * x * ra)
+            } else if delta == 0.0 {
+                (2.0 * x * rj, 2.0 * rj)
+            } else {
+                let s = dv.sqrt();
+                (2.0 * s * rj, 2.0 * x * rj / s)
+            }
+        };
         let f = |x: f64| {
-            let (th, dth) = self.time_in_x(x, 0.0);
-            let (tl, dtl) = self.time_in_x(x, delta);
+            let (th, dth) = t(x, 0.0);
+            let (tl, dtl) = t(x, delta);
             let (mh, ml) = (0.5 * (2.0 * m + x * x), 0.5 * (n + m + x * x));
             (mh * th + ml * tl - l, x * (th + tl) + mh * dth + ml * dtl)
         };
@@ -373,7 +369,7 @@ impl Kin {
         if f0.is_nan() || f0 >= 0.0 {
             return m;
         }
-        let q = l * self.j.sqrt();
+        let q = l * sqrt_j;
         let mut x = (q / (3.0 * m + n)).min(-f0 / df0);
         if x.is_nan() || 2.0 * x * x * x > q {
             x = (0.5 * q).cbrt();
@@ -526,7 +522,8 @@ pub fn plan(
 
 /// The time-optimal peak: `vmax` or the root of `D(vp) = L` (see the module documentation).
 fn peak_speed(k: &Kin, l: f64, v0: f64, v1: f64, vmax: f64) -> (f64, PeakMethod) {
-    let d = |vp: f64| k.two_lengths(v0, vp, v1).0;
+    // `two_lengths(..).0`, without the slopes.
+    let d = |vp: f64| k.length(v0, vp) + k.length(vp, v1);
     if d(vmax) <= l {
         return (vmax, PeakMethod::AtVmax);
     }
@@ -552,9 +549,11 @@ fn peak_speed(k: &Kin, l: f64, v0: f64, v1: f64, vmax: f64) -> (f64, PeakMethod)
         let x = cubic_root(2.0 * v0, 0.5 * l * k.j.sqrt());
         (v0 + x * x, PeakMethod::Cubic)
     } else {
-        // Just above `left` when the root is within rounding of it (the bracket's refinement
-        // then ends at once on `left`).
+        // Two ulps low, so that the refinement's first step usually lands below the root and
+        // ends there (within its tolerance of 4 ulps); just above `left` when the root is
+        // within rounding of it (the refinement then ends at once on `left`).
         let seed = k.peak_seed(l, v0, v1);
+        let seed = seed - 2.0 * f64::EPSILON * seed;
         let seed = if seed > left { seed } else { left.next_up() };
         (seed, PeakMethod::Bracketed)
     };
