@@ -1253,10 +1253,10 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, cap_mm_s: f64, limits: &Pro
     // cubic is convex there, so the iterates fall monotonically onto the root).
     let (vb, l) = (v_end_mm_s, length_mm);
     let c = a * a / j;
-    let b = c - vb;
-    let quadratic = 0.5 * (-b + (b * b + 4.0 * a * l).sqrt());
-    let guess = if quadratic - vb >= c {
-        quadratic
+    // The regime of the root: the bound at Δ = a²/j, where both forms give t = 2a/j.
+    let guess = if (vb + c) * (2.0 * a / j) <= l {
+        let b = c - vb;
+        0.5 * (-b + (b * b + 4.0 * a * l).sqrt())
     } else {
         // From the smaller of two upper bounds of the root: x²(x − vb) ≥ vb²·(x − vb) and
         // ≥ (x − vb)³ (`cbrt` only when the first is the larger).
@@ -1274,11 +1274,15 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, cap_mm_s: f64, limits: &Pro
             if df.is_nan() || df <= 0.0 {
                 break;
             }
-            let next = x - f / df;
-            if next.is_nan() || next >= x {
+            let step = f / df;
+            if step.is_nan() || step <= 0.0 {
                 break;
             }
-            x = next;
+            x -= step;
+            // Converged: the next step would be below rounding.
+            if step <= 2.0 * f64::EPSILON * x {
+                break;
+            }
         }
         x
     };
