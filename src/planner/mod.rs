@@ -836,13 +836,12 @@ impl Planner {
         let mut v_next = 0.0;
         for i in (0..n).rev() {
             let p = &self.window[i];
-            let reach = start_reach_mm_s(p.seg.length_mm, v_next, &p.limits);
             let cap = if i == 0 {
                 self.v_settled_mm_s
             } else {
                 p.cap_start_mm_s
             };
-            v_next = reach.min(cap);
+            v_next = start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits);
             self.back_mm_s[i] = v_next;
         }
         // Forward: settle the prefix whose end speeds can no longer change.
@@ -851,9 +850,16 @@ impl Planner {
         let mut settled = 0;
         while settled < n {
             let i = settled;
-            let p = self.window[i];
-            let fwd = profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0);
+            // By reference: an element is large, and `settle` copies only its segment.
+            let p = &self.window[i];
             let back = self.back_mm_s[i + 1];
+            // The forward reach is at least `v0`: below it, `back` is the end speed and the
+            // reach itself is not needed (`fwd > back`, whatever its value).
+            let fwd = if back < v0 {
+                v0
+            } else {
+                profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0)
+            };
             let v1 = fwd.min(back);
             let last = i + 1 == n;
             let fixed = all
@@ -862,7 +868,7 @@ impl Planner {
             if !fixed {
                 break;
             }
-            self.settle(&p, v0, v1)?;
+            self.settle(i, v0, v1)?;
             v0 = v1;
             settled += 1;
         }
@@ -871,14 +877,17 @@ impl Planner {
         Ok(())
     }
 
-    fn settle(&mut self, p: &Pending, v0: f64, v1: f64) -> Result<(), PlanError> {
-        let line = p.seg.line;
+    /// Settles the window's element `i` with the boundary speeds `v0`, `v1`.
+    fn settle(&mut self, i: usize, v0: f64, v1: f64) -> Result<(), PlanError> {
+        let mut seg = self.window[i].seg;
+        let limits = self.window[i].limits;
+        let line = seg.line;
         let no_profile = PlanError::NoProfile {
             line,
             v_start_mm_s: v0,
             v_end_mm_s: v1,
         };
-        let mut profile = profile::plan(p.seg.length_mm, v0, v1, &p.limits).ok_or(no_profile)?;
+        let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
         if self.config.integer_periods {
             // Where the boundary speeds leave no slack (a pure acceleration that fills the
             // element), the element keeps its time-optimal duration and the next starts off the
@@ -888,11 +897,10 @@ impl Planner {
                 Err(_) => self.off_grid += 1,
             }
         }
-        let mut seg = p.seg;
         seg.v_start_mm_s = v0;
         seg.v_end_mm_s = v1;
-        seg.v_limit_mm_s = p.v_limit_mm_s;
-        seg.v_start_limit_mm_s = p.cap_start_limit_mm_s;
+        seg.v_limit_mm_s = self.window[i].v_limit_mm_s;
+        seg.v_start_limit_mm_s = self.window[i].cap_start_limit_mm_s;
         seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
         seg.profile = Some(profile);
         seg.start_time_s = self.time_s;
@@ -1239,9 +1247,19 @@ impl Planner {
 /// infeasible when a longer window raises that end speed; the pass uses instead the bound
 /// `va · t(va − vb) ≥ d`, which decreases as `vb` rises: its largest `va` only grows with
 /// `vb`, and every speed it allows is reachable.
-fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, limits: &ProfileLimits) -> f64 {
+///
+/// The result is capped at `cap_mm_s` (the junction's speed): when the cap itself is within the
+/// bound (or below `v_end_mm_s`), it is the result, without solving; this is the common case on
+/// a path of tiny segments, whose junctions rather than their lengths bound the speed.
+fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, cap_mm_s: f64, limits: &ProfileLimits) -> f64 {
     if limits.is_trapezoid() {
-        return profile::max_start_speed(length_mm, v_end_mm_s, limits).unwrap_or(0.0);
+        return profile::max_start_speed(length_mm, v_end_mm_s, limits)
+            .unwrap_or(0.0)
+            .min(cap_mm_s);
+    }
+    if cap_mm_s <= v_end_mm_s {
+        // The bound allows every speed up to `v_end_mm_s` at least.
+        return cap_mm_s;
     }
     let a = limits.a_max_mm_s2();
     let j = match limits.shape() {
@@ -1257,37 +1275,53 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, limits: &ProfileLimits) -> 
         }
     };
     let fits = |va: f64| va * transition_s(va - v_end_mm_s) <= length_mm;
-    if fits(v_max) {
-        return v_max;
+    // The speeds within the bound are an interval from `v_end_mm_s` up (as computed too: each
+    // operation is monotone), so below, where `top` does not fit, every speed returned (one
+    // that fits) is below `top`.
+    let top = cap_mm_s.min(v_max);
+    if fits(top) {
+        return top;
     }
     // Closed form: with Δ = va − vb ≥ a²/j, va·(Δ/a + a/j) = L is a quadratic; below, with
     // 2·va·√(Δ/j) = L, the cubic va³ − vb·va² = L²j/4, solved by Newton from the right (the
     // cubic is convex there, so the iterates fall monotonically onto the root).
     let (vb, l) = (v_end_mm_s, length_mm);
     let c = a * a / j;
-    let b = c - vb;
-    let quadratic = 0.5 * (-b + (b * b + 4.0 * a * l).sqrt());
-    let guess = if quadratic - vb >= c {
-        quadratic
+    // The regime of the root: the bound at Δ = a²/j, where both forms give t = 2a/j.
+    let guess = if (vb + c) * (2.0 * a / j) <= l {
+        let b = c - vb;
+        0.5 * (-b + (b * b + 4.0 * a * l).sqrt())
     } else {
+        // From the smaller of two upper bounds of the root: x²(x − vb) ≥ vb²·(x − vb) and
+        // ≥ (x − vb)³ (`cbrt` only when the first is the larger).
         let k = 0.25 * l * l * j;
-        let mut x = vb + k.cbrt();
+        let linear = k / (vb * vb);
+        let mut x = vb
+            + if linear * linear * linear <= k {
+                linear
+            } else {
+                k.cbrt()
+            };
         for _ in 0..12 {
             let f = x * x * (x - vb) - k;
             let df = x * (3.0 * x - 2.0 * vb);
             if df.is_nan() || df <= 0.0 {
                 break;
             }
-            let next = x - f / df;
-            if next.is_nan() || next >= x {
+            let step = f / df;
+            if step.is_nan() || step <= 0.0 {
                 break;
             }
-            x = next;
+            x -= step;
+            // Converged: the next step would be below rounding.
+            if step <= 2.0 * f64::EPSILON * x {
+                break;
+            }
         }
         x
     };
     // The bound must hold as computed: step down a few ulps if the root's last bit is high.
-    let mut va = guess.clamp(vb, v_max);
+    let mut va = guess.min(v_max).max(vb); // no panic even if vb > v_max or NaN
     for _ in 0..8 {
         if fits(va) {
             return va;
@@ -1994,7 +2028,7 @@ mod tests {
             let shape = if smooth { JerkShape::RaisedCosine } else { JerkShape::Square };
             let lim = ProfileLimits::new(200.0, a, j, shape).unwrap();
             let vb = vb.min(200.0);
-            let va = start_reach_mm_s(l, vb, &lim);
+            let va = start_reach_mm_s(l, vb, f64::INFINITY, &lim);
             let je = if smooth { 0.5 * j } else { j };
             let t = |dv: f64| if dv >= a * a / je { dv / a + a / je } else { 2.0 * (dv / je).sqrt() };
             proptest::prop_assert!(va >= vb && va <= 200.0);
@@ -2003,6 +2037,40 @@ mod tests {
             proptest::prop_assert!(va == 200.0 || above * t(above - vb) > l);
             // And the profile the settle step plans from it exists.
             proptest::prop_assert!(profile::plan(l, va, vb, &lim).is_some());
+        }
+
+        /// The capped backward bound (which skips the solve when the cap is within the bound) is
+        /// the uncapped one capped, to a few ulps where the cap is within rounding of it, and
+        /// always within the bound.
+        #[test]
+        fn s_curve_start_reach_capped_is_the_uncapped_one_capped(
+            l in 1e-4..50.0f64,
+            vb in 0.0..150.0f64,
+            cap_ratio in 0.0..3.0f64,
+            near in proptest::bool::ANY,
+            a in 50.0..5000.0f64,
+            j in 1e3..1e6f64,
+            smooth in proptest::bool::ANY,
+            trapezoid in proptest::bool::ANY,
+        ) {
+            let shape = if smooth { JerkShape::RaisedCosine } else { JerkShape::Square };
+            let j = if trapezoid { f64::INFINITY } else { j };
+            let lim = ProfileLimits::new(200.0, a, j, shape).unwrap();
+            let uncapped = start_reach_mm_s(l, vb, f64::INFINITY, &lim);
+            // A cap near the uncapped bound, or anywhere from 0 to 3 times it.
+            let cap = if near { uncapped * (1.0 + (cap_ratio - 1.5) * 1e-14) } else { uncapped * cap_ratio };
+            let capped = start_reach_mm_s(l, vb, cap, &lim);
+            let expected = uncapped.min(cap);
+            proptest::prop_assert!(
+                (capped - expected).abs() <= 16.0 * f64::EPSILON * expected,
+                "capped {} expected {}", capped, expected
+            );
+            proptest::prop_assert!(capped <= cap);
+            if !trapezoid && capped > vb {
+                let je = if smooth { 0.5 * j } else { j };
+                let t = |dv: f64| if dv >= a * a / je { dv / a + a / je } else { 2.0 * (dv / je).sqrt() };
+                proptest::prop_assert!(capped * t(capped - vb) <= l);
+            }
         }
     }
 }

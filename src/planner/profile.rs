@@ -60,11 +60,15 @@
 //! - both transitions reach `amax`: `D` is a quadratic in `vp`, solved in **closed form**
 //!   `vp = (−vA + √((vA − v0 − v1)² + (v0 − v1)² + 4·amax·L))/2` (also the trapezoid);
 //! - neither reaches `amax` and `v0 = v1`: with `x = √(vp − v0)`, `x³ + 2·v0·x = L·√j/2`, a
-//!   depressed cubic with one real root, solved in **closed form** (hyperbolic Cardano);
+//!   depressed cubic with one real root, solved by **Newton from an upper bound**, on which
+//!   the cubic's convexity makes the iterates fall monotonically onto the root in a few steps;
 //! - otherwise (one transition at `amax` and the other not, or neither with `v0 ≠ v1`): `D` is a
 //!   quartic in `√(vp − vi)`, or a sum of two different square roots; no closed form worth its
 //!   rounding, so a **bracketed solve**: safeguarded Newton on `D(vp) − L` inside the regime's
-//!   bracket, falling back to bisection.
+//!   bracket, falling back to bisection, seeded by Newton in `x = √(vp − max(v0, v1))`, in
+//!   which `D` is convex (in `vp` it has a vertical tangent at `max(v0, v1)`, which made the
+//!   bracketed Newton fall back to bisection on short segments whose peak is barely above a
+//!   boundary speed, the look-ahead's common case).
 //!
 //! The closed forms only seed the same bracketed refinement (one or two Newton steps), which
 //! returns a peak with `D(vp) ≤ L` *as computed*; the remainder `L − D(vp)` (zero, a few ulps,
@@ -73,7 +77,8 @@
 //!
 //! **Reachability** ([`max_end_speed`], [`max_start_speed`]): the largest `v1 ≥ v0` with
 //! `d(v0, v1) ≤ L`, capped at `vmax`; both in **closed form** (`d` is a quadratic in `Δ` when
-//! `amax` is reached, a depressed cubic in `√Δ` otherwise), then adjusted by a few ulps with the
+//! `amax` is reached) or by the same monotone Newton on a depressed cubic in `√Δ` (otherwise),
+//! then refined and adjusted by a few ulps with the
 //! very predicate [`plan`] uses, so that a returned speed is always feasible in [`plan`] and the
 //! next one up is not. `d` being symmetric, the two functions are the same function; both are
 //! provided for the look-ahead's two passes. Feasible speeds *above* the known one form an
@@ -201,7 +206,7 @@ pub enum PeakMethod {
     AtVmax,
     /// Both transitions reach `amax` (or a trapezoid): closed-form quadratic.
     Quadratic,
-    /// Neither transition reaches `amax` and `v0 = v1`: closed-form cubic.
+    /// Neither transition reaches `amax` and `v0 = v1`: a depressed cubic (monotone Newton).
     Cubic,
     /// Bracketed solve (safeguarded Newton / bisection).
     Bracketed,
@@ -329,12 +334,66 @@ impl Kin {
         )
     }
 
+    /// A close estimate of the root of `D(vp) = l` (finite jerk, `D(max(v0, v1)) ≤ l`), the
+    /// seed of the bracketed solve. With `m = max(v0, v1)`, `n = min(v0, v1)` and
+    /// `vp = m + x²`, `D = (2m + x²)/2 · t(x²) + (n + m + x²)/2 · t(x² + m − n)` is increasing
+    /// and convex in `x ≥ 0` in every regime (`t` is C¹, `2√(Δ/j)` then `Δ/a + a/j`; the mean
+    /// speeds and `t(x² + δ)` are increasing and convex in `x`), unlike in `vp`, where it has
+    /// a vertical tangent at `m`: Newton from an upper bound of the root falls monotonically
+    /// onto it, from the smallest of three bounds: `t(Δ) ≥ 2√(Δ/j)` gives
+    /// `D ≥ (3m + n + 2x²)·x/√j` and `D ≥ 2x³/√j`, and convexity `D ≥ D(0) + D′(0⁺)·x`.
+    fn peak_seed(&self, l: f64, v0: f64, v1: f64) -> f64 {
+        let (m, n) = (v0.max(v1), v0.min(v1));
+        let delta = m - n;
+        let sqrt_j = self.j.sqrt();
+        let (rj, ra) = (1.0 / sqrt_j, 1.0 / self.a);
+        // t(x² + δ) and its derivative in x.
+        let t = |x: f64, delta: f64| {
+            let dv = x * x + delta;
+            if dv >= self.v_a {
+                (dv * ra + self.a_over_j, 2.0 * x * ra)
+            } else if delta == 0.0 {
+                (2.0 * x * rj, 2.0 * rj)
+            } else {
+                let s = dv.sqrt();
+                (2.0 * s * rj, 2.0 * x * rj / s)
+            }
+        };
+        let f = |x: f64| {
+            let (th, dth) = t(x, 0.0);
+            let (tl, dtl) = t(x, delta);
+            let (mh, ml) = (0.5 * (2.0 * m + x * x), 0.5 * (n + m + x * x));
+            (mh * th + ml * tl - l, x * (th + tl) + mh * dth + ml * dtl)
+        };
+        let (f0, df0) = f(0.0);
+        if f0.is_nan() || f0 >= 0.0 {
+            return m;
+        }
+        let q = l * sqrt_j;
+        let mut x = (q / (3.0 * m + n)).min(-f0 / df0);
+        if x.is_nan() || 2.0 * x * x * x > q {
+            x = (0.5 * q).cbrt();
+        }
+        for _ in 0..60 {
+            let (fx, dfx) = f(x);
+            if !(fx > 0.0 && dfx > 0.0) {
+                break;
+            }
+            let step = fx / dfx;
+            x -= step;
+            if step <= 1e-14 * x {
+                break;
+            }
+        }
+        m + x * x
+    }
+
     /// Largest `w ∈ [v, vmax]` with `d(v, w) ≤ l` (the caller checked `v ≤ vmax`).
     fn reach(&self, l: f64, v: f64, vmax: f64) -> f64 {
         if self.length(v, vmax) <= l {
             return vmax;
         }
-        // Closed form of d(v, v + Δ) = l.
+        // Δ with d(v, v + Δ) = l: a quadratic, or a depressed cubic in √Δ.
         let dv = if self.v_a == 0.0 || l >= self.length(v, v + self.v_a) {
             // (2v + Δ)/2 · (Δ/a + a/j) = l ⇔ Δ² + (2v + vA)Δ + 2v·vA − 2a·l = 0.
             let p = 2.0 * v + self.v_a;
@@ -358,28 +417,32 @@ impl Kin {
     }
 }
 
-/// The real root `x ≥ 0` of `x³ + p·x = q` (`p, q ≥ 0`), by the hyperbolic form of Cardano's
-/// formula (no cancellation), polished by Newton.
+/// The real root `x ≥ 0` of `x³ + p·x = q` (`p, q ≥ 0`), by Newton from the smaller of two
+/// upper bounds, `q/p` (as `x³ ≥ 0`) and `∛q` (as `p·x ≥ 0`; `cbrt` only when it is the
+/// smaller): the cubic is increasing and convex for `x ≥ 0`, so the iterates fall monotonically
+/// onto the root, within a few steps from the better bound (cheaper than the hyperbolic form of
+/// Cardano's formula, whose `asinh` and `sinh` cost more than the steps).
 fn cubic_root(p: f64, q: f64) -> f64 {
     if q.is_nan() || q <= 0.0 {
         return 0.0;
     }
-    let z = if p > 0.0 {
-        1.5 * q / p * (3.0 / p).sqrt()
+    let linear = q / p;
+    let mut x = if linear * linear * linear <= q {
+        linear
     } else {
-        f64::INFINITY
-    };
-    let mut x = if z < 1.0e30 {
-        2.0 * (p / 3.0).sqrt() * (z.asinh() / 3.0).sinh()
-    } else {
-        // p ≪ q^(2/3): x³ ≈ q.
         q.cbrt()
     };
-    for _ in 0..2 {
+    for _ in 0..200 {
+        let f = x * (x * x + p) - q;
         let df = 3.0 * x * x + p;
-        if df > 0.0 && df.is_finite() {
-            x -= (x * (x * x + p) - q) / df;
+        if !(f > 0.0 && df > 0.0 && df.is_finite()) {
+            break;
         }
+        let next = x - f / df;
+        if next.is_nan() || next >= x {
+            break;
+        }
+        x = next;
     }
     x.max(0.0)
 }
@@ -459,7 +522,8 @@ pub fn plan(
 
 /// The time-optimal peak: `vmax` or the root of `D(vp) = L` (see the module documentation).
 fn peak_speed(k: &Kin, l: f64, v0: f64, v1: f64, vmax: f64) -> (f64, PeakMethod) {
-    let d = |vp: f64| k.two_lengths(v0, vp, v1).0;
+    // `two_lengths(..).0`, without the slopes.
+    let d = |vp: f64| k.length(v0, vp) + k.length(vp, v1);
     if d(vmax) <= l {
         return (vmax, PeakMethod::AtVmax);
     }
@@ -485,7 +549,13 @@ fn peak_speed(k: &Kin, l: f64, v0: f64, v1: f64, vmax: f64) -> (f64, PeakMethod)
         let x = cubic_root(2.0 * v0, 0.5 * l * k.j.sqrt());
         (v0 + x * x, PeakMethod::Cubic)
     } else {
-        (mid, PeakMethod::Bracketed)
+        // Two ulps low, so that the refinement's first step usually lands below the root and
+        // ends there (within its tolerance of 4 ulps); just above `left` when the root is
+        // within rounding of it (the refinement then ends at once on `left`).
+        let seed = k.peak_seed(l, v0, v1);
+        let seed = seed - 2.0 * f64::EPSILON * seed;
+        let seed = if seed > left { seed } else { left.next_up() };
+        (seed, PeakMethod::Bracketed)
     };
     let f = |vp: f64| {
         let (d, slope) = k.two_lengths(v0, vp, v1);

@@ -880,3 +880,114 @@ fn stopping_first_can_take_less_length_than_a_slow_start() {
     let v0 = 6.0;
     assert!(transition_length_mm(v0, v0 / 3.0, &lim) > transition_length_mm(v0, 0.0, &lim));
 }
+
+// ---------------------------------------------------------------------------------------------
+// The fast paths against plain bisections.
+
+/// The largest `x ∈ [lo, hi]` with `pred(x)` (`pred(lo)` true, false above the crossing), by
+/// bisection down to adjacent floats: the slow reference of the solves.
+fn bisect(lo: f64, hi: f64, pred: impl Fn(f64) -> bool) -> f64 {
+    if pred(hi) {
+        return hi;
+    }
+    let (mut lo, mut hi) = (lo, hi);
+    loop {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            return lo;
+        }
+        if pred(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+}
+
+/// Cases like the look-ahead's on tiny segments: close boundary speeds (or one the reach of the
+/// other), short lengths, every jerk regime.
+fn near_cases() -> impl Strategy<Value = Case> {
+    (
+        prop_oneof![Just(JerkShape::Square), Just(JerkShape::RaisedCosine)],
+        0.0..5.0f64,  // log10 amax
+        -4.0..0.0f64, // log10 amax/jmax
+        -2.0..2.0f64, // log10 vmax/vA
+        -6.0..0.0f64, // log10 L / d(0, vmax)
+        0.0..1.0f64,  // v0 / vmax
+        -8.0..0.0f64, // log10 |v1 − v0| / v0
+        0u8..3,       // v1 below v0, above it, or the reach
+    )
+        .prop_map(|(shape, la, ltj, lv, ll, f0, ld, mode)| {
+            let a = 10f64.powf(la);
+            let j = a / 10f64.powf(ltj);
+            let vmax = (a * a / j) * 10f64.powf(lv);
+            let lim = ProfileLimits::new(vmax, a, j, shape).unwrap();
+            let l = transition_length_mm(0.0, vmax, &lim) * 10f64.powf(ll);
+            let v0 = vmax * f0;
+            let v1 = match mode {
+                0 => v0 * (1.0 - 10f64.powf(ld)),
+                1 => (v0 * (1.0 + 10f64.powf(ld))).min(vmax),
+                _ => max_end_speed(l, v0, &lim).unwrap(),
+            };
+            Case { l, v0, v1, lim }
+        })
+}
+
+/// The seeded solve of the peak (Newton in `√(vp − max(v0, v1))`, then the bracketed
+/// refinement) finds the peak a bisection of `D(vp) ≤ L` finds, and the seed alone is already
+/// that close (else the refinement would silently fall back to slow bisection steps).
+#[test]
+fn seeded_peak_matches_a_bisection() {
+    let mut runner = TestRunner::new(config(100_000));
+    let bracketed = AtomicUsize::new(0);
+    runner
+        .run(&prop_oneof![cases(), near_cases()], |c| {
+            let Case { l, v0, v1, lim } = c;
+            let k = lim.kin();
+            let vmax = lim.v_max_mm_s();
+            if lim.is_trapezoid() || k.length(v0, v1) > l || k.two_lengths(v0, vmax, v1).0 <= l {
+                return Ok(());
+            }
+            let (vp, method) = peak_speed(&k, l, v0, v1, vmax);
+            let m = v0.max(v1);
+            let reference = bisect(m, vmax, |vp| k.two_lengths(v0, vp, v1).0 <= l);
+            ensure!(k.two_lengths(v0, vp, v1).0 <= l, "peak {vp} too high");
+            let ulps = 64.0 * f64::EPSILON * reference;
+            ensure!(
+                (vp - reference).abs() <= ulps,
+                "{method:?} peak {vp}, bisection {reference}"
+            );
+            if method == PeakMethod::Bracketed {
+                bracketed.fetch_add(1, Relaxed);
+                let seed = k.peak_seed(l, v0, v1);
+                ensure!(
+                    (seed - reference).abs() <= ulps.max(1e-12 * (reference - m)),
+                    "seed {seed}, bisection {reference}"
+                );
+            }
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(bracketed.load(Relaxed) > 10_000);
+}
+
+/// The cubic's Newton from an upper bound finds the root a bisection finds, over the scales of
+/// `p` and `q` the solves meet (and beyond).
+#[test]
+fn cubic_root_matches_a_bisection() {
+    let mut runner = TestRunner::new(config(100_000));
+    let scale = prop_oneof![Just(0.0), (-12.0..12.0f64).prop_map(|e| 10f64.powf(e))];
+    runner
+        .run(&(scale, -12.0..12.0f64), |(p, lq)| {
+            let q = 10f64.powf(lq);
+            let x = cubic_root(p, q);
+            let hi = q.cbrt().min(if p > 0.0 { q / p } else { f64::INFINITY }) * 2.0;
+            let reference = bisect(0.0, hi, |x| x * (x * x + p) <= q);
+            ensure!(
+                (x - reference).abs() <= 4.0 * f64::EPSILON * reference,
+                "cubic_root({p}, {q}) = {x}, bisection {reference}"
+            );
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+}
