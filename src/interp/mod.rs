@@ -99,9 +99,9 @@
 //! queue the ceiling is 1. The check walks only the stretches where the ceiling is below
 //! [`MAX_OVERRIDE`] (kept as the queue fills), so it costs little per cycle.
 //!
-//! A dwell is scaled like the motion (it lasts `1/k` as long, and a hold pauses it). The end of
-//! a closed queue is still exact: the sample whose `τ` reaches it is the last segment's end
-//! point, bit for bit.
+//! Below 100 % a dwell is scaled like the motion (it lasts `1/k` as long, and a hold pauses it);
+//! above, its ceiling is 1: it is not shortened. The end of a closed queue is still exact: the
+//! sample whose `τ` reaches it is the last segment's end point, bit for bit.
 //!
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
