@@ -391,3 +391,33 @@ fn the_requested_override_is_reported_and_bad_values_refused() {
             .contains("need an override ramp")
     );
 }
+
+/// A dwell is not shortened above 100 %: at 200 % the machine stands still at the dwell's point
+/// for the whole of `G4 P1`, while the moves around it run faster.
+#[test]
+fn a_dwell_lasts_its_time_above_100_percent() {
+    let text = "G21 G90 G1 X40 F1200\nG4 P1\nG1 X80\nM2\n";
+    let prog = parse_program(text, "dwell.ngc", Vector3::zeros()).unwrap();
+    let cfg = config(ProfileKind::Trapezoid);
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
+    let at_100 = Interpolator::new(plan.clone(), T).unwrap().total_samples();
+    let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
+    interp.set_override(2.0).unwrap();
+    let (mut p, mut cycles, mut still) = (Vector3::zeros(), 0u64, 0u64);
+    loop {
+        cycles += 1;
+        let status = interp.update(&mut p);
+        if p.x == 40.0 {
+            still += 1;
+        }
+        if status == Status::Finished {
+            break;
+        }
+    }
+    assert!(
+        still as f64 * T >= 1.0 - T,
+        "stood {still} cycles at the dwell"
+    );
+    assert!(cycles < at_100, "{cycles} cycles at 200 % against {at_100}");
+}
