@@ -20,6 +20,16 @@ mod random_programs;
 
 use random_programs::{T, a_move, config, limits, program};
 
+/// The plan of `text` on the test machine in `profile`, its planner configuration, and the
+/// override ramp the machine allows.
+fn planned(text: &str, profile: ProfileKind) -> (Plan, PlannerConfig, OverrideRamp) {
+    let prog = parse_program(text, "test.ngc", Vector3::zeros()).unwrap();
+    let cfg = config(profile);
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
+    (plan, cfg, ramp)
+}
+
 /// What the operator does at some cycle.
 #[derive(Debug, Clone, Copy)]
 enum Command {
@@ -182,11 +192,8 @@ fn a_hold_stops_on_the_path_in_the_predicted_time_and_a_resume_finishes() {
         ProfileKind::Smooth,
     ] {
         let text = "G21 G90 G64 G1 X120 Y40 F6000\nG1 X0 Y0\nM2\n";
-        let prog = parse_program(text, "hold.ngc", Vector3::zeros()).unwrap();
-        let cfg = config(profile);
-        let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+        let (plan, _, ramp) = planned(text, profile);
         let reference = plan.clone();
-        let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
         let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
         let mut p = Vector3::zeros();
         // Cruise on the first line, then hold.
@@ -263,11 +270,8 @@ fn a_hold_stops_on_the_path_in_the_predicted_time_and_a_resume_finishes() {
 #[test]
 fn half_override_takes_twice_the_time_on_the_same_path() {
     let text = "G21 G90 G1 X50 F600\nM2\n";
-    let prog = parse_program(text, "half.ngc", Vector3::zeros()).unwrap();
-    let cfg = config(ProfileKind::SCurve);
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let (plan, _, ramp) = planned(text, ProfileKind::SCurve);
     let duration_s = plan.duration_s();
-    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
     let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
     interp.set_override(0.5).unwrap();
     let mut p = Vector3::zeros();
@@ -289,12 +293,9 @@ fn half_override_takes_twice_the_time_on_the_same_path() {
 /// limits; the number of cycles, the highest speed of each axis, and the highest effective
 /// override while the plan time is within the first segment's acceleration.
 fn run_at(text: &str, profile: ProfileKind, fraction: f64) -> (u64, Vector3<f64>, f64) {
-    let prog = parse_program(text, "over.ngc", Vector3::zeros()).unwrap();
-    let cfg = config(profile);
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let (plan, cfg, ramp) = planned(text, profile);
     let first = plan.segments()[0];
     let accel_end_s = first.start_time_s + first.profile.unwrap().phase_start_times_s()[3];
-    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
     let mut interp = Interpolator::new(plan.clone(), T)
         .unwrap()
         .with_override_ramp(ramp);
@@ -373,10 +374,7 @@ fn an_override_above_100_percent_stops_at_the_axis_speed_limit() {
 /// The requested value is reported as asked, and bad values are refused.
 #[test]
 fn the_requested_override_is_reported_and_bad_values_refused() {
-    let prog = parse_program("G21 G1 X5 F600\nM2\n", "r.ngc", Vector3::zeros()).unwrap();
-    let cfg = config(ProfileKind::Trapezoid);
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
+    let (plan, _, ramp) = planned("G21 G1 X5 F600\nM2\n", ProfileKind::Trapezoid);
     let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
     interp.set_override(2.5).unwrap();
     assert_eq!(interp.requested_override(), 2.5);
@@ -397,10 +395,7 @@ fn the_requested_override_is_reported_and_bad_values_refused() {
 #[test]
 fn a_dwell_lasts_its_time_above_100_percent() {
     let text = "G21 G90 G1 X40 F1200\nG4 P1\nG1 X80\nM2\n";
-    let prog = parse_program(text, "dwell.ngc", Vector3::zeros()).unwrap();
-    let cfg = config(ProfileKind::Trapezoid);
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    let ramp = OverrideRamp::for_machine(&limits(), &cfg).unwrap();
+    let (plan, _, ramp) = planned(text, ProfileKind::Trapezoid);
     let at_100 = Interpolator::new(plan.clone(), T).unwrap().total_samples();
     let mut interp = Interpolator::new(plan, T).unwrap().with_override_ramp(ramp);
     interp.set_override(2.0).unwrap();
