@@ -416,3 +416,36 @@ fn a_dwell_lasts_its_time_above_100_percent() {
     );
     assert!(cycles < at_100, "{cycles} cycles at 200 % against {at_100}");
 }
+
+/// The README's figure for a hold on the demo machine: at 200 mm/s on an X line (`G1 X150
+/// F12000`, held in the cruise) the motion stands still within 0.15 s and 15 mm, where the
+/// general ramp alone takes 0.5 s. `cargo test --release --test override_limits
+/// a_hold_on_the_demo_machine -- --nocapture` prints the figures.
+#[test]
+fn a_hold_on_the_demo_machine_stops_within_0_15_s_on_a_line() {
+    let m = canmotion::config::Machine::demo();
+    let l = canmotion::gateway::limits(&m);
+    let ramp = OverrideRamp::for_machine(&l, &m.planner).unwrap();
+    let prog = parse_program("G21 G90 G1 X150 F12000\nM2\n", "d.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &m.planner).unwrap();
+    let mut interp = Interpolator::new(plan, m.cycle_s())
+        .unwrap()
+        .with_override_ramp(ramp);
+    let mut p = Vector3::zeros();
+    for _ in 0..100 {
+        interp.update(&mut p);
+    }
+    let from = p.x;
+    interp.hold().unwrap();
+    let mut cycles = 0u64;
+    while !matches!(interp.update(&mut p), Status::Held { .. }) {
+        cycles += 1;
+    }
+    let (took_s, travel_mm) = (cycles as f64 * m.cycle_s(), p.x - from);
+    println!("hold at 200 mm/s: {took_s:.3} s, {travel_mm:.1} mm");
+    assert!(
+        took_s <= 0.15 && travel_mm <= 15.0,
+        "{took_s} s, {travel_mm} mm"
+    );
+    assert!(ramp.ramp_time_s(1.0, 0.0) >= 0.5);
+}
