@@ -583,12 +583,6 @@ impl Interpolator {
     pub fn new(plan: Plan, period_s: f64) -> Result<Interpolator, InterpError> {
         let mut interp = Interpolator::streaming(plan.start_mm(), period_s)?;
         interp.queue.extend(plan.segments().iter().copied());
-        let segs = plan.segments();
-        for (i, seg) in segs.iter().enumerate() {
-            lows_of(seg, segs.get(i + 1), &mut interp.lows);
-            quiet_of(seg, period_s, &mut interp.quiets);
-        }
-        interp.lows_until_s = plan.duration_s();
         interp.queued_end_mm = plan.end_mm();
         interp.queued_end_s = plan.duration_s();
         interp.line = plan.segments().first().map(|s| s.line);
@@ -633,7 +627,31 @@ impl Interpolator {
     /// [`resume`](Self::resume), with `k` ramping within `ramp`.
     pub fn with_override_ramp(mut self, ramp: OverrideRamp) -> Interpolator {
         self.ramp = Some(ramp);
+        self.lows.clear();
+        self.quiets.clear();
+        // The last segment of an open queue waits for its successor (or the close).
+        let known = if self.closed {
+            self.queue.len()
+        } else {
+            self.queue.len().saturating_sub(1)
+        };
+        for i in 0..known {
+            self.note_stretches(i);
+        }
         self
+    }
+
+    /// Records where queued segment `i` holds `k` below [`MAX_OVERRIDE`] and where it is a
+    /// quiet cruise; its successor must be queued, or the queue closed. Only an interpolator
+    /// with an override ramp keeps them.
+    fn note_stretches(&mut self, i: usize) {
+        if self.ramp.is_none() {
+            return;
+        }
+        let seg = &self.queue[i];
+        lows_of(seg, self.queue.get(i + 1), &mut self.lows);
+        quiet_of(seg, self.period_s, &mut self.quiets);
+        self.lows_until_s = seg.end_time_s();
     }
 
     /// Asks for the feed override `fraction` (1 = 100 %; above 1 counts as 1, see the module
@@ -904,23 +922,18 @@ impl Interpolator {
         if self.line.is_none() {
             self.line = Some(segment.line);
         }
-        if let Some(prev) = self.queue.back() {
-            lows_of(prev, Some(&segment), &mut self.lows);
-            quiet_of(prev, self.period_s, &mut self.quiets);
-            self.lows_until_s = prev.end_time_s();
-        }
         self.queue.push_back(segment);
+        if self.queue.len() >= 2 {
+            self.note_stretches(self.queue.len() - 2);
+        }
         Ok(())
     }
 
     /// No more segments: the sample that reaches the end of the queue finishes.
     pub fn close(&mut self) {
-        if !self.closed
-            && let Some(last) = self.queue.back()
-        {
-            lows_of(last, None, &mut self.lows);
-            quiet_of(last, self.period_s, &mut self.quiets);
-            self.lows_until_s = self.queued_end_s;
+        if !self.closed && !self.queue.is_empty() {
+            self.closed = true;
+            self.note_stretches(self.queue.len() - 1);
         }
         self.closed = true;
     }
