@@ -58,6 +58,8 @@ pub mod cia402;
 pub mod compensation;
 pub mod config;
 pub mod eds;
+#[doc(hidden)]
+pub mod fuzzing;
 pub mod gateway;
 pub mod gcode;
 pub mod interp;
