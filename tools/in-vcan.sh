@@ -9,7 +9,8 @@
 # read-write through hostfs and has its own real vcan0; see shared/docs/vcan-in-ci.md.
 #
 # In the guest, CMD's stdout and stderr both go to the guest console, which is this script's
-# stdout (live). CMD's stdin is empty.
+# stdout (live). CMD's stdin is empty. The guest ends when CMD ends: processes CMD left running in
+# the background are ended then (so `CMD | cat` or `CMD > file` returns).
 #
 # Environment:
 #   VCAN_TIMEOUT   seconds bounding the whole UML run (default 900)
@@ -173,13 +174,33 @@ if [ "$VERBOSE" = 1 ]; then
     echo "in-vcan guest: vcan0 up at uptime $(cut -d' ' -f1 /proc/uptime) s" >&2
 fi
 cd "$D" || fail "cannot cd to $D"
+# The guest ends when CMD ends, with whatever CMD left running in the background (a simdrive
+# started with `&`): every process but this init (and the console reader) is ended first.
+end_the_rest() {
+    for sig in TERM KILL; do
+        for p in /proc/[0-9]*; do
+            p=${p#/proc/}
+            [ "$p" = 1 ] || [ "$p" = "${1:-}" ] || kill -"$sig" "$p" 2>/dev/null
+        done
+        [ "$sig" = KILL ] || sleep 0.2
+    done
+}
 # The console is a tty. When the host's stdout is not one (CI), give CMD a pipe as on the host:
-# no colour codes or tty-only behaviour in the logs.
+# no colour codes or tty-only behaviour in the logs. The pipe is a FIFO read by cat, not a shell
+# pipeline: a pipeline would wait for every holder of its write end, CMD's background children
+# included, and never end.
 if [ "$TTY_OUT" = 1 ]; then
     run_cmd </dev/null
     echo "$?" >"$RCFILE.tmp"
+    end_the_rest
 else
-    { run_cmd </dev/null; echo "$?" >"$RCFILE.tmp"; } 2>&1 | cat
+    mkfifo /dev/shm/in-vcan-out || fail "mkfifo failed"
+    cat /dev/shm/in-vcan-out &
+    reader=$!
+    run_cmd </dev/null >/dev/shm/in-vcan-out 2>&1
+    echo "$?" >"$RCFILE.tmp"
+    end_the_rest "$reader"
+    wait "$reader"
 fi
 mv "$RCFILE.tmp" "$RCFILE"
 busybox sync # hostfs writes go through the guest's page cache

@@ -24,6 +24,8 @@ echo "== cargo clippy --all-targets -- -D warnings"
 cargo clippy --quiet --all-targets --features vcan-tests -- -D warnings
 echo "== cargo test (unit, property, golden, in-process integration)"
 cargo test --quiet
+echo "== tools/in-vcan.sh without a terminal (background children, pipe and file)"
+tools/in-vcan-selftest.sh
 echo "== vcan0 suite"
 tools/vcan-suite.sh
 echo "== all tests passed"
