@@ -18,14 +18,24 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 rustup component list --installed 2>/dev/null | grep -q '^rustfmt' || rustup component add rustfmt clippy
 
+# Third-party data the tests read (never committed): say up front whether it is there, since the
+# tests that need it skip quietly under `cargo test --quiet`.
+corpus="$root/../shared/corpus"
+if [ -d "$corpus/linuxcnc-tp" ] && [ -d "$corpus/eds" ]; then
+  echo "== third-party corpus at $corpus: the corpus tests run"
+else
+  echo "== WARNING: no third-party corpus at $corpus: tests/gcode_corpus.rs and tests/eds_import.rs skip their corpus tests"
+fi
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
-echo "== cargo clippy --all-targets -- -D warnings"
-cargo clippy --quiet --all-targets --features vcan-tests -- -D warnings
-echo "== cargo test (unit, property, golden, in-process integration)"
+echo "== cargo clippy --all-targets -- -D warnings (2-4 minutes the first time)"
+cargo clippy --all-targets --features vcan-tests -- -D warnings
+echo "== building the tests (5-8 minutes the first time on 2 cores)"
+cargo test --no-run
+echo "== cargo test (unit, property, golden, in-process integration; about 6 minutes)"
 cargo test --quiet
 echo "== tools/in-vcan.sh without a terminal (background children, pipe and file)"
 tools/in-vcan-selftest.sh
-echo "== vcan0 suite"
+echo "== vcan0 suite (Rust and python-canopen tests on a real vcan0; about 5 minutes)"
 tools/vcan-suite.sh
 echo "== all tests passed"
