@@ -27,15 +27,11 @@ const SEND_RETRY_PAUSE: Duration = Duration::from_micros(50);
 pub(super) fn open_error(iface: &str, e: io::Error) -> BusError {
     match e.raw_os_error() {
         Some(libc::EAFNOSUPPORT) | Some(libc::EPROTONOSUPPORT) => BusError::NoSocketCan(e),
-        Some(libc::ENODEV) | Some(libc::ENXIO) => BusError::NoSuchInterface {
-            iface: iface.to_string(),
-        },
+        Some(libc::ENODEV) | Some(libc::ENXIO) => missing_interface(iface, af_can_unavailable()),
         Some(libc::ENETDOWN) => BusError::InterfaceDown {
             iface: iface.to_string(),
         },
-        _ if e.kind() == io::ErrorKind::NotFound => BusError::NoSuchInterface {
-            iface: iface.to_string(),
-        },
+        _ if e.kind() == io::ErrorKind::NotFound => missing_interface(iface, af_can_unavailable()),
         _ => BusError::Io {
             iface: iface.to_string(),
             source: e,
@@ -73,12 +69,43 @@ pub(super) fn check_interface(iface: &str) -> Result<(), BusError> {
             Ok(())
         }
         Err(_) if std::path::Path::new("/sys/class/net").exists() => {
-            Err(BusError::NoSuchInterface {
-                iface: iface.to_string(),
-            })
+            Err(missing_interface(iface, af_can_unavailable()))
         }
         Err(_) => Ok(()),
     }
+}
+
+/// Why `iface` cannot be found: on a kernel without SocketCAN no CAN interface can exist, and
+/// advice to create one (`ip link add ... type vcan`) cannot work, so that is said instead.
+/// `af_can` is [`af_can_unavailable`]'s answer.
+fn missing_interface(iface: &str, af_can: Option<io::Error>) -> BusError {
+    match af_can {
+        Some(e) => BusError::NoSocketCan(e),
+        None => BusError::NoSuchInterface {
+            iface: iface.to_string(),
+        },
+    }
+}
+
+/// The error of `socket(AF_CAN, SOCK_RAW, CAN_RAW)` when this kernel has no SocketCAN (errno 97,
+/// EAFNOSUPPORT, or EPROTONOSUPPORT without `can-raw`); `None` when a CAN socket can be made.
+/// The socket crate looks the interface up by name before it makes its socket, so a missing
+/// SocketCAN shows first as a missing interface; this tells the two apart.
+fn af_can_unavailable() -> Option<io::Error> {
+    // SAFETY: socket(2) with constant arguments; a descriptor it returns is ours and is closed
+    // at once.
+    let fd = unsafe { libc::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW) };
+    if fd >= 0 {
+        // SAFETY: `fd` is the descriptor just opened, closed once.
+        unsafe { libc::close(fd) };
+        return None;
+    }
+    let e = io::Error::last_os_error();
+    matches!(
+        e.raw_os_error(),
+        Some(libc::EAFNOSUPPORT) | Some(libc::EPROTONOSUPPORT)
+    )
+    .then_some(e)
 }
 
 fn configure<S: SocketOptions>(sock: &S, iface: &str, filters: &[Filter]) -> Result<(), BusError> {
@@ -396,6 +423,30 @@ mod tests {
                 || msg.contains("tools/in-vcan.sh"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn a_missing_interface_on_a_kernel_without_socketcan_points_to_in_vcan() {
+        // The advice to create the interface cannot work without AF_CAN: it must not be given.
+        let no_af_can = io::Error::from_raw_os_error(libc::EAFNOSUPPORT);
+        let err = missing_interface("vcan0", Some(no_af_can));
+        assert!(matches!(err, BusError::NoSocketCan(_)), "{err:?}");
+        let msg = err.to_string();
+        assert!(msg.contains("tools/in-vcan.sh"), "{msg}");
+        assert!(!msg.contains("ip link add"), "{msg}");
+        let err = missing_interface("vcan0", None);
+        assert!(matches!(err, BusError::NoSuchInterface { .. }), "{err:?}");
+        // And on this machine, whichever it is, the classification follows the probe.
+        let opened = SocketCanPort::open("canmotion-nope1", &[])
+            .err()
+            .expect("no such interface");
+        match af_can_unavailable() {
+            Some(_) => assert!(matches!(opened, BusError::NoSocketCan(_)), "{opened:?}"),
+            None => assert!(
+                matches!(opened, BusError::NoSuchInterface { .. }),
+                "{opened:?}"
+            ),
+        }
     }
 
     #[test]
