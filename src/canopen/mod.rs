@@ -8,6 +8,7 @@
 pub mod abort;
 pub mod emcy;
 pub mod od;
+pub mod sdo_client;
 pub mod sdo_server;
 
 pub use abort::AbortCode;

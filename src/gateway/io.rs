@@ -1,18 +1,19 @@
 //! The non-cyclic side of the master on tokio: one receive task dispatches SDO responses,
-//! boot-ups, heartbeats and EMCYs; SDO transfers are driven by canopen-rs's `SdoClient` state
-//! machine; the gateway's own heartbeat is a task of its own.
+//! boot-ups, heartbeats and EMCYs; SDO transfers are driven by the sans-I/O
+//! [`crate::canopen::sdo_client::SdoClient`] (expedited, segmented or block, of any length); the
+//! gateway's own heartbeat is a task of its own.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use canopen_rs::sdo::{SdoClient, SdoEvent};
-use canopen_rs::{Address, DataType, NodeId, Value};
+use canopen_rs::{DataType, Value};
 use tokio::sync::mpsc;
 
 use super::GatewayError;
 use crate::bus::{AsyncPort, Bus, Filter, Frame};
-use crate::canopen::{AbortCode, Emcy, NmtState, cob};
+use crate::canopen::sdo_client::{Mode, Outcome, SdoClient, SdoError, Step};
+use crate::canopen::{Emcy, NmtState, cob};
 
 /// How long an SDO server may take to answer one request.
 pub const SDO_TIMEOUT: Duration = Duration::from_millis(500);
@@ -170,14 +171,13 @@ impl NodeIo {
         }));
     }
 
+    /// Runs one SDO transfer with `node` to its end: `start` makes the client and pushes its
+    /// first request.
     async fn transfer(
         &self,
         node: u8,
-        index: u16,
-        sub: u8,
-        first: [u8; 8],
-        client: &mut SdoClient,
-    ) -> Result<Option<Value>, GatewayError> {
+        start: impl FnOnce(Duration, &mut Vec<[u8; 8]>) -> SdoClient,
+    ) -> Result<Outcome, GatewayError> {
         let rx = self
             .sdo_rx
             .get(&node)
@@ -185,36 +185,87 @@ impl NodeIo {
         let mut rx = rx.lock().await;
         while rx.try_recv().is_ok() {} // stale responses
         let req = cob::SDO_RX + u16::from(node);
-        let mut frame = first;
+        let epoch = tokio::time::Instant::now();
+        let mut out = Vec::new();
+        let mut client = start(Duration::ZERO, &mut out).with_timeout(SDO_TIMEOUT, Duration::ZERO);
+        let (index, sub) = client.address();
         loop {
-            self.send(&Frame::new(req, &frame).expect("id")).await?;
-            let resp = match tokio::time::timeout(SDO_TIMEOUT, rx.recv()).await {
-                Ok(Some(r)) => r,
+            for f in out.drain(..) {
+                self.send(&Frame::new(req, &f).expect("id")).await?;
+            }
+            let step = match tokio::time::timeout_at(epoch + client.poll_at(), rx.recv()).await {
+                Ok(Some(r)) => client.on_response(&r, epoch.elapsed(), &mut out),
                 Ok(None) => return Err(GatewayError::Bus(crate::bus::BusError::Closed)),
-                Err(_) => {
-                    // Tell the server we gave up (CiA 301: abort with 0x05040000).
-                    let mut a = [0x80, index as u8, (index >> 8) as u8, sub, 0, 0, 0, 0];
-                    a[4..].copy_from_slice(&AbortCode::TIMEOUT.0.to_le_bytes());
-                    let _ = self.send(&Frame::new(req, &a).expect("id")).await;
-                    return Err(GatewayError::SdoTimeout { node, index, sub });
-                }
+                Err(_) => client.poll(epoch.elapsed().max(client.poll_at()), &mut out),
             };
-            match client.on_response(&resp) {
-                SdoEvent::Send(next) => frame = next,
-                SdoEvent::Complete(v) => return Ok(v),
-                SdoEvent::Aborted(code) => {
-                    return Err(GatewayError::SdoAbort {
+            if let Step::Done(result) = step {
+                // The client's own abort, if it sent one, goes out before the error.
+                for f in out.drain(..) {
+                    let _ = self.send(&Frame::new(req, &f).expect("id")).await;
+                }
+                return result.map_err(|e| match e {
+                    SdoError::Aborted { code } => GatewayError::SdoAbort {
                         node,
                         index,
                         sub,
-                        code: AbortCode(code),
-                    });
-                }
+                        code,
+                    },
+                    SdoError::TimedOut { .. } => GatewayError::SdoTimeout { node, index, sub },
+                    source @ SdoError::Protocol { .. } => GatewayError::SdoClient {
+                        node,
+                        index,
+                        sub,
+                        source,
+                    },
+                });
             }
         }
     }
 
-    /// SDO upload of `index:sub` as `data_type`.
+    /// SDO upload of `index:sub`: its bytes, of any length (segmented, or expedited where the
+    /// node answers so).
+    pub async fn upload(&self, node: u8, index: u16, sub: u8) -> Result<Vec<u8>, GatewayError> {
+        self.upload_with(node, index, sub, Mode::Segmented).await
+    }
+
+    /// [`NodeIo::upload`] in a given transfer mode (block transfers for long objects).
+    pub async fn upload_with(
+        &self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        mode: Mode,
+    ) -> Result<Vec<u8>, GatewayError> {
+        match self
+            .transfer(node, |now, out| {
+                SdoClient::upload(index, sub, mode, now, out)
+            })
+            .await?
+        {
+            Outcome::Uploaded(bytes) => Ok(bytes),
+            Outcome::Downloaded => Err(GatewayError::SdoProtocol { node, index, sub }),
+        }
+    }
+
+    /// SDO download of `data` to `index:sub`, of any length.
+    pub async fn download(
+        &self,
+        node: u8,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        mode: Mode,
+    ) -> Result<(), GatewayError> {
+        let data = data.to_vec();
+        self.transfer(node, move |now, out| {
+            SdoClient::download(index, sub, data, mode, now, out)
+        })
+        .await
+        .map(|_| ())
+    }
+
+    /// SDO upload of `index:sub` decoded as `data_type`. A length that does not fit the type
+    /// is [`GatewayError::SdoLength`] (the node answered; the answer is not that type).
     pub async fn read(
         &self,
         node: u8,
@@ -222,12 +273,14 @@ impl NodeIo {
         sub: u8,
         data_type: DataType,
     ) -> Result<Value, GatewayError> {
-        let mut c =
-            SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
-        let first = c.read(Address::new(index, sub), data_type);
-        self.transfer(node, index, sub, first, &mut c)
-            .await?
-            .ok_or(GatewayError::SdoProtocol { node, index, sub })
+        let bytes = self.upload(node, index, sub).await?;
+        Value::decode_le(data_type, &bytes).map_err(|_| GatewayError::SdoLength {
+            node,
+            index,
+            sub,
+            data_type,
+            len: bytes.len(),
+        })
     }
 
     /// SDO download of `value` to `index:sub`.
@@ -238,12 +291,12 @@ impl NodeIo {
         sub: u8,
         value: Value,
     ) -> Result<(), GatewayError> {
-        let mut c =
-            SdoClient::new(NodeId::new(node).map_err(|_| GatewayError::UnknownNode { node })?);
-        let first = c.write(Address::new(index, sub), value);
-        self.transfer(node, index, sub, first, &mut c)
+        let mut buf = [0u8; canopen_rs::MAX_STRING_LEN];
+        let n = value
+            .encode_le(&mut buf)
+            .map_err(|_| GatewayError::SdoProtocol { node, index, sub })?;
+        self.download(node, index, sub, &buf[..n], Mode::Segmented)
             .await
-            .map(|_| ())
     }
 
     /// Read an integer entry.

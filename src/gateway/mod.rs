@@ -97,6 +97,33 @@ pub enum GatewayError {
         /// Sub-index.
         sub: u8,
     },
+    /// The node's SDO answers broke the protocol; the gateway aborted the transfer (its own
+    /// abort, not the node's).
+    #[error("node {node}: SDO {index:04X}:{sub:02X}: {source}")]
+    SdoClient {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// What was wrong, and the abort code the gateway sent.
+        source: crate::canopen::sdo_client::SdoError,
+    },
+    /// An upload whose length does not fit the data type asked for.
+    #[error("node {node}: SDO {index:04X}:{sub:02X}: {len} byte(s) do not hold a {data_type:?}")]
+    SdoLength {
+        /// Node.
+        node: u8,
+        /// Object.
+        index: u16,
+        /// Sub-index.
+        sub: u8,
+        /// The type asked for.
+        data_type: canopen_rs::DataType,
+        /// The bytes the node sent.
+        len: usize,
+    },
     /// An SDO answer that does not fit the request.
     #[error("node {node}: SDO {index:04X}:{sub:02X}: unexpected answer")]
     SdoProtocol {

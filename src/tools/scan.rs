@@ -80,7 +80,13 @@ fn u32_of(b: &[u8]) -> Option<u32> {
 /// (no answer), or the bus failed.
 fn answered(r: &Result<Vec<u8>, GatewayError>) -> Option<bool> {
     match r {
-        Ok(_) | Err(GatewayError::SdoAbort { .. } | GatewayError::SdoProtocol { .. }) => Some(true),
+        Ok(_)
+        | Err(
+            GatewayError::SdoAbort { .. }
+            | GatewayError::SdoProtocol { .. }
+            | GatewayError::SdoClient { .. }
+            | GatewayError::SdoLength { .. },
+        ) => Some(true),
         Err(GatewayError::SdoTimeout { .. }) => Some(false),
         Err(_) => None,
     }

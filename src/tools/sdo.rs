@@ -1,5 +1,5 @@
-//! `canmotion sdo read|write`: one SDO transfer with a node, through [`NodeIo`] (canopen-rs's
-//! SDO client state machine: expedited or segmented as the size requires).
+//! `canmotion sdo read|write`: one SDO transfer with a node, through [`NodeIo`] (the sans-I/O
+//! [`crate::canopen::sdo_client`]: expedited or segmented as the size requires, any length).
 //!
 //! An upload is always requested untyped and the bytes decoded afterwards, so a length that
 //! does not fit the requested type is reported as such (instead of the client's generic abort).
@@ -8,7 +8,7 @@
 
 use std::fmt;
 
-use canopen_rs::{DataType, Value};
+use canopen_rs::Value;
 
 use super::args::{Node, ObjectAddress, SdoType, format_raw, format_value};
 use super::{ToolError, runtime};
@@ -23,6 +23,8 @@ pub enum ReadValue {
     Typed(Value),
     /// No type requested: the bytes.
     Raw(Vec<u8>),
+    /// A `VISIBLE_STRING`, of any length (a `Value` holds at most 32 bytes).
+    Text(Vec<u8>),
 }
 
 impl fmt::Display for ReadValue {
@@ -31,23 +33,22 @@ impl fmt::Display for ReadValue {
         match self {
             ReadValue::Typed(v) => f.write_str(&format_value(v)),
             ReadValue::Raw(b) => f.write_str(&format_raw(b)),
+            ReadValue::Text(b) => match std::str::from_utf8(b) {
+                Ok(s) => write!(f, "{s:?} ({})", super::hex_bytes(b)),
+                Err(_) => f.write_str(&super::hex_bytes(b)),
+            },
         }
     }
 }
 
-/// Upload `index:sub` from `node` as raw bytes (any length up to 32).
+/// Upload `index:sub` from `node` as raw bytes (any length).
 pub async fn upload_bytes(
     io: &NodeIo,
     node: u8,
     index: u16,
     sub: u8,
 ) -> Result<Vec<u8>, GatewayError> {
-    match io.read(node, index, sub, DataType::Domain).await? {
-        Value::Domain(b) | Value::OctetString(b) | Value::VisibleString(b) => {
-            Ok(b.as_bytes().to_vec())
-        }
-        _ => Err(GatewayError::SdoProtocol { node, index, sub }),
-    }
+    io.upload(node, index, sub).await
 }
 
 /// Decode uploaded bytes as `ty`.
@@ -89,6 +90,7 @@ pub fn read(
         let io = NodeIo::start(bus, &[node.0])?;
         let bytes = upload_bytes(&io, node.0, addr.index, addr.sub).await?;
         Ok(match ty {
+            Some(SdoType::String) => ReadValue::Text(bytes),
             Some(t) => ReadValue::Typed(decode_as(node.0, addr, t, &bytes)?),
             None => ReadValue::Raw(bytes),
         })
