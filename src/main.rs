@@ -215,6 +215,10 @@ enum SdoOp {
         /// u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
         #[arg(value_name = "TYPE")]
         data_type: Option<canmotion::tools::SdoType>,
+        /// Ask for a block upload (CiA 301 §7.2.4.3.9; a node without it may answer with a
+        /// normal upload, which is followed).
+        #[arg(long)]
+        block: bool,
     },
     /// Download a value to an object.
     Write {
@@ -665,9 +669,21 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     node,
                     address,
                     data_type,
+                    block,
                 },
         } => {
-            let v = canmotion::tools::sdo::read(&Bus::from_arg(&iface), node, address, data_type)?;
+            let mode = if block {
+                canmotion::canopen::sdo_client::Mode::Block
+            } else {
+                canmotion::canopen::sdo_client::Mode::Segmented
+            };
+            let v = canmotion::tools::sdo::read(
+                &Bus::from_arg(&iface),
+                node,
+                address,
+                data_type,
+                mode,
+            )?;
             println!("{v}");
             Ok(())
         }

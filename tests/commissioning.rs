@@ -13,6 +13,7 @@ use canopen_rs::Value;
 use canmotion::bus::inproc::InProcBus;
 use canmotion::bus::{Bus, Filter};
 use canmotion::canopen::NmtState;
+use canmotion::canopen::sdo_client::Mode;
 use canmotion::config::{DriveDictionary, Machine};
 use canmotion::sim::{SimDrive, runner};
 use canmotion::tools::monitor::{self, MonitorOptions};
@@ -114,19 +115,33 @@ fn sdo_read_write_round_trip() {
     ] {
         let written = sdo::write_text(&bus, n5, addr(a), t, text).expect("write");
         assert_eq!(written, want);
-        let back = sdo::read(&bus, n5, addr(a), Some(t)).expect("read");
+        let back = sdo::read(&bus, n5, addr(a), Some(t), Mode::Segmented).expect("read");
         assert_eq!(back, ReadValue::Typed(want), "{a}");
     }
-    let r = sdo::read(&bus, n5, addr("0x607A"), Some(SdoType::I32)).unwrap();
+    let r = sdo::read(
+        &bus,
+        n5,
+        addr("0x607A"),
+        Some(SdoType::I32),
+        Mode::Segmented,
+    )
+    .unwrap();
     eprintln!("$ canmotion sdo read sim 5 0x607A i32\n{r}");
     assert_eq!(r.to_string(), "-12345 (0xFFFFCFC7)");
     // Untyped: the bytes, as a number with its hex.
-    let r = sdo::read(&bus, n5, addr("1000"), None).unwrap();
+    let r = sdo::read(&bus, n5, addr("1000"), None, Mode::Segmented).unwrap();
     eprintln!("$ canmotion sdo read sim 5 1000\n{r}");
     assert_eq!(r, ReadValue::Raw(vec![0x92, 0x01, 0x02, 0x00]));
     assert_eq!(r.to_string(), "131474 (0x00020192)");
     // Segmented upload of a string.
-    let r = sdo::read(&bus, n5, addr("1008:00"), Some(SdoType::String)).unwrap();
+    let r = sdo::read(
+        &bus,
+        n5,
+        addr("1008:00"),
+        Some(SdoType::String),
+        Mode::Segmented,
+    )
+    .unwrap();
     eprintln!("$ canmotion sdo read sim 5 1008:00 string\n{r}");
     assert!(
         r.to_string()
@@ -135,11 +150,18 @@ fn sdo_read_write_round_trip() {
     );
     // The other node kept its own value.
     assert_eq!(
-        sdo::read(&bus, Node(2), addr("1017"), Some(SdoType::U16)).unwrap(),
+        sdo::read(
+            &bus,
+            Node(2),
+            addr("1017"),
+            Some(SdoType::U16),
+            Mode::Segmented
+        )
+        .unwrap(),
         ReadValue::Typed(Value::Unsigned16(0))
     );
     // A type of the wrong length is named, not a generic abort.
-    let e = sdo::read(&bus, n5, addr("1017"), Some(SdoType::U32)).unwrap_err();
+    let e = sdo::read(&bus, n5, addr("1017"), Some(SdoType::U32), Mode::Segmented).unwrap_err();
     assert_eq!(
         e.to_string(),
         "node 5: SDO 1017:00 answered 2 byte(s), type u32 has 4"
@@ -156,12 +178,12 @@ fn sdo_aborts_name_node_object_and_code() {
         e.to_string(),
         "node 5: SDO 1000:00 aborted with 0x06010002 (attempt to write a read-only object)"
     );
-    let e = sdo::read(&bus, Node(5), addr("2345:00"), None).unwrap_err();
+    let e = sdo::read(&bus, Node(5), addr("2345:00"), None, Mode::Segmented).unwrap_err();
     assert_eq!(
         e.to_string(),
         "node 5: SDO 2345:00 aborted with 0x06020000 (object does not exist in the object dictionary)"
     );
-    let e = sdo::read(&bus, Node(5), addr("1018:09"), None).unwrap_err();
+    let e = sdo::read(&bus, Node(5), addr("1018:09"), None, Mode::Segmented).unwrap_err();
     assert!(
         e.to_string()
             .contains("0x06090011 (sub-index does not exist)"),
@@ -176,7 +198,7 @@ fn sdo_aborts_name_node_object_and_code() {
         "{e}"
     );
     // Nobody at node 9.
-    let e = sdo::read(&bus, Node(9), addr("1000"), None).unwrap_err();
+    let e = sdo::read(&bus, Node(9), addr("1000"), None, Mode::Segmented).unwrap_err();
     assert!(
         e.to_string()
             .starts_with("node 9: no answer to SDO 1000:00"),

@@ -13,6 +13,7 @@ use canopen_rs::Value;
 use super::args::{Node, ObjectAddress, SdoType, format_raw, format_value};
 use super::{ToolError, runtime};
 use crate::bus::Bus;
+use crate::canopen::sdo_client::Mode;
 use crate::gateway::GatewayError;
 use crate::gateway::io::NodeIo;
 
@@ -79,16 +80,18 @@ pub fn decode_as(
     })
 }
 
-/// `canmotion sdo read`: upload `addr` from `node`, decoded as `ty` (raw bytes without a type).
+/// `canmotion sdo read`: upload `addr` from `node` (any length, segmented or block), decoded as
+/// `ty` (raw bytes without a type).
 pub fn read(
     bus: &Bus,
     node: Node,
     addr: ObjectAddress,
     ty: Option<SdoType>,
+    mode: Mode,
 ) -> Result<ReadValue, ToolError> {
     runtime()?.block_on(async {
         let io = NodeIo::start(bus, &[node.0])?;
-        let bytes = upload_bytes(&io, node.0, addr.index, addr.sub).await?;
+        let bytes = io.upload_with(node.0, addr.index, addr.sub, mode).await?;
         Ok(match ty {
             Some(SdoType::String) => ReadValue::Text(bytes),
             Some(t) => ReadValue::Typed(decode_as(node.0, addr, t, &bytes)?),

@@ -292,7 +292,7 @@ fn exchange(
         );
         now = client.poll_at();
         if let Step::Done(r) = client.poll(now, &mut out) {
-            sent.extend(out.drain(..));
+            sent.append(&mut out);
             return (r, sent);
         }
     }
