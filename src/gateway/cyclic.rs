@@ -1123,6 +1123,58 @@ mod tests {
     }
 
     #[test]
+    fn a_stop_on_the_path_holds_on_it_then_disables_and_fails_with_its_message() {
+        let m = Machine::demo();
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 40);
+        let from = r.master.armed_mm().unwrap();
+        let to = Vector3::new(150.0, 80.0, from[2]);
+        let ramp =
+            crate::interp::OverrideRamp::for_machine(&crate::gateway::limits(&m), &m.planner)
+                .unwrap();
+        r.master
+            .supply_motion(motion(from, "G90 G1 X150 Y80 F12000\n").with_override_ramp(ramp));
+        for _ in 0..80 {
+            r.step();
+        }
+        assert_eq!(r.master.phase(), Phase::Streaming);
+        let stopped_at = r.records.len();
+        r.master.stop_on_path("stopped by signal SIGINT".into());
+        // An operator's resume does not lift it.
+        r.master.set_override(1.0, false);
+        r.run_until(Phase::Done, 3000);
+        assert!(
+            r.master
+                .failure()
+                .unwrap()
+                .starts_with("stopped by signal SIGINT"),
+            "{:?}",
+            r.master.failure()
+        );
+        assert!(r.master.frozen_nodes().is_empty(), "no axis frozen");
+        let interp = r.master.motion().unwrap();
+        assert!(
+            interp.plan_time_s() < interp.duration_s() * 0.9,
+            "stopped before the end"
+        );
+        // On the path all along, within the limits, and at rest at the end.
+        let t = m.cycle_s();
+        let on = &r.records[stopped_at - 2..];
+        for w in on.windows(3) {
+            let p = Vector3::new(w[2].cmd_mm[0], w[2].cmd_mm[1], w[2].cmd_mm[2]);
+            let off = (p - from).cross(&(to - from)).norm() / (to - from).norm();
+            assert!(off < 1e-3, "cycle {}: {off} mm off the path", w[2].cycle);
+            for (i, a) in m.axes.iter().enumerate() {
+                let acc = (w[2].cmd_mm[i] - 2.0 * w[1].cmd_mm[i] + w[0].cmd_mm[i]) / (t * t);
+                assert!(acc.abs() <= a.max_acc_mm_s2 * 1.01 + 1e-6, "{acc}");
+            }
+        }
+        let last = r.records.last().unwrap();
+        assert_eq!(last.cmd_mm, on[on.len() - 2].cmd_mm);
+        assert!(r.records.iter().any(|c| c.phase == Phase::Settling));
+    }
+
+    #[test]
     fn a_drive_fault_stops_the_others_within_their_acceleration_and_names_the_axis() {
         let mut r = Rig::new();
         r.run_until(Phase::Armed, 40);
