@@ -23,6 +23,46 @@ use std::time::{Duration, Instant};
 /// Highest override accepted at run time, 200 %.
 pub const MAX_REQUEST: f64 = crate::interp::MAX_OVERRIDE;
 
+/// Why a command line was refused (it changes nothing).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    /// `override P` with P not a number.
+    #[error("override '{text}': not a percentage (e.g. override 50)")]
+    NotAPercentage {
+        /// What was given.
+        text: String,
+    },
+    /// `override P` with P outside 0 to 200 %.
+    #[error("override {percent} %: must be between 0 and {} %", MAX_REQUEST * 100.0)]
+    OutOfRange {
+        /// What was given, %.
+        percent: f64,
+    },
+    /// An empty line.
+    #[error("empty line: override P, hold, resume, status, or keys + - 0-9 f h space")]
+    Empty,
+    /// Neither a command nor keys.
+    #[error(
+        "unknown command '{}': override P, hold, resume, status, or keys + - 0-9 f h space",
+        line.escape_debug()
+    )]
+    Unknown {
+        /// The line.
+        line: String,
+    },
+    /// The line's bytes are not UTF-8.
+    #[error("not UTF-8 (invalid byte at column {column})")]
+    NotUtf8 {
+        /// The first invalid byte, from 1.
+        column: usize,
+    },
+    /// No run in progress, or its motion has no override ramp.
+    #[error(
+        "no feed override in this run: the machine's planner keeps no acceleration for it (path_acc_share = 1), or no run is in progress"
+    )]
+    NoOverride,
+}
+
 /// The wanted override and hold of the run in progress (see the module documentation).
 #[derive(Debug)]
 pub struct Control {
@@ -98,14 +138,16 @@ impl Control {
                 Err(e) => format!("error: {e}"),
             },
             Err(e) => format!(
-                "error: not UTF-8 (invalid byte at column {})",
-                e.valid_up_to() + 1
+                "error: {}",
+                CommandError::NotUtf8 {
+                    column: e.valid_up_to() + 1
+                }
             ),
         }
     }
 
     /// Applies one line of commands or keys; the answer (`ok ...`) or why not.
-    pub fn apply_line(&self, line: &str) -> Result<String, String> {
+    pub fn apply_line(&self, line: &str) -> Result<String, CommandError> {
         let line = line.trim_end_matches(['\n', '\r']);
         let words: Vec<&str> = line.split_whitespace().collect();
         let _w = self.writer.lock().unwrap_or_else(|e| e.into_inner());
@@ -113,26 +155,20 @@ impl Control {
         match words.as_slice() {
             ["status"] => return Ok(format!("ok {}", describe(requested, held))),
             ["override", p] => {
-                let percent: f64 = p
-                    .trim_end_matches('%')
-                    .parse()
-                    .map_err(|_| format!("override '{p}': not a percentage (e.g. override 50)"))?;
+                let percent: f64 =
+                    p.trim_end_matches('%')
+                        .parse()
+                        .map_err(|_| CommandError::NotAPercentage {
+                            text: (*p).to_string(),
+                        })?;
                 if !(0.0..=MAX_REQUEST * 100.0).contains(&percent) {
-                    return Err(format!(
-                        "override {percent} %: must be between 0 and {} %",
-                        MAX_REQUEST * 100.0
-                    ));
+                    return Err(CommandError::OutOfRange { percent });
                 }
                 requested = percent / 100.0;
             }
             ["hold"] => held = true,
             ["resume"] => held = false,
-            [] if line.is_empty() => {
-                return Err(
-                    "empty line: override P, hold, resume, status, or keys + - 0-9 f h space"
-                        .into(),
-                );
-            }
+            [] if line.is_empty() => return Err(CommandError::Empty),
             _ if line.chars().all(|c| "+-0123456789fh ".contains(c)) => {
                 for c in line.chars() {
                     match c {
@@ -147,16 +183,13 @@ impl Control {
                 }
             }
             _ => {
-                return Err(format!(
-                    "unknown command '{line}': override P, hold, resume, status, or keys + - 0-9 f h space"
-                ));
+                return Err(CommandError::Unknown {
+                    line: line.to_string(),
+                });
             }
         }
         if !self.available.load(Ordering::Relaxed) {
-            return Err(
-                "no feed override in this run: the machine's planner keeps no acceleration for it (path_acc_share = 1), or no run is in progress"
-                    .into(),
-            );
+            return Err(CommandError::NoOverride);
         }
         self.requested.store(requested.to_bits(), Ordering::Relaxed);
         self.held.store(held, Ordering::Relaxed);
@@ -519,10 +552,12 @@ pub fn read_keys<R: BufRead + ?Sized>(input: &mut R, control: &Control, report: 
         let problem = match read {
             Ok(LineRead::Eof) => return,
             Ok(LineRead::Line) => match std::str::from_utf8(&line) {
-                Ok(text) => control.apply_line(text).err(),
+                Ok(text) => control.apply_line(text).err().map(|e| e.to_string()),
                 Err(e) => Some(format!(
-                    "not UTF-8 (invalid byte at column {}), ignored",
-                    e.valid_up_to() + 1
+                    "{}, ignored",
+                    CommandError::NotUtf8 {
+                        column: e.valid_up_to() + 1
+                    }
                 )),
             },
             Ok(LineRead::TooLong) => match skip_line(input) {
@@ -783,7 +818,11 @@ mod tests {
     fn lines_and_keys_set_the_wanted_state() {
         let c = Control::new();
         let mut seen = 0;
-        assert!(c.apply_line("override 50").is_err(), "no run: refused");
+        assert_eq!(
+            c.apply_line("override 50"),
+            Err(CommandError::NoOverride),
+            "no run: refused"
+        );
         c.reset(true);
         assert_eq!(c.poll(&mut seen), Some((1.0, false)));
         assert_eq!(c.poll(&mut seen), None);
@@ -805,19 +844,21 @@ mod tests {
         c.apply_line("h0").unwrap();
         assert_eq!(c.wanted(), (0.0, false));
         assert_eq!(c.apply_line("override 150").unwrap(), "ok override 150 %");
-        for bad in ["override 201", "override x", "stop", ""] {
-            assert!(
-                c.apply_line(bad)
-                    .unwrap_err()
-                    .contains(if bad == "override 201" {
-                        "between 0 and 200 %"
-                    } else if bad == "override x" {
-                        "not a percentage"
-                    } else {
-                        "override P, hold, resume"
-                    })
-            );
-        }
+        assert_eq!(
+            c.apply_line("override 201"),
+            Err(CommandError::OutOfRange { percent: 201.0 })
+        );
+        assert_eq!(
+            c.apply_line("override x"),
+            Err(CommandError::NotAPercentage { text: "x".into() })
+        );
+        assert_eq!(
+            c.apply_line("stop"),
+            Err(CommandError::Unknown {
+                line: "stop".into()
+            })
+        );
+        assert_eq!(c.apply_line(""), Err(CommandError::Empty));
         assert_eq!(c.wanted(), (1.5, false), "a refused line changes nothing");
     }
 }
