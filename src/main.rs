@@ -255,11 +255,52 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    match real_main() {
+    let result = real_main();
+    if let Err(e) = &result {
+        eprintln!("canmotion: error: {e}");
+    }
+    // A run stopped by SIGINT or SIGTERM exits as the signal would have ended it (130, 143),
+    // once the drives are disabled, the resume point saved and the control socket removed.
+    if let Some(signal) = canmotion::rt::signal::STOP.first() {
+        if result.is_ok() {
+            eprintln!(
+                "canmotion: {} received as the program ended: it ran to its end",
+                signal.name()
+            );
+        }
+        return ExitCode::from(signal.exit_code());
+    }
+    match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("canmotion: error: {e}");
-            ExitCode::FAILURE
+        Err(_) => ExitCode::FAILURE,
+    }
+}
+
+/// Standard input as the resume confirmation reads it: a line read on a thread of its own, so
+/// that a stop signal (SIGINT, SIGTERM: blocked in every thread, see
+/// [`canmotion::rt::signal`]) cancels the question instead of waiting for an answer.
+struct AnswerOrSignal;
+
+impl std::io::Read for AnswerOrSignal {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let _ = std::io::stdin().read_line(&mut line);
+            let _ = tx.send(line);
+        });
+        loop {
+            match rx.recv_timeout(std::time::Duration::from_millis(50)) {
+                Ok(line) => {
+                    let n = line.len().min(buf.len());
+                    buf[..n].copy_from_slice(&line.as_bytes()[..n]);
+                    return Ok(n);
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout)
+                    if canmotion::rt::signal::STOP.count() == 0 => {}
+                // A signal, or nobody to answer: no.
+                Err(_) => return Ok(0),
+            }
         }
     }
 }
@@ -282,7 +323,7 @@ fn confirm(preview: &ResumePreview, yes: bool) -> bool {
     }
     resume::ask(
         preview,
-        &mut std::io::stdin().lock(),
+        &mut std::io::BufReader::new(AnswerOrSignal),
         &mut std::io::stderr(),
     )
 }
@@ -458,6 +499,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     DEMO_PROGRAM.to_string(),
                 ),
             };
+            // From here on SIGINT and SIGTERM stop the run in order (no thread is running yet).
+            canmotion::rt::signal::route_stop_signals()
+                .map_err(|e| format!("cannot route SIGINT and SIGTERM: {e}"))?;
             let bus_arg = bus.unwrap_or_else(|| machine.interface.clone());
             let bus = Bus::from_arg(&bus_arg);
             let simulate = matches!(bus, Bus::InProc(_));

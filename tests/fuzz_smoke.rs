@@ -36,3 +36,10 @@ fn gcode_programs() {
     let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
     run_seeded(&s, 1500, 1, fuzzing::gcode::program);
 }
+
+#[test]
+fn control_lines() {
+    let s = seeds("tests/control_lines", &[".txt"]);
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 4000, 2, fuzzing::control::lines);
+}

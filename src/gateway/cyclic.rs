@@ -200,6 +200,8 @@ pub struct CyclicMaster {
     pub streaming_cycles: u64,
     /// The feed override and hold the operator wants (given to the motion once supplied).
     override_wanted: (f64, bool),
+    /// A stop on the path was asked for ([`Self::stop_on_path`]): why, once the hold is done.
+    stop_asked: Option<String>,
 }
 
 impl CyclicMaster {
@@ -241,6 +243,7 @@ impl CyclicMaster {
             last_ferr_mm: vec![0.0; n],
             streaming_cycles: 0,
             override_wanted: (1.0, false),
+            stop_asked: None,
             axes,
         }
     }
@@ -360,7 +363,8 @@ impl CyclicMaster {
     /// later, from its start). A hold keeps the drives enabled, streaming the held point. A
     /// motion without an override ramp ignores it.
     pub fn set_override(&mut self, fraction: f64, hold: bool) {
-        self.override_wanted = (fraction, hold);
+        // A stop on the path under way holds, whatever the operator asks next.
+        self.override_wanted = (fraction, hold || self.stop_asked.is_some());
         self.apply_override();
     }
 
@@ -411,6 +415,29 @@ impl CyclicMaster {
         self.fail(message);
     }
 
+    /// Stop the run on the path (SIGINT, SIGTERM): while the motion streams, a feed hold with
+    /// the motion's own override ramp (the path kept, every axis within its limits), then, at
+    /// standstill, the drives are disabled as at the end of a program and the run fails with
+    /// `message`, so that its resume point is where the hold stopped. Before the motion
+    /// streams, or for a motion without an override ramp, it is the stop of [`Self::alarm`] (no
+    /// axis frozen). While the axes settle at the program's end, or once stopping, nothing
+    /// changes. A later [`Self::alarm`] escalates to the fault stop.
+    pub fn stop_on_path(&mut self, message: String) {
+        match self.phase {
+            Phase::Streaming => {
+                let held = self.motion.as_mut().is_some_and(|m| m.hold().is_ok());
+                if held {
+                    self.override_wanted.1 = true;
+                    self.stop_asked = Some(message);
+                } else {
+                    self.fail(message);
+                }
+            }
+            Phase::Enabling | Phase::Arming | Phase::Armed => self.fail(message),
+            Phase::Settling | Phase::Stopping | Phase::Disabling | Phase::Done => {}
+        }
+    }
+
     /// The bus is gone (bus-off, interface down): no frame reaches the drives any more, so no
     /// controlled stop is possible. Every setpoint is held where it is, and the run ends now
     /// ([`Phase::Done`]: no more frames).
@@ -420,7 +447,8 @@ impl CyclicMaster {
         self.set_phase(Phase::Done);
     }
 
-    fn fail(&mut self, message: String) {
+    /// The run's failure, unless it has one already.
+    fn fail_message(&mut self, message: String) {
         if self.failure.is_none() {
             let at = match self.line {
                 Some(l) => format!(" (last program line {l})"),
@@ -429,6 +457,10 @@ impl CyclicMaster {
             self.failure = Some(format!("{message}{at}"));
             self.failure_cycle = Some(self.cycle);
         }
+    }
+
+    fn fail(&mut self, message: String) {
+        self.fail_message(message);
         match self.phase {
             Phase::Streaming | Phase::Settling | Phase::Armed | Phase::Arming => {
                 // Stop along the current direction: every axis decelerates so that all reach
@@ -721,6 +753,18 @@ impl CyclicMaster {
             }
             let filtered = self.filters.iter().flatten().all(AxisFilter::is_settled);
             if self.phase == Phase::Streaming && status == Some(Status::Finished) && filtered {
+                self.set_phase(Phase::Settling);
+            }
+            // A stop on the path: once held at standstill, settle where it stopped and disable.
+            if self.phase == Phase::Streaming
+                && filtered
+                && self
+                    .motion
+                    .as_ref()
+                    .is_some_and(Interpolator::is_standing_still)
+                && let Some(message) = self.stop_asked.take()
+            {
+                self.fail_message(message);
                 self.set_phase(Phase::Settling);
             }
         } else if self.phase == Phase::Settling {
@@ -1076,6 +1120,58 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_stop_on_the_path_holds_on_it_then_disables_and_fails_with_its_message() {
+        let m = Machine::demo();
+        let mut r = Rig::new();
+        r.run_until(Phase::Armed, 40);
+        let from = r.master.armed_mm().unwrap();
+        let to = Vector3::new(150.0, 80.0, from[2]);
+        let ramp =
+            crate::interp::OverrideRamp::for_machine(&crate::gateway::limits(&m), &m.planner)
+                .unwrap();
+        r.master
+            .supply_motion(motion(from, "G90 G1 X150 Y80 F12000\n").with_override_ramp(ramp));
+        for _ in 0..80 {
+            r.step();
+        }
+        assert_eq!(r.master.phase(), Phase::Streaming);
+        let stopped_at = r.records.len();
+        r.master.stop_on_path("stopped by signal SIGINT".into());
+        // An operator's resume does not lift it.
+        r.master.set_override(1.0, false);
+        r.run_until(Phase::Done, 3000);
+        assert!(
+            r.master
+                .failure()
+                .unwrap()
+                .starts_with("stopped by signal SIGINT"),
+            "{:?}",
+            r.master.failure()
+        );
+        assert!(r.master.frozen_nodes().is_empty(), "no axis frozen");
+        let interp = r.master.motion().unwrap();
+        assert!(
+            interp.plan_time_s() < interp.duration_s() * 0.9,
+            "stopped before the end"
+        );
+        // On the path all along, within the limits, and at rest at the end.
+        let t = m.cycle_s();
+        let on = &r.records[stopped_at - 2..];
+        for w in on.windows(3) {
+            let p = Vector3::new(w[2].cmd_mm[0], w[2].cmd_mm[1], w[2].cmd_mm[2]);
+            let off = (p - from).cross(&(to - from)).norm() / (to - from).norm();
+            assert!(off < 1e-3, "cycle {}: {off} mm off the path", w[2].cycle);
+            for (i, a) in m.axes.iter().enumerate() {
+                let acc = (w[2].cmd_mm[i] - 2.0 * w[1].cmd_mm[i] + w[0].cmd_mm[i]) / (t * t);
+                assert!(acc.abs() <= a.max_acc_mm_s2 * 1.01 + 1e-6, "{acc}");
+            }
+        }
+        let last = r.records.last().unwrap();
+        assert_eq!(last.cmd_mm, on[on.len() - 2].cmd_mm);
+        assert!(r.records.iter().any(|c| c.phase == Phase::Settling));
     }
 
     #[test]

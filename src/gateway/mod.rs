@@ -207,6 +207,16 @@ pub enum GatewayError {
         /// Why.
         source: std::io::Error,
     },
+    /// A stop signal (SIGINT, SIGTERM) arrived before any drive was enabled: every drive was
+    /// sent to Pre-operational, nothing moved.
+    #[error(
+        "stopped by signal {} before any motion: no drive was enabled, every drive was sent to Pre-operational",
+        signal.name()
+    )]
+    Stopped {
+        /// The first signal.
+        signal: rt::signal::Signal,
+    },
     /// A resume (`run --resume`) was refused before any motion: changed program, another
     /// machine, an axis too far from the stop point, no confirmation (see [`resume`]).
     #[error("{0}")]
@@ -634,6 +644,7 @@ pub fn run_with(
         &opts.program_text,
         Vector3::zeros(),
     )?;
+    rt::signal::STOP.begin_run();
 
     let _sims = if opts.simulate {
         let drives = machine
@@ -665,7 +676,15 @@ async fn run_async(
     control::CONTROL.reset(ramp.is_ok());
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
-    let start_counts = startup::start(machine, bus, &mut io).await?;
+    // A stop signal during start-up (SDO configuration, nothing enabled) ends it there.
+    let started = tokio::select! {
+        r = startup::start(machine, bus, &mut io) => Ok(r),
+        s = stop_signal() => Err(s),
+    };
+    let start_counts = match started {
+        Ok(r) => r?,
+        Err(signal) => return Err(pre_operational(machine, &io, signal).await),
+    };
     let mut start_mm = Vector3::zeros();
     for (a, c) in machine.axes.iter().zip(&start_counts) {
         if let Some(i) = a.xyz() {
@@ -679,6 +698,10 @@ async fn run_async(
             let _ = io.nmt(crate::canopen::nmt::PRE_OPERATIONAL, a.node).await;
         }
         return Err(e);
+    }
+    // A signal during the check (a resume's confirmation): nothing is enabled yet.
+    if let Some(signal) = rt::signal::STOP.first() {
+        return Err(pre_operational(machine, &io, signal).await);
     }
 
     let (log_tx, log_thread) = match &opts.log {
@@ -816,6 +839,29 @@ async fn run_async(
     })
 }
 
+/// The first stop signal, once one has arrived (polled: the count is an atomic of the signal
+/// thread's, see [`rt::signal`]).
+async fn stop_signal() -> rt::signal::Signal {
+    loop {
+        if let Some(s) = rt::signal::STOP.first() {
+            return s;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Every drive to Pre-operational after a stop signal before any motion; the run's error.
+async fn pre_operational(
+    machine: &Machine,
+    io: &NodeIo,
+    signal: rt::signal::Signal,
+) -> GatewayError {
+    for a in &machine.axes {
+        let _ = io.nmt(crate::canopen::nmt::PRE_OPERATIONAL, a.node).await;
+    }
+    GatewayError::Stopped { signal }
+}
+
 /// The channels between the cyclic thread and the async side.
 struct CyclicLinks {
     /// The motion, once planned from the armed position.
@@ -880,11 +926,31 @@ fn cyclic_thread(
     let on_path: Vec<bool> = machine.axes.iter().map(|a| a.xyz().is_some()).collect();
     let mut prev_cmd_mm: Option<[f64; crate::config::machine::MAX_AXES]> = None;
     let mut control_seen = 0u64;
+    let mut signals_seen = 0u32;
     loop {
         ticker.wait();
         // Override and hold from the operator: atomics only, applied from this cycle's sample.
         if let Some((fraction, hold)) = control::CONTROL.poll(&mut control_seen) {
             master.set_override(fraction, hold);
+        }
+        // Stop signals: one atomic load per cycle; the first stops on the path, the second
+        // escalates to the fault stop.
+        let signals = rt::signal::STOP.count();
+        if signals != signals_seen {
+            let first = rt::signal::STOP.first().map_or("?", |s| s.name());
+            if signals_seen == 0 {
+                master.stop_on_path(format!("stopped by signal {first}"));
+            }
+            if signals >= 2 {
+                let latest = rt::signal::STOP.latest().map_or("?", |s| s.name());
+                master.alarm(
+                    0,
+                    format!(
+                        "stopped by signal {first}; a second signal ({latest}) during the stop escalated to the fault stop"
+                    ),
+                );
+            }
+            signals_seen = signals;
         }
         // Feedback and error frames received since the last cycle.
         if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {

@@ -3,6 +3,7 @@
 //! the process is permitted, never bursting a backlog after an overrun.
 
 pub mod period_stats;
+pub mod signal;
 
 use std::time::Duration;
 
