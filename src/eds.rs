@@ -82,6 +82,10 @@ pub enum EdsError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not a regular file or is too large, or the output cannot be written there
+    /// (see [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The EDS is malformed at a line.
     #[error("{}:{line}: {message}", file.display())]
     Line {
@@ -189,10 +193,7 @@ impl Imported {
 
 /// Import an EDS or DCF file.
 pub fn import_file(path: &Path, opts: &ImportOptions) -> Result<Imported, EdsError> {
-    let bytes = std::fs::read(path).map_err(|source| EdsError::Read {
-        file: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::files::read_bounded(path, crate::files::MAX_CONFIG_BYTES)?;
     import_str(path, &decode(&bytes), opts)
 }
 
@@ -211,7 +212,7 @@ pub fn import_to_file(
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(werr)?;
     }
-    std::fs::write(output, &imported.toml).map_err(werr)?;
+    crate::files::write_output(output, imported.toml.as_bytes())?;
     DriveDictionary::load(output).map_err(|e| EdsError::Rejected {
         file: input.to_path_buf(),
         message: e.to_string(),

@@ -58,6 +58,7 @@ pub mod cia402;
 pub mod compensation;
 pub mod config;
 pub mod eds;
+pub mod files;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod gateway;

@@ -7,9 +7,34 @@ use clap::{Parser, Subcommand};
 
 use canmotion::bus::Bus;
 use canmotion::config::{DriveDictionary, Machine};
+use canmotion::files::{self, MAX_CONFIG_BYTES};
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState};
 use canmotion::gateway::{self, RunOptions};
 use canmotion::sim::{SimDrive, runner};
+
+/// Standard output failed (a full disk, a closed pipe): reported, never a panic.
+#[derive(Debug, thiserror::Error)]
+#[error("standard output: cannot write: {0}")]
+struct StdoutError(std::io::Error);
+
+/// `println!` that returns [`StdoutError`] from the enclosing function instead of panicking.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(
+            &mut std::io::stdout().lock(),
+            format_args!("{}\n", format_args!($($arg)*)),
+        )
+        .map_err(StdoutError)?
+    };
+}
+
+/// `print!` that returns [`StdoutError`] from the enclosing function instead of panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(&mut std::io::stdout().lock(), format_args!($($arg)*))
+            .map_err(StdoutError)?
+    };
+}
 
 /// The demo program run when `canmotion run` is given no program.
 const DEMO_PROGRAM: &str = include_str!("../examples/demo.ngc");
@@ -251,9 +276,20 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    match real_main() {
+    let result = real_main().and_then(|()| {
+        // What is still buffered must reach the output too, or be an error.
+        std::io::Write::flush(&mut std::io::stdout()).map_err(|e| StdoutError(e).into())
+    });
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            // A reader that went away (`canmotion plan ... | head`) wanted no more: quiet, and
+            // the status a shell shows for SIGPIPE.
+            if e.downcast_ref::<StdoutError>()
+                .is_some_and(|s| s.0.kind() == std::io::ErrorKind::BrokenPipe)
+            {
+                return ExitCode::from(141);
+            }
             eprintln!("canmotion: error: {e}");
             ExitCode::FAILURE
         }
@@ -264,13 +300,14 @@ fn main() -> ExitCode {
 /// Without a terminal on standard input there is nobody to ask: no.
 fn confirm(preview: &ResumePreview, yes: bool) -> bool {
     use std::io::IsTerminal;
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
     if yes {
-        println!("{preview}");
-        println!("confirmed by --yes");
-        return true;
+        // Nobody confirms a resume whose preview could not be shown.
+        return writeln!(stdout, "{preview}\nconfirmed by --yes").is_ok();
     }
     if !std::io::stdin().is_terminal() {
-        println!("{preview}");
+        let _ = writeln!(stdout, "{preview}");
         eprintln!(
             "canmotion: standard input is not a terminal, nobody to confirm the resume: use --yes from a script"
         );
@@ -375,7 +412,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 canmotion::offline::plan_file(&machine, &program, start_mm, &opts)?
             };
-            print!("{}", summary.report(&machine));
+            out!("{}", summary.report(&machine));
             Ok(())
         }
         Command::Optimize {
@@ -388,14 +425,13 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
             };
+            // Bytes, bounded, read as `plan` reads them (a Latin-1 comment is no error).
             let (name, text) = if program.as_os_str() == "-" {
-                let mut text = String::new();
-                std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
-                    .map_err(|e| format!("<stdin>: cannot read: {e}"))?;
+                let stdin = std::path::Path::new("<stdin>");
+                let text = files::read_to_end_bounded(std::io::stdin(), stdin, MAX_CONFIG_BYTES)?;
                 ("<stdin>".to_string(), text)
             } else {
-                let text = std::fs::read_to_string(&program)
-                    .map_err(|e| format!("{}: cannot read: {e}", program.display()))?;
+                let text = files::read_bounded(&program, MAX_CONFIG_BYTES)?;
                 (program.display().to_string(), text)
             };
             let opts = canmotion::optimize::OptimizeOptions { trace: !no_trace };
@@ -406,10 +442,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 nalgebra::Vector3::zeros(),
                 &opts,
             )?;
-            std::fs::write(&output, &done.text)
-                .map_err(|e| format!("{}: cannot write: {e}", output.display()))?;
-            print!("{}", done.report.summary());
-            println!("wrote             {}", output.display());
+            files::write_output(&output, &done.text)?;
+            out!("{}", done.report.summary());
+            outln!("wrote             {}", output.display());
             Ok(())
         }
         Command::Run {
@@ -445,8 +480,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     ("<stdin>".to_string(), text)
                 }
                 Some(p) => {
-                    let text = std::fs::read_to_string(&p)
+                    // A regular file (not a FIFO or /dev/zero), read as `plan` reads it.
+                    let mut bytes = Vec::new();
+                    std::io::Read::read_to_end(&mut files::open_input(&p)?, &mut bytes)
                         .map_err(|e| format!("{}: cannot read: {e}", p.display()))?;
+                    let text = String::from_utf8_lossy(&bytes).into_owned();
                     (p.display().to_string(), text)
                 }
                 None => (
@@ -457,7 +495,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let bus_arg = bus.unwrap_or_else(|| machine.interface.clone());
             let bus = Bus::from_arg(&bus_arg);
             let simulate = matches!(bus, Bus::InProc(_));
-            println!(
+            outln!(
                 "canmotion: {} on machine '{}' ({} axes, {} µs cycle) over {}{}",
                 name,
                 machine.name,
@@ -541,9 +579,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     return Err(format!("{e}{hint}").into());
                 }
             };
-            println!("{summary}");
+            outln!("{summary}");
             if let Some(l) = log {
-                println!("log               {}", l.display());
+                outln!("log               {}", l.display());
             }
             // The program ran to its end: a resume point of it is done with.
             if let Some(path) = &state
@@ -553,7 +591,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             {
                 std::fs::remove_file(path)
                     .map_err(|e| format!("{}: cannot remove: {e}", path.display()))?;
-                println!(
+                outln!(
                     "resume point      {} removed (the program completed)",
                     path.display()
                 );
@@ -587,7 +625,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let mut failed = Vec::new();
             for r in &reports {
                 if r.ok() {
-                    println!("{r}");
+                    outln!("{r}");
                 } else {
                     failed.push(r.to_string());
                 }
@@ -668,7 +706,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 },
         } => {
             let v = canmotion::tools::sdo::read(&Bus::from_arg(&iface), node, address, data_type)?;
-            println!("{v}");
+            outln!("{v}");
             Ok(())
         }
         Command::Sdo {
@@ -684,7 +722,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let bus = Bus::from_arg(&iface);
             let v = canmotion::tools::sdo::write_text(&bus, node, address, data_type, &value)?;
             let v = canmotion::tools::args::format_value(&v);
-            println!("node {node}: {address} = {v} written");
+            outln!("node {node}: {address} = {v} written");
             Ok(())
         }
         Command::Nmt {
@@ -693,7 +731,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             target,
         } => {
             let f = canmotion::tools::nmt::send(&Bus::from_arg(&iface), command, target)?;
-            println!("NMT {command}: {target} ({f})");
+            outln!("NMT {command}: {target} ({f})");
             Ok(())
         }
         Command::Scan { iface, timeout_ms } => {
@@ -704,8 +742,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 ..scan::ScanOptions::default()
             };
             let nodes = scan::scan(&bus, &opts)?;
-            print!("{}", scan::format_table(&nodes));
-            println!("{} node(s) on {}", nodes.len(), bus.name());
+            out!("{}", scan::format_table(&nodes));
+            outln!("{} node(s) on {}", nodes.len(), bus.name());
             Ok(())
         }
         Command::Dict {
@@ -716,8 +754,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 ..Default::default()
             };
             let imported = canmotion::eds::import_to_file(&file, &output, &opts)?;
-            println!("{}", imported.summary());
-            println!("wrote             {}", output.display());
+            outln!("{}", imported.summary());
+            outln!("wrote             {}", output.display());
             Ok(())
         }
     }

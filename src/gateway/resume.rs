@@ -135,6 +135,9 @@ pub enum StateError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not a regular file, is too large, or cannot be written where it is.
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The content is not a resume file of this version.
     #[error("{file}: not a canmotion resume file: {message}")]
     Format {
@@ -166,10 +169,7 @@ impl ResumeState {
 
     /// Read a resume file.
     pub fn load(file: &Path) -> Result<ResumeState, StateError> {
-        let text = std::fs::read_to_string(file).map_err(|source| StateError::Io {
-            file: file.display().to_string(),
-            source,
-        })?;
+        let text = crate::files::read_text(file, crate::files::MAX_CONFIG_BYTES)?;
         ResumeState::parse(file, &text)
     }
 
@@ -183,16 +183,10 @@ impl ResumeState {
         )
     }
 
-    /// Write the file (through a temporary file and a rename, so a reader never sees half).
+    /// Write the file (through a partial file and a rename, so a reader never sees half; see
+    /// [`crate::files::Output`]).
     pub fn save(&self, file: &Path) -> Result<(), StateError> {
-        let io = |source| StateError::Io {
-            file: file.display().to_string(),
-            source,
-        };
-        let mut tmp = file.as_os_str().to_owned();
-        tmp.push(".tmp");
-        std::fs::write(&tmp, self.to_toml()).map_err(io)?;
-        std::fs::rename(&tmp, file).map_err(io)
+        Ok(crate::files::write_output(file, self.to_toml().as_bytes())?)
     }
 
     fn stop_point(&self) -> Vector3<f64> {
