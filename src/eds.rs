@@ -996,6 +996,20 @@ impl Cx<'_> {
                 SecName::Values(i) => {
                     values.insert(i, s);
                 }
+                // `[0x6040]`, `[-6040]`, `[16040]`: meant as an object, but not CiA 306's
+                // four hex digits. Skipped, counted and named, never dropped silently.
+                SecName::Other
+                    if s.name
+                        .starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+') =>
+                {
+                    self.skip(
+                        s.line,
+                        format!(
+                            "section [{}] is not an object section ([XXXX], [XXXXsubN], [XXXXName] or [XXXXValue], XXXX four hex digits): skipped",
+                            s.name
+                        ),
+                    );
+                }
                 SecName::Other => {}
             }
         }

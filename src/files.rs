@@ -76,6 +76,28 @@ impl std::fmt::Display for FileKind {
     }
 }
 
+/// Text from a file, shown with its control characters escaped (`\u{1b}`, `\r`, ...): an ANSI
+/// escape sequence, a carriage return or a bidirectional override in a resume file's reason or
+/// a machine's name must not redraw or fake what the operator reads.
+#[derive(Debug, Clone, Copy)]
+pub struct Escaped<'a>(pub &'a str);
+
+impl std::fmt::Display for Escaped<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use std::fmt::Write as _;
+        for c in self.0.chars() {
+            // C0, DEL, C1, and the bidirectional embeddings, overrides and isolates.
+            let bidi = matches!(c, '\u{200E}' | '\u{200F}' | '\u{202A}'..='\u{202E}' | '\u{2066}'..='\u{2069}');
+            if c.is_control() || bidi {
+                write!(f, "{}", c.escape_default())?;
+            } else {
+                f.write_char(c)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// An input or output that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {

@@ -179,7 +179,8 @@ impl ResumeState {
         format!(
             "# canmotion resume point: where `{}` stopped. `canmotion run {} --resume` continues\n\
              # from here after a confirmation; delete this file to forget it.\n{body}",
-            self.program, self.program
+            Escaped(&self.program),
+            Escaped(&self.program)
         )
     }
 
@@ -593,11 +594,14 @@ pub struct ResumePreview {
     pub approach_mm_s: f64,
 }
 
+use crate::files::Escaped;
+
 impl fmt::Display for ResumePreview {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let p = self.stop_point_mm;
-        writeln!(f, "resume {} at line {}", self.program, self.line)?;
-        writeln!(f, "  stopped by      {}", self.reason)?;
+        // Everything that comes from a file is shown escaped: it must not redraw the screen.
+        writeln!(f, "resume {} at line {}", Escaped(&self.program), self.line)?;
+        writeln!(f, "  stopped by      {}", Escaped(&self.reason))?;
         if self.motion_done {
             writeln!(
                 f,
@@ -626,7 +630,7 @@ impl fmt::Display for ResumePreview {
                 Some(s) => writeln!(
                     f,
                     "  axis {} (node {})  at {:.4} mm, {:.4} mm from the stop point{reset}",
-                    a.name,
+                    Escaped(&a.name),
                     a.node,
                     a.now_mm,
                     (a.now_mm - s).abs()
@@ -634,7 +638,9 @@ impl fmt::Display for ResumePreview {
                 None => writeln!(
                     f,
                     "  axis {} (node {})  at {:.4} mm, held{reset}",
-                    a.name, a.node, a.now_mm
+                    Escaped(&a.name),
+                    a.node,
+                    a.now_mm
                 )?,
             }
         }
@@ -1159,5 +1165,49 @@ mod tests {
                 "{text}"
             );
         }
+    }
+
+    #[test]
+    fn text_from_the_file_is_shown_escaped() {
+        let m = machine();
+        let orig = original(Vector3::zeros());
+        let (_, plan) = orig.plan.clone().unwrap();
+        let state = ResumeState {
+            program: "p\u{1b}[2J.ngc".into(),
+            reason: "\u{1b}[2J\u{1b}[1;1Hall clear, \u{202E}safe\r".into(),
+            ..orig
+                .state_after(&m, &opts(PROGRAM), &failure(stop_at(&plan, 0.5)))
+                .unwrap()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.ngc.resume");
+        state.save(&file).unwrap();
+        let loaded = ResumeState::load(&file).unwrap();
+        let preview = ResumePreview {
+            program: loaded.program.clone(),
+            reason: loaded.reason.clone(),
+            line: 3,
+            fraction: 0.25,
+            completed_line: 2,
+            stop_point_mm: Vector3::new(1.0, 2.0, 3.0),
+            motion_done: false,
+            axes: vec![PreviewAxis {
+                name: "X\u{1b}[31m".into(),
+                node: 1,
+                now_mm: 1.5,
+                stop_mm: None,
+                reset: false,
+            }],
+            max_distance_mm: 0.5,
+            approach_mm_s: APPROACH_MM_S,
+        };
+        let text = preview.to_string();
+        assert!(!text.contains(['\u{1b}', '\r', '\u{202E}']), "{text:?}");
+        assert!(
+            text.contains("stopped by      \\u{1b}[2J\\u{1b}[1;1Hall clear, \\u{202e}safe\\r"),
+            "{text}"
+        );
+        assert!(text.contains("resume p\\u{1b}[2J.ngc at line 3"), "{text}");
+        assert!(text.contains("axis X\\u{1b}[31m (node 1)"), "{text}");
     }
 }
