@@ -1780,7 +1780,7 @@ impl<R: BufRead> Interpreter<R> {
             }
             Repeat => {
                 if !(0.0..=1e12).contains(&value) {
-                    return Err(self.error(c.col, ErrorKind::ControlValue { keyword: "repeat" }));
+                    return Err(self.error(c.col, ErrorKind::RepeatCount { value }));
                 }
                 let count = value.round() as u64;
                 if count == 0 {

@@ -365,6 +365,12 @@ pub enum ErrorKind {
         /// The keyword.
         keyword: &'static str,
     },
+    /// A `repeat` count below 0, above 1e12 or not a number.
+    #[error("repeat count {value} is out of range: it must be 0 or more (at most 1e12)")]
+    RepeatCount {
+        /// The count as evaluated.
+        value: f64,
+    },
     /// An O-word control line out of place (`endwhile` without `while`...).
     #[error("{what} needs {expected}")]
     ControlMismatch {
@@ -769,6 +775,19 @@ mod tests {
         // The optimiser's line split agrees.
         let lines: Vec<_> = split_lines_inclusive(b"a\rb\r\nc\n\rd").collect();
         assert_eq!(lines, [&b"a\r"[..], b"b\r\n", b"c\n", b"\r", b"d"]);
+    }
+
+    #[test]
+    fn a_negative_repeat_count_says_so() {
+        let e = parse_program(
+            "G0 X1\no1 repeat [-5]\nG0 X2\no1 endrepeat\n",
+            "p",
+            Vector3::zeros(),
+        )
+        .unwrap_err();
+        assert_eq!((e.line, e.col), (2, 1));
+        assert_eq!(e.kind, ErrorKind::RepeatCount { value: -5.0 });
+        assert!(e.to_string().contains("must be 0 or more"), "{e}");
     }
 
     #[test]
