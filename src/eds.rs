@@ -194,7 +194,12 @@ impl Imported {
 /// Import an EDS or DCF file.
 pub fn import_file(path: &Path, opts: &ImportOptions) -> Result<Imported, EdsError> {
     let bytes = crate::files::read_bounded(path, crate::files::MAX_CONFIG_BYTES)?;
-    import_str(path, &decode(&bytes), opts)
+    import_bytes(path, &bytes, opts)
+}
+
+/// Import EDS or DCF bytes (UTF-8, or else Latin-1); `file` names them in messages.
+pub fn import_bytes(file: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Imported, EdsError> {
+    import_str(file, &decode(bytes), opts)
 }
 
 /// Import an EDS or DCF file and write the dictionary to `output` (its folder is created when
