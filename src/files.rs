@@ -357,13 +357,13 @@ impl Output {
 
     /// Flushes the output and, for an atomic write, renames the partial file over the target.
     pub fn finish(mut self) -> Result<(), FileError> {
-        if let Some(mut w) = self.w.take() {
-            if let Err(e) = w.flush() {
-                if let Some(p) = &self.partial {
-                    let _ = std::fs::remove_file(p);
-                }
-                return Err(self.err(e));
+        if let Some(mut w) = self.w.take()
+            && let Err(e) = w.flush()
+        {
+            if let Some(p) = &self.partial {
+                let _ = std::fs::remove_file(p);
             }
+            return Err(self.err(e));
         }
         match &self.partial {
             Some(p) => std::fs::rename(p, &self.path).map_err(|e| self.err(e)),
