@@ -498,7 +498,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             outln!(
                 "canmotion: {} on machine '{}' ({} axes, {} µs cycle) over {}{}",
                 name,
-                machine.name,
+                files::Escaped(&machine.name),
                 machine.axes.len(),
                 machine.cycle_us,
                 bus.name(),
