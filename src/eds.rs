@@ -82,6 +82,10 @@ pub enum EdsError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not a regular file or is too large, or the output cannot be written there
+    /// (see [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The EDS is malformed at a line.
     #[error("{}:{line}: {message}", file.display())]
     Line {
@@ -189,11 +193,13 @@ impl Imported {
 
 /// Import an EDS or DCF file.
 pub fn import_file(path: &Path, opts: &ImportOptions) -> Result<Imported, EdsError> {
-    let bytes = std::fs::read(path).map_err(|source| EdsError::Read {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    import_str(path, &decode(&bytes), opts)
+    let bytes = crate::files::read_bounded(path, crate::files::MAX_CONFIG_BYTES)?;
+    import_bytes(path, &bytes, opts)
+}
+
+/// Import EDS or DCF bytes (UTF-8, or else Latin-1); `file` names them in messages.
+pub fn import_bytes(file: &Path, bytes: &[u8], opts: &ImportOptions) -> Result<Imported, EdsError> {
+    import_str(file, &decode(bytes), opts)
 }
 
 /// Import an EDS or DCF file and write the dictionary to `output` (its folder is created when
@@ -211,7 +217,7 @@ pub fn import_to_file(
     if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(werr)?;
     }
-    std::fs::write(output, &imported.toml).map_err(werr)?;
+    crate::files::write_output(output, imported.toml.as_bytes())?;
     DriveDictionary::load(output).map_err(|e| EdsError::Rejected {
         file: input.to_path_buf(),
         message: e.to_string(),
@@ -994,6 +1000,20 @@ impl Cx<'_> {
                 }
                 SecName::Values(i) => {
                     values.insert(i, s);
+                }
+                // `[0x6040]`, `[-6040]`, `[16040]`: meant as an object, but not CiA 306's
+                // four hex digits. Skipped, counted and named, never dropped silently.
+                SecName::Other
+                    if s.name
+                        .starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+') =>
+                {
+                    self.skip(
+                        s.line,
+                        format!(
+                            "section [{}] is not an object section ([XXXX], [XXXXsubN], [XXXXName] or [XXXXValue], XXXX four hex digits): skipped",
+                            s.name
+                        ),
+                    );
                 }
                 SecName::Other => {}
             }

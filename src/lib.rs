@@ -50,7 +50,9 @@
 //! Data flows one way: `gcode → compensation → planner → interp → gateway::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
-//! takes time as an argument.
+//! takes time as an argument. [`files`] is how the command line and the loaders open their
+//! inputs (regular files only, bounded) and write their outputs (atomically, or in place through
+//! a symlink or to a device).
 
 pub mod bus;
 pub mod canopen;
@@ -58,6 +60,7 @@ pub mod cia402;
 pub mod compensation;
 pub mod config;
 pub mod eds;
+pub mod files;
 #[doc(hidden)]
 pub mod fuzzing;
 pub mod gateway;

@@ -7,9 +7,34 @@ use clap::{Parser, Subcommand};
 
 use canmotion::bus::Bus;
 use canmotion::config::{DriveDictionary, Machine};
+use canmotion::files::{self, MAX_CONFIG_BYTES};
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState};
 use canmotion::gateway::{self, RunOptions};
 use canmotion::sim::{SimDrive, runner};
+
+/// Standard output failed (a full disk, a closed pipe): reported, never a panic.
+#[derive(Debug, thiserror::Error)]
+#[error("standard output: cannot write: {0}")]
+struct StdoutError(std::io::Error);
+
+/// `println!` that returns [`StdoutError`] from the enclosing function instead of panicking.
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(
+            &mut std::io::stdout().lock(),
+            format_args!("{}\n", format_args!($($arg)*)),
+        )
+        .map_err(StdoutError)?
+    };
+}
+
+/// `print!` that returns [`StdoutError`] from the enclosing function instead of panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        std::io::Write::write_fmt(&mut std::io::stdout().lock(), format_args!($($arg)*))
+            .map_err(StdoutError)?
+    };
+}
 
 /// The demo program run when `canmotion run` is given no program.
 const DEMO_PROGRAM: &str = include_str!("../examples/demo.ngc");
@@ -255,8 +280,19 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
-    let result = real_main();
-    if let Err(e) = &result {
+    let result = real_main().and_then(|()| {
+        // What is still buffered must reach the output too, or be an error.
+        std::io::Write::flush(&mut std::io::stdout()).map_err(|e| StdoutError(e).into())
+    });
+    // A reader that went away (`canmotion plan ... | head`) wanted no more: quiet, and the
+    // status a shell shows for SIGPIPE.
+    let broken_pipe = result.as_ref().is_err_and(|e| {
+        e.downcast_ref::<StdoutError>()
+            .is_some_and(|s| s.0.kind() == std::io::ErrorKind::BrokenPipe)
+    });
+    if let Err(e) = &result
+        && !broken_pipe
+    {
         eprintln!("canmotion: error: {e}");
     }
     // A run stopped by SIGINT or SIGTERM exits as the signal would have ended it (130, 143),
@@ -272,6 +308,7 @@ fn main() -> ExitCode {
     }
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(_) if broken_pipe => ExitCode::from(141),
         Err(_) => ExitCode::FAILURE,
     }
 }
@@ -309,13 +346,14 @@ impl std::io::Read for AnswerOrSignal {
 /// Without a terminal on standard input there is nobody to ask: no.
 fn confirm(preview: &ResumePreview, yes: bool) -> bool {
     use std::io::IsTerminal;
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
     if yes {
-        println!("{preview}");
-        println!("confirmed by --yes");
-        return true;
+        // Nobody confirms a resume whose preview could not be shown.
+        return writeln!(stdout, "{preview}\nconfirmed by --yes").is_ok();
     }
     if !std::io::stdin().is_terminal() {
-        println!("{preview}");
+        let _ = writeln!(stdout, "{preview}");
         eprintln!(
             "canmotion: standard input is not a terminal, nobody to confirm the resume: use --yes from a script"
         );
@@ -420,7 +458,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 canmotion::offline::plan_file(&machine, &program, start_mm, &opts)?
             };
-            print!("{}", summary.report(&machine));
+            out!("{}", summary.report(&machine));
             Ok(())
         }
         Command::Optimize {
@@ -433,14 +471,13 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 Some(p) => Machine::load(&p)?,
                 None => Machine::demo(),
             };
+            // Bytes, bounded, read as `plan` reads them (a Latin-1 comment is no error).
             let (name, text) = if program.as_os_str() == "-" {
-                let mut text = String::new();
-                std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
-                    .map_err(|e| format!("<stdin>: cannot read: {e}"))?;
+                let stdin = std::path::Path::new("<stdin>");
+                let text = files::read_to_end_bounded(std::io::stdin(), stdin, MAX_CONFIG_BYTES)?;
                 ("<stdin>".to_string(), text)
             } else {
-                let text = std::fs::read_to_string(&program)
-                    .map_err(|e| format!("{}: cannot read: {e}", program.display()))?;
+                let text = files::read_bounded(&program, MAX_CONFIG_BYTES)?;
                 (program.display().to_string(), text)
             };
             let opts = canmotion::optimize::OptimizeOptions { trace: !no_trace };
@@ -451,10 +488,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 nalgebra::Vector3::zeros(),
                 &opts,
             )?;
-            std::fs::write(&output, &done.text)
-                .map_err(|e| format!("{}: cannot write: {e}", output.display()))?;
-            print!("{}", done.report.summary());
-            println!("wrote             {}", output.display());
+            files::write_output(&output, &done.text)?;
+            out!("{}", done.report.summary());
+            outln!("wrote             {}", output.display());
             Ok(())
         }
         Command::Run {
@@ -490,8 +526,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     ("<stdin>".to_string(), text)
                 }
                 Some(p) => {
-                    let text = std::fs::read_to_string(&p)
+                    // A regular file (not a FIFO or /dev/zero), read as `plan` reads it.
+                    let mut bytes = Vec::new();
+                    std::io::Read::read_to_end(&mut files::open_input(&p)?, &mut bytes)
                         .map_err(|e| format!("{}: cannot read: {e}", p.display()))?;
+                    let text = String::from_utf8_lossy(&bytes).into_owned();
                     (p.display().to_string(), text)
                 }
                 None => (
@@ -505,10 +544,10 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let bus_arg = bus.unwrap_or_else(|| machine.interface.clone());
             let bus = Bus::from_arg(&bus_arg);
             let simulate = matches!(bus, Bus::InProc(_));
-            println!(
+            outln!(
                 "canmotion: {} on machine '{}' ({} axes, {} µs cycle) over {}{}",
                 name,
-                machine.name,
+                files::Escaped(&machine.name),
                 machine.axes.len(),
                 machine.cycle_us,
                 bus.name(),
@@ -589,9 +628,9 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                     return Err(format!("{e}{hint}").into());
                 }
             };
-            println!("{summary}");
+            outln!("{summary}");
             if let Some(l) = log {
-                println!("log               {}", l.display());
+                outln!("log               {}", l.display());
             }
             // The program ran to its end: a resume point of it is done with.
             if let Some(path) = &state
@@ -601,7 +640,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             {
                 std::fs::remove_file(path)
                     .map_err(|e| format!("{}: cannot remove: {e}", path.display()))?;
-                println!(
+                outln!(
                     "resume point      {} removed (the program completed)",
                     path.display()
                 );
@@ -635,7 +674,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let mut failed = Vec::new();
             for r in &reports {
                 if r.ok() {
-                    println!("{r}");
+                    outln!("{r}");
                 } else {
                     failed.push(r.to_string());
                 }
@@ -728,7 +767,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 data_type,
                 mode,
             )?;
-            println!("{v}");
+            outln!("{v}");
             Ok(())
         }
         Command::Sdo {
@@ -744,7 +783,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             let bus = Bus::from_arg(&iface);
             let v = canmotion::tools::sdo::write_text(&bus, node, address, data_type, &value)?;
             let v = canmotion::tools::args::format_value(&v);
-            println!("node {node}: {address} = {v} written");
+            outln!("node {node}: {address} = {v} written");
             Ok(())
         }
         Command::Nmt {
@@ -753,7 +792,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             target,
         } => {
             let f = canmotion::tools::nmt::send(&Bus::from_arg(&iface), command, target)?;
-            println!("NMT {command}: {target} ({f})");
+            outln!("NMT {command}: {target} ({f})");
             Ok(())
         }
         Command::Scan { iface, timeout_ms } => {
@@ -764,8 +803,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 ..scan::ScanOptions::default()
             };
             let nodes = scan::scan(&bus, &opts)?;
-            print!("{}", scan::format_table(&nodes));
-            println!("{} node(s) on {}", nodes.len(), bus.name());
+            out!("{}", scan::format_table(&nodes));
+            outln!("{} node(s) on {}", nodes.len(), bus.name());
             Ok(())
         }
         Command::Dict {
@@ -776,8 +815,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 ..Default::default()
             };
             let imported = canmotion::eds::import_to_file(&file, &output, &opts)?;
-            println!("{}", imported.summary());
-            println!("wrote             {}", output.display());
+            outln!("{}", imported.summary());
+            outln!("wrote             {}", output.display());
             Ok(())
         }
     }

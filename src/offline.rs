@@ -7,7 +7,7 @@
 //!
 //! Units in names: `_mm` millimetres, `_mm_s` mm/s, `_s` seconds.
 
-use std::io::{BufRead, Write};
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
@@ -41,6 +41,23 @@ pub struct PlanOptions {
 /// Largest planning-time feed override (200 %).
 pub const MAX_PLAN_OVERRIDE: f64 = 2.0;
 
+/// A fraction shown as a percentage, to at most two decimals with trailing zeros dropped:
+/// `Percent(2.01)` is `201`, `Percent(0.505)` is `50.5` (never `200.99999999999997`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Percent(pub f64);
+
+impl std::fmt::Display for Percent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = format!("{:.2}", self.0 * 100.0);
+        let s = if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.')
+        } else {
+            &s
+        };
+        f.write_str(if s == "-0" { "0" } else { s })
+    }
+}
+
 /// Checks a planning-time override fraction: finite, 1 % to 200 %.
 pub fn check_override(fraction: f64) -> Result<f64, String> {
     if (0.01..=MAX_PLAN_OVERRIDE).contains(&fraction) {
@@ -48,8 +65,8 @@ pub fn check_override(fraction: f64) -> Result<f64, String> {
     } else {
         Err(format!(
             "feed override {} % must be between 1 % and {} %",
-            fraction * 100.0,
-            MAX_PLAN_OVERRIDE * 100.0
+            Percent(fraction),
+            Percent(MAX_PLAN_OVERRIDE)
         ))
     }
 }
@@ -93,14 +110,9 @@ pub enum OfflineError {
     /// The program or the machine refused it (parse error, travel, planning).
     #[error(transparent)]
     Gateway(#[from] GatewayError),
-    /// An output file could not be written.
-    #[error("{}: cannot write: {source}", file.display())]
-    Write {
-        /// The file.
-        file: PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
+    /// An output file could not be written (or is a directory).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The plot could not be made (its extension, or drawing it).
     #[error("{0}")]
     Plot(String),
@@ -138,60 +150,15 @@ fn xyz(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
-/// A file written through a buffer, named in its errors. It is written as `FILE.partial` and
-/// renamed to `FILE` only when complete, so a failed plan never leaves a truncated output that
-/// looks whole (the partial file is removed).
-struct Out {
-    file: PathBuf,
-    partial: PathBuf,
-    w: Option<std::io::BufWriter<std::fs::File>>,
-}
+/// An output file: see [`crate::files::Output`] (atomic for a regular file, in place through a
+/// symlink or to a device, a directory refused).
+type Out = crate::files::Output;
 
-impl Out {
-    fn create(file: &Path) -> Result<Out, OfflineError> {
-        let mut partial = file.as_os_str().to_owned();
-        partial.push(".partial");
-        let partial = PathBuf::from(partial);
-        let f = std::fs::File::create(&partial).map_err(|source| OfflineError::Write {
-            file: partial.clone(),
-            source,
-        })?;
-        Ok(Out {
-            file: file.to_path_buf(),
-            partial,
-            w: Some(std::io::BufWriter::new(f)),
-        })
-    }
-
-    fn err(&self, source: std::io::Error) -> OfflineError {
-        OfflineError::Write {
-            file: self.file.clone(),
-            source,
-        }
-    }
-
-    fn write_all(&mut self, bytes: &[u8]) -> Result<(), OfflineError> {
-        match self.w.as_mut() {
-            Some(w) => w.write_all(bytes).map_err(|e| self.err(e)),
-            None => Ok(()),
-        }
-    }
-
-    fn finish(mut self) -> Result<(), OfflineError> {
-        if let Some(mut w) = self.w.take() {
-            w.flush().map_err(|e| self.err(e))?;
-        }
-        std::fs::rename(&self.partial, &self.file).map_err(|e| self.err(e))
-    }
-}
-
-impl Drop for Out {
-    fn drop(&mut self) {
-        if self.w.take().is_some() {
-            // Not finished: an error stopped the plan.
-            let _ = std::fs::remove_file(&self.partial);
-        }
-    }
+fn json_err(out: &Out, e: serde_json::Error) -> OfflineError {
+    OfflineError::File(crate::files::FileError::Write {
+        path: out.path().to_path_buf(),
+        source: e.into(),
+    })
 }
 
 /// Plans `reader` (named `name` in messages) on `machine` from `start_mm`, streaming, and writes
@@ -227,9 +194,12 @@ pub fn plan_stream<R: BufRead>(
     let plot = opts
         .plot_out
         .as_deref()
-        .map(|file| PlotRecorder::new(machine, file))
-        .transpose()
-        .map_err(OfflineError::Plot)?;
+        .map(|file| -> Result<PlotRecorder, OfflineError> {
+            // Refused before planning, not after.
+            crate::files::check_output(file)?;
+            PlotRecorder::new(machine, file).map_err(OfflineError::Plot)
+        })
+        .transpose()?;
     let mut setpoints = if opts.setpoints_out.is_some() || plot.is_some() {
         Some(Setpoints::new(
             machine,
@@ -321,16 +291,8 @@ pub fn plan_file(
     opts: &PlanOptions,
 ) -> Result<PlanSummary, OfflineError> {
     let name = program.display().to_string();
-    let file = std::fs::File::open(program).map_err(|e| {
-        GatewayError::Program(crate::gcode::Error {
-            file: name.clone(),
-            line: 0,
-            col: 0,
-            kind: crate::gcode::ErrorKind::Read {
-                message: e.to_string(),
-            },
-        })
-    })?;
+    // A regular file only: a FIFO would block, a device never end.
+    let file = crate::files::open_input(program)?;
     plan_stream(
         machine,
         std::io::BufReader::with_capacity(1 << 16, file),
@@ -362,9 +324,9 @@ fn write_path_record(out: &mut Out, e: &Element) -> Result<(), OfflineError> {
         // Rapids have no programmed feed: 0 in the file, the planner uses the machine's.
         feed_mm_s: e.feed_mm_s.unwrap_or(0.0),
     };
-    let mut line = serde_json::to_vec(&record).map_err(|e| out.err(e.into()))?;
+    let mut line = serde_json::to_vec(&record).map_err(|e| json_err(out, e))?;
     line.push(b'\n');
-    out.write_all(&line)
+    Ok(out.write_all(&line)?)
 }
 
 impl PlanSummary {
@@ -381,9 +343,9 @@ impl PlanSummary {
         match self.feed_override {
             Some(x) => {
                 s += &format!(
-                    "program time  {:.3} s at {:.0} % feed override\n",
+                    "program time  {:.3} s at {} % feed override\n",
                     self.program_s,
-                    x * 100.0
+                    Percent(x)
                 )
             }
             None => s += &format!("program time  {:.3} s\n", self.program_s),
@@ -561,7 +523,7 @@ impl Setpoints {
             s.push_str(&format!(",{v:.6}"));
         }
         s.push('\n');
-        out.write_all(s.as_bytes())
+        Ok(out.write_all(s.as_bytes())?)
     }
 
     fn finish(mut self) -> Result<u64, OfflineError> {
@@ -576,7 +538,9 @@ impl Setpoints {
             out.finish()?;
         }
         if let Some(plot) = self.plot {
-            plot.finish().map_err(OfflineError::Plot)?;
+            let file = plot.file().to_path_buf();
+            let bytes = plot.render().map_err(OfflineError::Plot)?;
+            crate::files::write_output(&file, &bytes)?;
         }
         Ok(cycles)
     }

@@ -147,8 +147,8 @@ impl OptimizeReport {
 /// The optimised program and what was done.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Optimized {
-    /// The program with its new F words.
-    pub text: String,
+    /// The program with its new F words (bytes: a Latin-1 comment is kept as it was).
+    pub text: Vec<u8>,
     /// What changed.
     pub report: OptimizeReport,
 }
@@ -332,8 +332,8 @@ struct FWord {
 
 /// Finds the F word of a line (outside comments, brackets and parameter names) and where the
 /// code of the line ends (before a `;` comment and trailing blanks).
-fn scan_line(line: &str) -> (Option<FWord>, usize) {
-    let b = line.as_bytes();
+fn scan_line(line: &(impl AsRef<[u8]> + ?Sized)) -> (Option<FWord>, usize) {
+    let b = line.as_ref();
     let mut i = 0;
     let mut depth = 0usize;
     let mut f = None;
@@ -469,15 +469,18 @@ struct LineFeeds {
 
 /// Optimises the feeds of `text` (named `name` in errors) for `machine`, interpreted from
 /// `start_mm`. A program that does not interpret is an error naming its line and column.
+///
+/// The text is bytes, read by the same interpreter as `plan` and `run`: the same line ends
+/// (`\n`, `\r\n`, `\r`), and bytes that are not UTF-8 accepted where they are (comments).
 pub fn optimize(
     machine: &Machine,
-    text: &str,
+    text: &[u8],
     name: &str,
     start_mm: Vector3<f64>,
     opts: &OptimizeOptions,
 ) -> Result<Optimized, Error> {
     let lim = AxisLimits::of(machine);
-    let lines: Vec<&str> = text.split_inclusive('\n').collect();
+    let lines: Vec<&[u8]> = crate::gcode::split_lines_inclusive(text).collect();
     let f_words: Vec<Option<FWord>> = lines.iter().map(|l| scan_line(l).0).collect();
     let has_f = |line: usize| f_words.get(line - 1).is_some_and(|f| f.is_some());
 
@@ -491,7 +494,7 @@ pub fn optimize(
     let mut blocks: Vec<Block> = Vec::new();
     let mut steps: Vec<Step> = Vec::new();
     let mut report = OptimizeReport::default();
-    let mut interp = Interpreter::new(text.as_bytes(), name, machine.setup(start_mm));
+    let mut interp = Interpreter::new(text, name, machine.setup(start_mm));
     let mut rest = true;
     while let Some(item) = interp.next() {
         let e = match item? {
@@ -645,10 +648,10 @@ pub fn optimize(
     report.lines_feed_kept = kept.len() as u64;
     edits.extend(kept);
 
-    let mut out = String::with_capacity(text.len() + 64 * edits.len());
+    let mut out: Vec<u8> = Vec::with_capacity(text.len() + 64 * edits.len());
     for (idx, l) in lines.iter().enumerate() {
         match edits.get(&(idx + 1)) {
-            None => out.push_str(l),
+            None => out.extend_from_slice(l),
             Some(edit) => {
                 let (f, code_end) = scan_line(l);
                 let comment = edit
@@ -661,18 +664,18 @@ pub fn optimize(
                         // The F word in place, its letter's case kept; the trace at the end of
                         // the code.
                         let code_end = code_end.max(f.end);
-                        out.push_str(&l[..f.start + 1]);
-                        out.push_str(&edit.value);
-                        out.push_str(&l[f.end..code_end]);
-                        out.push_str(&comment);
-                        out.push_str(&l[code_end..]);
+                        out.extend_from_slice(&l[..f.start + 1]);
+                        out.extend_from_slice(edit.value.as_bytes());
+                        out.extend_from_slice(&l[f.end..code_end]);
+                        out.extend_from_slice(comment.as_bytes());
+                        out.extend_from_slice(&l[code_end..]);
                     }
                     None => {
-                        out.push_str(&l[..code_end]);
-                        out.push_str(" F");
-                        out.push_str(&edit.value);
-                        out.push_str(&comment);
-                        out.push_str(&l[code_end..]);
+                        out.extend_from_slice(&l[..code_end]);
+                        out.extend_from_slice(b" F");
+                        out.extend_from_slice(edit.value.as_bytes());
+                        out.extend_from_slice(comment.as_bytes());
+                        out.extend_from_slice(&l[code_end..]);
                     }
                 }
             }

@@ -216,8 +216,14 @@ impl PlotRecorder {
         }
     }
 
-    /// Draws the picture into the file.
-    pub fn finish(mut self) -> Result<(), String> {
+    /// The file the picture is for.
+    pub fn file(&self) -> &Path {
+        &self.file
+    }
+
+    /// Draws the picture: the bytes of the SVG or PNG file. The caller writes them with
+    /// [`crate::files::write_output`], like every other output.
+    pub fn render(mut self) -> Result<Vec<u8>, String> {
         if let Some((b, _)) = self.current.take() {
             self.buckets.push(b);
         }
@@ -229,14 +235,32 @@ impl PlotRecorder {
         let err = |e: String| format!("{}: cannot draw the plot: {e}", self.file.display());
         match self.format {
             PlotFormat::Svg => {
-                let root = SVGBackend::new(&self.file, SIZE_PX).into_drawing_area();
-                self.draw(&root).map_err(err)?;
-                root.present().map_err(|e| err(e.to_string()))
+                let mut svg = String::new();
+                {
+                    let root = SVGBackend::with_string(&mut svg, SIZE_PX).into_drawing_area();
+                    self.draw(&root).map_err(err)?;
+                    root.present().map_err(|e| err(e.to_string()))?;
+                }
+                Ok(svg.into_bytes())
             }
             PlotFormat::Png => {
-                let root = BitMapBackend::new(&self.file, SIZE_PX).into_drawing_area();
-                self.draw(&root).map_err(err)?;
-                root.present().map_err(|e| err(e.to_string()))
+                let (w, h) = SIZE_PX;
+                let mut rgb = vec![0u8; w as usize * h as usize * 3];
+                {
+                    let root = BitMapBackend::with_buffer(&mut rgb, SIZE_PX).into_drawing_area();
+                    self.draw(&root).map_err(err)?;
+                    root.present().map_err(|e| err(e.to_string()))?;
+                }
+                let mut bytes = Vec::new();
+                let mut encoder = png::Encoder::new(&mut bytes, w, h);
+                encoder.set_color(png::ColorType::Rgb);
+                encoder.set_depth(png::BitDepth::Eight);
+                let mut writer = encoder.write_header().map_err(|e| err(e.to_string()))?;
+                writer
+                    .write_image_data(&rgb)
+                    .map_err(|e| err(e.to_string()))?;
+                writer.finish().map_err(|e| err(e.to_string()))?;
+                Ok(bytes)
             }
         }
     }

@@ -568,3 +568,24 @@ fn command_line_import_writes_a_loadable_file() {
     );
     assert!(!out2.exists());
 }
+
+#[test]
+fn sections_that_look_like_objects_but_are_not_are_counted_and_named() {
+    let good = "[DeviceInfo]\nVendorNumber=1\n\n[1000]\nParameterName=Device type\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0\n";
+    let clean = eds::import_str(Path::new("ok.eds"), good, &ImportOptions::default()).unwrap();
+    assert_eq!(clean.skipped, 0);
+    let bad_names = ["0x6040", "-6040", "16040"];
+    let mut text = good.to_string();
+    for name in bad_names {
+        text.push_str(&format!(
+            "\n[{name}]\nParameterName=Controlword\nObjectType=0x7\nDataType=0x0006\nAccessType=rw\nDefaultValue=0\n"
+        ));
+    }
+    let i = eds::import_str(Path::new("odd.eds"), &text, &ImportOptions::default()).unwrap();
+    assert_eq!(i.skipped, bad_names.len(), "{}", i.summary());
+    let summary = i.summary();
+    assert!(summary.contains("3 skipped"), "{summary}");
+    for name in bad_names {
+        assert!(summary.contains(&format!("[{name}]")), "{name}: {summary}");
+    }
+}

@@ -43,3 +43,116 @@ fn control_lines() {
     let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
     run_seeded(&s, 4000, 2, fuzzing::control::lines);
 }
+
+/// A small EDS like the ones `tests/eds_import.rs` builds: identity, a VAR, an ARRAY with
+/// sub-objects, a DCF commissioning section, `$NODEID` defaults.
+const EDS_SEED: &str = "\
+[FileInfo]
+FileName=seed.eds
+[DeviceInfo]
+VendorNumber=0x1234
+ProductNumber=2
+[DeviceComissioning]
+NodeID=3
+[MandatoryObjects]
+SupportedObjects=2
+1=0x1000
+2=0x1018
+[OptionalObjects]
+SupportedObjects=1
+1=0x1400
+[1000]
+ParameterName=Device type
+ObjectType=0x7
+DataType=0x0007
+AccessType=ro
+DefaultValue=0x00020192
+PDOMapping=0
+[1018]
+ParameterName=Identity
+ObjectType=0x9
+SubNumber=2
+[1018sub0]
+ParameterName=Highest sub-index
+ObjectType=0x7
+DataType=0x0005
+AccessType=ro
+DefaultValue=1
+[1018sub1]
+ParameterName=Vendor-ID
+ObjectType=0x7
+DataType=0x0007
+AccessType=ro
+DefaultValue=0x1234
+[1400]
+ParameterName=RPDO1 communication
+ObjectType=0x9
+SubNumber=2
+[1400sub0]
+ParameterName=Highest sub-index
+ObjectType=0x7
+DataType=0x0005
+AccessType=ro
+DefaultValue=2
+[1400sub1]
+ParameterName=COB-ID
+ObjectType=0x7
+DataType=0x0007
+AccessType=rw
+DefaultValue=$NODEID+0x200
+[1400sub2]
+ParameterName=Transmission type
+ObjectType=0x7
+DataType=0x0005
+AccessType=rw
+DefaultValue=1
+LowLimit=0
+HighLimit=0xFF
+[6040]
+ParameterName=Controlword
+ObjectType=0x7
+DataType=0x0006
+AccessType=rww
+DefaultValue=0
+PDOMapping=1
+";
+
+#[test]
+fn eds_files() {
+    let mut s: Vec<Vec<u8>> = vec![EDS_SEED.as_bytes().to_vec()];
+    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/eds");
+    if corpus.is_dir() {
+        s.extend(seeds(
+            "../shared/corpus/eds",
+            &[".eds", ".dcf", ".EDS", ".DCF"],
+        ));
+    } else {
+        eprintln!(
+            "eds_files: no EDS corpus at {} (third-party files, not in the repository): seeded from the built-in EDS only",
+            corpus.display()
+        );
+    }
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 1500, 2, fuzzing::eds::import);
+}
+
+#[test]
+fn candump_lines() {
+    let log: &[u8] = b"\
+(1700000000.123456) vcan0 181#3716E8030000
+(1700000000.124001) vcan0 080#
+(1700000000.200000) vcan0 701#R
+(1700000000.200100) vcan0 701#R1
+(1700000000.300000) can0 601#40.00.10.00.00.00.00.00 R
+(1700000000.300500) can0 581#4300100092010200 T
+# a comment
+
+(1700000000.400000) vcan0 20000040#0000000000000000
+(1700000000.400001) vcan0 20000204#0030000000008000
+(1700000000.5) vcan0 000#0100
+";
+    let single: Vec<&[u8]> = log.split(|b| *b == b'\n').collect();
+    let mut s = vec![log];
+    s.extend(single.iter().filter(|l| !l.is_empty()));
+    run_seeded(&s, 4000, 3, fuzzing::candump::log);
+}

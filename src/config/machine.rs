@@ -619,10 +619,7 @@ pub fn ip_time_period(cycle_us: u32) -> Option<(u8, i8)> {
 impl Machine {
     /// Load and validate a machine file; drive dictionaries are read relative to it.
     pub fn load(path: &Path) -> Result<Machine, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::files::read_text(path, crate::files::MAX_CONFIG_BYTES)?;
         let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         let mut machine =
             Machine::parse(path, &text, |rel| DriveDictionary::load(&base.join(rel)))?;

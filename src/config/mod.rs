@@ -23,6 +23,9 @@ pub enum ConfigError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not a regular file, too large, or not text (see [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The file is not valid TOML or does not fit the schema (unknown key, wrong type).
     #[error("{file}: {message}")]
     Parse {
@@ -46,10 +49,7 @@ pub enum ConfigError {
 }
 
 pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-        file: path.to_path_buf(),
-        source,
-    })?;
+    let text = crate::files::read_text(path, crate::files::MAX_CONFIG_BYTES)?;
     parse_toml(path, &text)
 }
 

@@ -8,7 +8,9 @@
 //! repository's dictionaries, programs, logs) byte- and line-wise, so that the short run reaches
 //! past the first syntax check.
 
+pub mod candump;
 pub mod control;
+pub mod eds;
 pub mod gcode;
 
 /// A deterministic generator of fuzz inputs from seed files (xorshift64*; no dependency).

@@ -135,6 +135,9 @@ pub enum StateError {
         /// Why.
         source: std::io::Error,
     },
+    /// The file is not a regular file, is too large, or cannot be written where it is.
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// The content is not a resume file of this version.
     #[error("{file}: not a canmotion resume file: {message}")]
     Format {
@@ -166,10 +169,7 @@ impl ResumeState {
 
     /// Read a resume file.
     pub fn load(file: &Path) -> Result<ResumeState, StateError> {
-        let text = std::fs::read_to_string(file).map_err(|source| StateError::Io {
-            file: file.display().to_string(),
-            source,
-        })?;
+        let text = crate::files::read_text(file, crate::files::MAX_CONFIG_BYTES)?;
         ResumeState::parse(file, &text)
     }
 
@@ -179,20 +179,15 @@ impl ResumeState {
         format!(
             "# canmotion resume point: where `{}` stopped. `canmotion run {} --resume` continues\n\
              # from here after a confirmation; delete this file to forget it.\n{body}",
-            self.program, self.program
+            Escaped(&self.program),
+            Escaped(&self.program)
         )
     }
 
-    /// Write the file (through a temporary file and a rename, so a reader never sees half).
+    /// Write the file (through a partial file and a rename, so a reader never sees half; see
+    /// [`crate::files::Output`]).
     pub fn save(&self, file: &Path) -> Result<(), StateError> {
-        let io = |source| StateError::Io {
-            file: file.display().to_string(),
-            source,
-        };
-        let mut tmp = file.as_os_str().to_owned();
-        tmp.push(".tmp");
-        std::fs::write(&tmp, self.to_toml()).map_err(io)?;
-        std::fs::rename(&tmp, file).map_err(io)
+        Ok(crate::files::write_output(file, self.to_toml().as_bytes())?)
     }
 
     fn stop_point(&self) -> Vector3<f64> {
@@ -599,11 +594,14 @@ pub struct ResumePreview {
     pub approach_mm_s: f64,
 }
 
+use crate::files::Escaped;
+
 impl fmt::Display for ResumePreview {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let p = self.stop_point_mm;
-        writeln!(f, "resume {} at line {}", self.program, self.line)?;
-        writeln!(f, "  stopped by      {}", self.reason)?;
+        // Everything that comes from a file is shown escaped: it must not redraw the screen.
+        writeln!(f, "resume {} at line {}", Escaped(&self.program), self.line)?;
+        writeln!(f, "  stopped by      {}", Escaped(&self.reason))?;
         if self.motion_done {
             writeln!(
                 f,
@@ -632,7 +630,7 @@ impl fmt::Display for ResumePreview {
                 Some(s) => writeln!(
                     f,
                     "  axis {} (node {})  at {:.4} mm, {:.4} mm from the stop point{reset}",
-                    a.name,
+                    Escaped(&a.name),
                     a.node,
                     a.now_mm,
                     (a.now_mm - s).abs()
@@ -640,7 +638,9 @@ impl fmt::Display for ResumePreview {
                 None => writeln!(
                     f,
                     "  axis {} (node {})  at {:.4} mm, held{reset}",
-                    a.name, a.node, a.now_mm
+                    Escaped(&a.name),
+                    a.node,
+                    a.now_mm
                 )?,
             }
         }
@@ -1165,5 +1165,49 @@ mod tests {
                 "{text}"
             );
         }
+    }
+
+    #[test]
+    fn text_from_the_file_is_shown_escaped() {
+        let m = machine();
+        let orig = original(Vector3::zeros());
+        let (_, plan) = orig.plan.clone().unwrap();
+        let state = ResumeState {
+            program: "p\u{1b}[2J.ngc".into(),
+            reason: "\u{1b}[2J\u{1b}[1;1Hall clear, \u{202E}safe\r".into(),
+            ..orig
+                .state_after(&m, &opts(PROGRAM), &failure(stop_at(&plan, 0.5)))
+                .unwrap()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.ngc.resume");
+        state.save(&file).unwrap();
+        let loaded = ResumeState::load(&file).unwrap();
+        let preview = ResumePreview {
+            program: loaded.program.clone(),
+            reason: loaded.reason.clone(),
+            line: 3,
+            fraction: 0.25,
+            completed_line: 2,
+            stop_point_mm: Vector3::new(1.0, 2.0, 3.0),
+            motion_done: false,
+            axes: vec![PreviewAxis {
+                name: "X\u{1b}[31m".into(),
+                node: 1,
+                now_mm: 1.5,
+                stop_mm: None,
+                reset: false,
+            }],
+            max_distance_mm: 0.5,
+            approach_mm_s: APPROACH_MM_S,
+        };
+        let text = preview.to_string();
+        assert!(!text.contains(['\u{1b}', '\r', '\u{202E}']), "{text:?}");
+        assert!(
+            text.contains("stopped by      \\u{1b}[2J\\u{1b}[1;1Hall clear, \\u{202e}safe\\r"),
+            "{text}"
+        );
+        assert!(text.contains("resume p\\u{1b}[2J.ngc at line 3"), "{text}");
+        assert!(text.contains("axis X\\u{1b}[31m (node 1)"), "{text}");
     }
 }

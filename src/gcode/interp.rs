@@ -26,7 +26,7 @@
 
 use std::collections::{HashMap, VecDeque};
 use std::f64::consts::FRAC_PI_2;
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 use std::rc::Rc;
 
 use nalgebra::Vector3;
@@ -1262,6 +1262,8 @@ pub struct Interpreter<R> {
     params: Params,
     scanner: Scanner,
     buf: Vec<u8>,
+    /// The last line ended with `\r`: a `\n` next belongs to it.
+    cr_pending: bool,
     queue: VecDeque<Item>,
     /// Lines read from the reader.
     line: usize,
@@ -1302,6 +1304,7 @@ impl<R: BufRead> Interpreter<R> {
             params: Params::default(),
             scanner: Scanner::default(),
             buf: Vec::new(),
+            cr_pending: false,
             queue: VecDeque::new(),
             line: 0,
             at: 0,
@@ -1364,31 +1367,63 @@ impl<R: BufRead> Interpreter<R> {
     }
 
     /// Reads one line into `buf` (terminator stripped); `false` at the end of the input.
+    ///
+    /// A line ends at `\n`, `\r` or `\r\n`, as in LinuxCNC: a program saved with CR-only
+    /// endings must not merge its lines into one (a retract and a traverse would become one
+    /// diagonal move through the part). The `\n` of a `\r\n` may come in a later read than its
+    /// `\r`; `cr_pending` carries that over, so each ending counts once.
     fn read_line(&mut self) -> Result<bool, Error> {
         self.buf.clear();
-        let limit = MAX_LINE_BYTES as u64 + 2;
-        let n = (&mut self.reader)
-            .take(limit)
-            .read_until(b'\n', &mut self.buf)
-            .map_err(|e| Error {
-                file: self.file.clone(),
-                line: self.line + 1,
-                col: 0,
-                kind: ErrorKind::Read {
-                    message: e.to_string(),
-                },
-            })?;
-        if n == 0 {
+        let mut read_any = false;
+        loop {
+            let available = match self.reader.fill_buf() {
+                Ok(b) => b,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    return Err(Error {
+                        file: self.file.clone(),
+                        line: self.line + 1,
+                        col: 0,
+                        kind: ErrorKind::Read {
+                            message: e.to_string(),
+                        },
+                    });
+                }
+            };
+            if available.is_empty() {
+                self.cr_pending = false;
+                break;
+            }
+            if std::mem::take(&mut self.cr_pending) && available[0] == b'\n' {
+                self.reader.consume(1);
+                continue;
+            }
+            read_any = true;
+            let end = available.iter().position(|b| *b == b'\n' || *b == b'\r');
+            let take = end.unwrap_or(available.len());
+            // Keep at most one byte past the bound: enough to tell an overlong line.
+            let room = (MAX_LINE_BYTES + 1).saturating_sub(self.buf.len());
+            self.buf.extend_from_slice(&available[..take.min(room)]);
+            match end {
+                Some(i) => {
+                    self.cr_pending = available[i] == b'\r';
+                    self.reader.consume(i + 1);
+                    break;
+                }
+                None => {
+                    let n = available.len();
+                    self.reader.consume(n);
+                    if self.buf.len() > MAX_LINE_BYTES {
+                        break;
+                    }
+                }
+            }
+        }
+        if !read_any {
             return Ok(false);
         }
         self.line += 1;
         self.at = self.line;
-        if self.buf.last() == Some(&b'\n') {
-            self.buf.pop();
-        }
-        if self.buf.last() == Some(&b'\r') {
-            self.buf.pop();
-        }
         if self.buf.len() > MAX_LINE_BYTES {
             return Err(self.error(
                 1,
@@ -1745,7 +1780,7 @@ impl<R: BufRead> Interpreter<R> {
             }
             Repeat => {
                 if !(0.0..=1e12).contains(&value) {
-                    return Err(self.error(c.col, ErrorKind::ControlValue { keyword: "repeat" }));
+                    return Err(self.error(c.col, ErrorKind::RepeatCount { value }));
                 }
                 let count = value.round() as u64;
                 if count == 0 {

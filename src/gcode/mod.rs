@@ -72,6 +72,25 @@ pub use interp::{
 pub use lex::MAX_ABS_VALUE;
 pub use tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 
+/// The lines of `text` as the [`Interpreter`] reads them, each with its terminator: a line ends
+/// at `\n`, `\r\n` or a lone `\r`. Line `k` of the interpreter's errors is item `k − 1`.
+pub fn split_lines_inclusive(text: &[u8]) -> impl Iterator<Item = &[u8]> {
+    let mut rest = text;
+    std::iter::from_fn(move || {
+        if rest.is_empty() {
+            return None;
+        }
+        let end = match rest.iter().position(|b| *b == b'\n' || *b == b'\r') {
+            Some(i) if rest[i] == b'\r' && rest.get(i + 1) == Some(&b'\n') => i + 2,
+            Some(i) => i + 1,
+            None => rest.len(),
+        };
+        let (line, tail) = rest.split_at(end);
+        rest = tail;
+        Some(line)
+    })
+}
+
 /// Millimetres per inch (exact by definition).
 pub const MM_PER_INCH: f64 = 25.4;
 
@@ -345,6 +364,12 @@ pub enum ErrorKind {
     ControlValue {
         /// The keyword.
         keyword: &'static str,
+    },
+    /// A `repeat` count below 0, above 1e12 or not a number.
+    #[error("repeat count {value} is out of range: it must be 0 or more (at most 1e12)")]
+    RepeatCount {
+        /// The count as evaluated.
+        value: f64,
     },
     /// An O-word control line out of place (`endwhile` without `while`...).
     #[error("{what} needs {expected}")]
@@ -701,6 +726,68 @@ mod tests {
         assert!(matches!(items[0], Ok(Item::Motion(_))));
         let e = items[1].clone().unwrap_err();
         assert_eq!((e.line, e.col), (2, 4));
+    }
+
+    /// The items of `lines` joined by `ending`, read through a 1-byte buffer (so that a
+    /// `\r\n` is split across reads) and through a large one.
+    fn items_with_ending(lines: &[&str], ending: &str) -> Vec<Result<Item, Error>> {
+        let text: String = lines.iter().map(|l| format!("{l}{ending}")).collect();
+        let small: Vec<_> = Interpreter::new(
+            std::io::BufReader::with_capacity(1, text.as_bytes()),
+            "p",
+            Setup::new(Vector3::zeros()),
+        )
+        .collect();
+        let large: Vec<_> =
+            Interpreter::new(text.as_bytes(), "p", Setup::new(Vector3::zeros())).collect();
+        assert_eq!(small, large, "ending {ending:?}");
+        large
+    }
+
+    #[test]
+    fn cr_lf_and_crlf_all_end_lines() {
+        let program = ["G21 G90", "G0 Z5", "X100 Y100", "", "M2"];
+        let lf = items_with_ending(&program, "\n");
+        // Retract, then traverse: two moves, never one diagonal.
+        let moves: Vec<_> = lf
+            .iter()
+            .filter_map(|i| match i {
+                Ok(Item::Motion(e)) => Some(e.end_mm),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(moves, vec![v(0.0, 0.0, 5.0), v(100.0, 100.0, 5.0)]);
+        assert_eq!(lf.last(), Some(&Ok(Item::End(ProgramEnd::M2 { line: 5 }))));
+        assert_eq!(items_with_ending(&program, "\r"), lf);
+        assert_eq!(items_with_ending(&program, "\r\n"), lf);
+
+        let bad = ["G21 G90", "G0 Z5", "G0 Q1", "M2"];
+        for ending in ["\n", "\r", "\r\n"] {
+            let e = items_with_ending(&bad, ending)
+                .into_iter()
+                .find_map(Result::err)
+                .expect("an error");
+            assert_eq!((e.line, e.col), (3, 4), "ending {ending:?}");
+        }
+        // A lone LF after a CR line is a line of its own only when it is not that CR's pair.
+        let p = parse_program("G0 X1\n\rG0 Q1\n", "p", Vector3::zeros()).unwrap_err();
+        assert_eq!(p.line, 3);
+        // The optimiser's line split agrees.
+        let lines: Vec<_> = split_lines_inclusive(b"a\rb\r\nc\n\rd").collect();
+        assert_eq!(lines, [&b"a\r"[..], b"b\r\n", b"c\n", b"\r", b"d"]);
+    }
+
+    #[test]
+    fn a_negative_repeat_count_says_so() {
+        let e = parse_program(
+            "G0 X1\no1 repeat [-5]\nG0 X2\no1 endrepeat\n",
+            "p",
+            Vector3::zeros(),
+        )
+        .unwrap_err();
+        assert_eq!((e.line, e.col), (2, 1));
+        assert_eq!(e.kind, ErrorKind::RepeatCount { value: -5.0 });
+        assert!(e.to_string().contains("must be 0 or more"), "{e}");
     }
 
     #[test]

@@ -73,10 +73,7 @@ impl ToolTable {
 
     /// Reads and checks a tool table file.
     pub fn load(path: &Path) -> Result<ToolTable, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            file: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::files::read_text(path, crate::files::MAX_CONFIG_BYTES)?;
         ToolTable::parse(path, &text)
     }
 

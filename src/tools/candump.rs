@@ -11,14 +11,18 @@
 //! `cansend` syntax: three hex digits of identifier, `#`, the data as hex pairs (or `R` and an
 //! optional length digit for a remote frame). The parser also accepts `.` between data bytes
 //! (`cansend`'s readability separator), blank lines and `#` comment lines, and a trailing `T`/`R`
-//! direction token (newer can-utils). It refuses what [`Frame`] cannot hold, 29-bit identifiers
-//! and CAN FD (`##`), with a message naming the line.
+//! direction token (newer can-utils). Error frames, as candump and `canmotion monitor` log them
+//! (eight hex digits of identifier with `CAN_ERR_FLAG` 0x2000_0000 set:
+//! `20000040#0000000000000000`), are read as [`ErrorFrame`]s, so a monitor's log replays. It
+//! refuses what [`Frame`] cannot hold, other 29-bit identifiers and CAN FD (`##`), with a message
+//! naming the line; a line longer than [`crate::files::MAX_LINE_BYTES`] is refused unread.
 
 use std::fmt;
 use std::io::BufRead;
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use crate::bus::Frame;
+use crate::bus::error::{CAN_ERR_FLAG, parse_error_frame};
+use crate::bus::{ErrorFrame, Frame, Received};
 
 /// A timestamp with microsecond resolution, as candump logs it (seconds since the epoch).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
@@ -56,8 +60,8 @@ pub struct LogRecord {
     pub ts: Timestamp,
     /// The interface it was received on (`vcan0`).
     pub iface: String,
-    /// The frame.
-    pub frame: Frame,
+    /// The frame: a data or remote frame, or an error frame.
+    pub frame: Received,
 }
 
 /// A frame in `cansend` syntax as candump logs it: `181#3716E8030000`, `080#`, `701#R`,
@@ -77,6 +81,38 @@ pub fn frame_text(frame: &Frame) -> String {
     s
 }
 
+/// A data, remote or error frame as candump logs it ([`frame_text`], [`ErrorFrame::text`]).
+pub fn received_text(frame: &Received) -> String {
+    match frame {
+        Received::Frame(f) => frame_text(f),
+        Received::Error(e) => e.text(),
+    }
+}
+
+/// Parse a frame as candump logs it: [`parse_frame`], or an error frame
+/// (`20000040#0000000000000000`, eight hex digits of identifier with `CAN_ERR_FLAG` set).
+pub fn parse_received(s: &str) -> Result<Received, String> {
+    let id = s.split_once('#').map_or(s, |(id, _)| id);
+    if id.len() == 8
+        && u32::from_str_radix(id, 16).is_ok_and(|id| id & CAN_ERR_FLAG != 0)
+        && !s.contains("##")
+    {
+        return parse_error_frame(s)
+            .map(Received::Error)
+            .ok_or_else(|| format!("error frame {s:?}: expected up to 8 data bytes in hex"));
+    }
+    parse_frame(s).map(Received::Frame)
+}
+
+/// An error frame's record, as the live monitor logs it.
+pub fn error_record(ts: Timestamp, iface: &str, e: ErrorFrame) -> LogRecord {
+    LogRecord {
+        ts,
+        iface: iface.to_string(),
+        frame: Received::Error(e),
+    }
+}
+
 impl fmt::Display for LogRecord {
     /// The log line, without its newline: `(1700000000.123456) vcan0 181#3716E8030000`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -85,7 +121,7 @@ impl fmt::Display for LogRecord {
             "({}) {} {}",
             self.ts,
             self.iface,
-            frame_text(&self.frame)
+            received_text(&self.frame)
         )
     }
 }
@@ -131,7 +167,7 @@ pub fn parse_frame(s: &str) -> Result<Frame, String> {
     }
     if id.len() == 8 {
         return Err(format!(
-            "frame {s:?} has a 29-bit identifier (or is an error frame), which is not supported"
+            "frame {s:?} has a 29-bit identifier, which is not supported"
         ));
     }
     if id.len() != 3 {
@@ -192,7 +228,7 @@ pub fn parse_line(line: &str) -> Result<Option<LogRecord>, String> {
         (Some(extra), _) => return Err(format!("unexpected {extra:?} after the frame")),
     }
     let ts = parse_timestamp(ts)?;
-    let frame = parse_frame(frame)?;
+    let frame = parse_received(frame)?;
     Ok(Some(LogRecord {
         ts,
         iface: iface.to_string(),
@@ -210,7 +246,7 @@ pub struct LogReader<R> {
     file: String,
     input: R,
     line: usize,
-    buf: String,
+    buf: Vec<u8>,
     failed: bool,
 }
 
@@ -221,7 +257,7 @@ impl<R: BufRead> LogReader<R> {
             file: file.to_string(),
             input,
             line: 0,
-            buf: String::new(),
+            buf: Vec::new(),
             failed: false,
         }
     }
@@ -235,22 +271,36 @@ impl<R: BufRead> Iterator for LogReader<R> {
             return None;
         }
         loop {
-            self.buf.clear();
             self.line += 1;
             let err = |message: String, line: usize, file: &str| super::ToolError::Log {
                 file: file.to_string(),
                 line,
                 message,
             };
-            match self.input.read_line(&mut self.buf) {
-                Ok(0) => return None,
-                Ok(_) => {}
+            // A bounded line: `/dev/zero` or a log with no line ends must not fill memory.
+            match crate::files::read_bounded_line(
+                &mut self.input,
+                &mut self.buf,
+                crate::files::MAX_LINE_BYTES,
+                std::path::Path::new(&self.file),
+                self.line,
+            ) {
+                Ok(false) => return None,
+                Ok(true) => {}
                 Err(e) => {
                     self.failed = true;
-                    return Some(Err(err(e.to_string(), self.line, &self.file)));
+                    return Some(Err(super::ToolError::File(e)));
                 }
             }
-            match parse_line(&self.buf) {
+            let Ok(text) = std::str::from_utf8(&self.buf) else {
+                self.failed = true;
+                return Some(Err(err(
+                    "not UTF-8 text".to_string(),
+                    self.line,
+                    &self.file,
+                )));
+            };
+            match parse_line(text) {
                 Ok(None) => continue,
                 Ok(Some(r)) => return Some(Ok(r)),
                 Err(message) => {
@@ -282,22 +332,37 @@ mod tests {
         assert_eq!(r.iface, "vcan0");
         assert_eq!(
             r.frame,
-            Frame::new(0x181, &[0x37, 0x16, 0xE8, 3, 0, 0]).unwrap()
+            Received::Frame(Frame::new(0x181, &[0x37, 0x16, 0xE8, 3, 0, 0]).unwrap())
         );
         assert_eq!(r.to_string(), "(1700000000.123456) vcan0 181#3716E8030000");
         let sync = parse_line("(0.5) can0 080#").unwrap().unwrap();
-        assert_eq!(sync.frame.data(), &[] as &[u8]);
+        assert_eq!(sync.frame, Received::Frame(Frame::new(0x080, &[]).unwrap()));
         assert_eq!(sync.ts.micros, 500_000);
         let rtr = parse_line("(1.000000) vcan0 701#R").unwrap().unwrap();
-        assert!(rtr.frame.is_remote());
+        assert_eq!(rtr.frame, Received::Frame(Frame::remote(0x701, 0).unwrap()));
         assert_eq!(rtr.to_string(), "(1.000000) vcan0 701#R");
         let rtr1 = parse_line("(1.000000) vcan0 701#R1").unwrap().unwrap();
-        assert_eq!(rtr1.frame.dlc(), 1);
+        assert_eq!(
+            rtr1.frame,
+            Received::Frame(Frame::remote(0x701, 1).unwrap())
+        );
         assert_eq!(rtr1.to_string(), "(1.000000) vcan0 701#R1");
         let dots = parse_line("(1.000000) vcan0 601#40.00.10.00.00.00.00.00 R")
             .unwrap()
             .unwrap();
-        assert_eq!(dots.frame.data(), &[0x40, 0, 0x10, 0, 0, 0, 0, 0]);
+        assert_eq!(
+            dots.frame,
+            Received::Frame(Frame::new(0x601, &[0x40, 0, 0x10, 0, 0, 0, 0, 0]).unwrap())
+        );
+        // An error frame, as candump and the monitor log it.
+        let bus_off = parse_line("(1.000000) vcan0 20000040#0000000000000000")
+            .unwrap()
+            .unwrap();
+        assert_eq!(bus_off.frame, Received::Error(ErrorFrame::bus_off()));
+        assert_eq!(
+            bus_off.to_string(),
+            "(1.000000) vcan0 20000040#0000000000000000"
+        );
         assert_eq!(parse_line("   ").unwrap(), None);
         assert_eq!(parse_line("# a comment").unwrap(), None);
     }
@@ -346,11 +411,11 @@ mod tests {
             .prop_map(|(secs, micros, iface, id, rtr, data)| LogRecord {
                 ts: Timestamp { secs, micros },
                 iface,
-                frame: if rtr {
+                frame: Received::Frame(if rtr {
                     Frame::remote(id, data.len() as u8).unwrap()
                 } else {
                     Frame::new(id, &data).unwrap()
-                },
+                }),
             })
     }
 

@@ -51,6 +51,9 @@ pub enum ToolError {
     /// The machine file is wrong.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// An input is not a regular file, or a line of it is too long (see [`crate::files`]).
+    #[error(transparent)]
+    File(#[from] crate::files::FileError),
     /// A candump log line is malformed.
     #[error("{file}:{line}: {message}")]
     Log {

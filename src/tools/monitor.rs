@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use super::ToolError;
-use super::candump::{LogReader, LogRecord, Timestamp, frame_text};
+use super::candump::{LogReader, LogRecord, Timestamp, error_record, frame_text};
 use super::decode::{DecodeContext, decode};
 use crate::bus::{Bus, ErrorFrame, Received};
 
@@ -46,13 +46,16 @@ pub fn iface_name(bus: &Bus) -> &str {
 
 /// The monitor's line for a record: the candump log record, padded, then the decoded text.
 pub fn format_line(rec: &LogRecord, ctx: &DecodeContext) -> String {
-    format!(
-        "({}) {} {:<20} {}",
-        rec.ts,
-        rec.iface,
-        frame_text(&rec.frame),
-        decode(&rec.frame, ctx)
-    )
+    match &rec.frame {
+        Received::Frame(f) => format!(
+            "({}) {} {:<20} {}",
+            rec.ts,
+            rec.iface,
+            frame_text(f),
+            decode(f, ctx)
+        ),
+        Received::Error(e) => format_error_line(rec.ts, &rec.iface, e),
+    }
 }
 
 /// The monitor's line for an error frame: timestamp, interface, the frame as candump logs it,
@@ -90,24 +93,6 @@ impl Sink<'_> {
             })?;
         }
         match writeln!(self.out, "{}", format_line(rec, ctx)) {
-            Ok(()) => Ok(true),
-            Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
-            Err(source) => Err(ToolError::Io {
-                file: PathBuf::from("stdout"),
-                source,
-            }),
-        }
-    }
-
-    /// Log and print an error frame; `Ok(false)` when the output was closed.
-    fn put_error(&mut self, ts: Timestamp, iface: &str, e: &ErrorFrame) -> Result<bool, ToolError> {
-        if let Some((path, w)) = &mut self.log {
-            writeln!(w, "({ts}) {iface} {}", e.text()).map_err(|source| ToolError::Io {
-                file: path.clone(),
-                source,
-            })?;
-        }
-        match writeln!(self.out, "{}", format_error_line(ts, iface, e)) {
             Ok(()) => Ok(true),
             Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
             Err(source) => Err(ToolError::Io {
@@ -165,7 +150,7 @@ pub fn monitor(
             Some(Received::Frame(f)) => f,
             Some(Received::Error(e)) => {
                 n += 1;
-                if !sink.put_error(Timestamp::now(), &iface, &e)? {
+                if !sink.put(&error_record(Timestamp::now(), &iface, e), ctx)? {
                     break;
                 }
                 continue;
@@ -174,7 +159,7 @@ pub fn monitor(
         let rec = LogRecord {
             ts: Timestamp::now(),
             iface: iface.clone(),
-            frame,
+            frame: Received::Frame(frame),
         };
         n += 1;
         if !sink.put(&rec, ctx)? {
@@ -218,10 +203,8 @@ pub fn replay(
     opts: &MonitorOptions,
     out: &mut dyn Write,
 ) -> Result<u64, ToolError> {
-    let f = File::open(path).map_err(|source| ToolError::Io {
-        file: path.to_path_buf(),
-        source,
-    })?;
+    // A regular file only (a FIFO would block); its lines are bounded as they are read.
+    let f = crate::files::open_input(path)?;
     replay_reader(
         &path.display().to_string(),
         BufReader::new(f),
@@ -261,7 +244,7 @@ mod tests {
                 micros: 42,
             },
             iface: "vcan0".into(),
-            frame: Frame::new(0x080, &[]).unwrap(),
+            frame: Received::Frame(Frame::new(0x080, &[]).unwrap()),
         };
         assert_eq!(
             format_line(&rec, &DecodeContext::new()),
@@ -310,9 +293,9 @@ mod tests {
         assert_eq!(
             recs.iter().map(|r| r.frame).collect::<Vec<_>>(),
             vec![
-                Frame::new(0x000, &[1, 0]).unwrap(),
-                Frame::new(0x080, &[]).unwrap(),
-                Frame::new(0x705, &[5]).unwrap()
+                Received::Frame(Frame::new(0x000, &[1, 0]).unwrap()),
+                Received::Frame(Frame::new(0x080, &[]).unwrap()),
+                Received::Frame(Frame::new(0x705, &[5]).unwrap())
             ]
         );
         assert!(recs.iter().all(|r| r.iface == "sim"));
@@ -356,6 +339,17 @@ mod tests {
             logged.ends_with(" sim 20000040#0000000000000000\n"),
             "{logged}"
         );
+        // What the monitor logs, the monitor replays, line for line as it showed it live.
+        let mut replayed = Vec::new();
+        let n = replay(
+            &log,
+            &DecodeContext::new(),
+            &MonitorOptions::default(),
+            &mut replayed,
+        )
+        .unwrap();
+        assert_eq!(n, 2);
+        assert_eq!(String::from_utf8(replayed).unwrap(), text);
     }
 
     #[test]

@@ -1,0 +1,7 @@
+//! See `canmotion::fuzzing::eds`.
+
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| canmotion::fuzzing::eds::import(data));
