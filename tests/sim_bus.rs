@@ -149,29 +149,30 @@ fn a_wrong_identity_is_refused_before_any_motion() {
     );
 }
 
-/// X's following-error window at 1 count (0x6065) with no time-out (0x6066 = 0).
-fn one_count_window(t: String) -> String {
+/// X's following-error window at 10 counts (0x6065, the narrowest a machine file may ask for)
+/// with no time-out (0x6066 = 0).
+fn narrowest_window(t: String) -> String {
     t.replacen(
         "following_error_mm = 2.0         # 0x6065, converted to counts\nfollowing_error_timeout_ms = 10",
-        "following_error_mm = 0.001\nfollowing_error_timeout_ms = 0",
+        "following_error_mm = 0.01\nfollowing_error_timeout_ms = 0",
         1,
     )
 }
 
 #[test]
 fn a_following_error_fault_stops_the_group_and_names_the_axis() {
-    following_error_fault(machine(one_count_window));
+    following_error_fault(machine(narrowest_window));
 }
 
 #[test]
 fn a_following_error_fault_in_csp_too() {
-    following_error_fault(machine(|t| one_count_window(csp(t))));
+    following_error_fault(machine(|t| narrowest_window(csp(t))));
 }
 
 fn following_error_fault(m: canmotion::config::Machine) {
     let _one = one_at_a_time();
     assert_eq!(m.axes[0].following_error_timeout_ms, 0, "the edit took");
-    // A window of 1 count, with no time-out, cannot be held while the motor accelerates (the
+    // A window of 10 counts, with no time-out, cannot be held while the motor accelerates (the
     // drive's position loop lags its demand by more than that for a moment at every change of
     // speed): the drive must fault with EMCY 0x8611.
     let bus = Bus::InProc(InProcBus::new());

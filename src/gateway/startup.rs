@@ -150,7 +150,9 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     write_checked(io, n, 0x607D, 1, Value::Integer32(counts(a.min_mm))).await?;
     write_checked(io, n, 0x607D, 2, Value::Integer32(counts(a.max_mm))).await?;
     // The drive's own velocity limit, with head-room for its position loop to catch up.
-    let vmax = (a.max_vel_mm_s * a.counts_per_mm * 1.5).ceil() as u32;
+    // (The machine file's validation keeps it within UNSIGNED32.)
+    let vmax = (a.max_vel_mm_s * a.counts_per_mm * crate::config::machine::DRIVE_VELOCITY_HEADROOM)
+        .ceil() as u32;
     write_checked(io, n, 0x607F, 0, Value::Unsigned32(vmax)).await?;
     // Process data: our two PDOs, every other one off.
     let rx = a.setpoint_pdo.number;
