@@ -36,3 +36,10 @@ fn gcode_programs() {
     let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
     run_seeded(&s, 1500, 1, fuzzing::gcode::program);
 }
+
+#[test]
+fn machine_files() {
+    let s = seeds("dictionaries/machines", &[".toml"]);
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 3000, 2, fuzzing::machine::machine_file);
+}

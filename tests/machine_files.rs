@@ -73,7 +73,7 @@ fn a_following_error_window_that_rounds_away_or_clamps_is_refused() {
     // 1e10 counts: 0x6065 would be clamped at 2³¹−1 (jam detection off).
     let (t, k, m) = refused(fe, "following_error_mm = 1e7");
     assert_eq!((t.as_str(), k.as_str()), ("axis X", "following_error_mm"));
-    assert!(m.contains("above the 2147483647 counts"), "{m}");
+    assert!(m.contains("not below the 2147483647 counts"), "{m}");
     // As long as the travel: a jam is never seen.
     assert_refused(
         fe,

@@ -185,8 +185,9 @@ pub const MIN_TRAVEL_COUNTS: f64 = 1000.0;
 /// each rounded to a count, so a window of a few counts trips on rounding alone, and one that
 /// rounds to 0 trips at once.
 pub const MIN_FOLLOWING_ERROR_COUNTS: f64 = 10.0;
-/// The widest following-error window, counts: the largest value the gateway writes to 0x6065
-/// (an INTEGER32 position difference); a wider window would be clamped to it, its meaning lost.
+/// The bound on the following-error window, counts, which a window must stay below: the largest
+/// value the gateway writes to 0x6065 (an INTEGER32 position difference); a wider window would
+/// be clamped to it, and a window that wide supervises nothing.
 pub const MAX_FOLLOWING_ERROR_COUNTS: f64 = i32::MAX as f64;
 /// The smallest axis limit (`max_vel_mm_s`, `max_acc_mm_s2`, `max_jerk_mm_s3`) and path
 /// acceleration a machine file may give. The planner honours limits within
@@ -1274,12 +1275,12 @@ fn supervision(ctx: &Ctx, table: &str, a: &RawAxis) -> Result<(), ConfigError> {
             ),
         ));
     }
-    if window_counts > MAX_FOLLOWING_ERROR_COUNTS {
+    if window_counts.round() >= MAX_FOLLOWING_ERROR_COUNTS {
         return Err(ctx.err(
             table,
             "following_error_mm",
             format!(
-                "{} mm is {window_counts:.0} counts at counts_per_mm = {}, above the {MAX_FOLLOWING_ERROR_COUNTS} counts 0x6065 can hold: it would be clamped, and a jam never detected",
+                "{} mm is {window_counts:.0} counts at counts_per_mm = {}, not below the {MAX_FOLLOWING_ERROR_COUNTS} counts (2³¹ − 1) the gateway can write to 0x6065: it would be clamped there, and a jam never detected",
                 a.following_error_mm, a.counts_per_mm
             ),
         ));

@@ -9,6 +9,7 @@
 //! past the first syntax check.
 
 pub mod gcode;
+pub mod machine;
 
 /// A deterministic generator of fuzz inputs from seed files (xorshift64*; no dependency).
 #[derive(Debug, Clone)]
