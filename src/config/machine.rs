@@ -204,13 +204,13 @@ pub const DRIVE_VELOCITY_HEADROOM: f64 = 1.5;
 /// Objects the gateway writes itself (at start-up or every cycle), or that decide how a drive
 /// reacts to a lost gateway: a machine file's `sdo` entry may not write them, since the value
 /// would override the machine file's own keys or switch off supervision. (first index, last
-/// index, what it is, where it comes from).
+/// index, what it is, why the gateway owns it).
 pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
     (
         0x1005,
         0x1007,
         "SYNC COB-ID, period and window",
-        "[sync] and [bus] cycle_us",
+        "written from [sync] and [bus] cycle_us",
     ),
     (
         0x1014,
@@ -222,13 +222,13 @@ pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
         0x1016,
         0x1016,
         "heartbeat consumer",
-        "[heartbeat] gateway_node and drive_consumer_ms",
+        "written from [heartbeat] gateway_node and drive_consumer_ms",
     ),
     (
         0x1017,
         0x1017,
         "heartbeat producer",
-        "[heartbeat] drive_producer_ms",
+        "written from [heartbeat] drive_producer_ms",
     ),
     (
         0x1019,
@@ -240,41 +240,46 @@ pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
         0x1029,
         0x1029,
         "error behaviour",
-        "the drive's reaction to a lost gateway",
+        "decides the drive's reaction to a lost gateway",
     ),
     (
         0x1400,
         0x1BFF,
         "PDO communication and mapping",
-        "setpoint_pdo and feedback_pdo",
+        "written from setpoint_pdo and feedback_pdo",
     ),
     (
         0x6007,
         0x6007,
         "abort connection option",
-        "the drive's reaction to a lost gateway",
+        "decides the drive's reaction to a lost gateway",
     ),
-    (0x6040, 0x6040, "controlword", "the cyclic process data"),
-    (0x6060, 0x6060, "modes of operation", "mode"),
+    (0x6040, 0x6040, "controlword", "written every cycle"),
+    (0x6060, 0x6060, "modes of operation", "written from mode"),
     (
         0x6065,
         0x6066,
         "following error window and time-out",
-        "following_error_mm and following_error_timeout_ms",
+        "written from following_error_mm and following_error_timeout_ms",
     ),
-    (0x607A, 0x607A, "target position", "the cyclic process data"),
+    (0x607A, 0x607A, "target position", "written every cycle"),
     (
         0x607D,
         0x607D,
         "software position limits",
-        "min_mm and max_mm",
+        "written from min_mm and max_mm",
     ),
-    (0x607F, 0x607F, "max profile velocity", "max_vel_mm_s"),
+    (
+        0x607F,
+        0x607F,
+        "max profile velocity",
+        "written from max_vel_mm_s",
+    ),
     (
         0x60C0,
         0x60C2,
         "interpolation sub-mode, data and period",
-        "mode, the cyclic process data and [bus] cycle_us",
+        "written from mode and [bus] cycle_us, and every cycle",
     ),
 ];
 
@@ -1002,7 +1007,7 @@ impl Machine {
             let mut sdo = Vec::new();
             for (i, w) in a.sdo.iter().enumerate() {
                 let key = format!("sdo[{i}]");
-                if let Some((lo, hi, what, from)) = GATEWAY_OWNED
+                if let Some((lo, hi, what, why)) = GATEWAY_OWNED
                     .iter()
                     .find(|(lo, hi, ..)| (*lo..=*hi).contains(&w.index))
                 {
@@ -1015,7 +1020,7 @@ impl Machine {
                         table.as_str(),
                         &key,
                         format!(
-                            "0x{:04X}:{:02X}: the gateway owns {range} ({what}; it comes from {from}): an sdo entry may not override it",
+                            "0x{:04X}:{:02X}: the gateway owns {range} ({what}: {why}); an sdo entry may not override it",
                             w.index, w.sub
                         ),
                     ));
