@@ -346,3 +346,31 @@ fn every_machine_file_in_the_repository_still_loads() {
     }
     assert!(n >= 6, "{n} machine files");
 }
+
+#[test]
+fn a_dictionary_without_the_pdo_objects_start_up_writes_is_refused_at_load() {
+    // No RPDO 4 communication object: start-up switches every unused PDO off, so `run` would
+    // end on an SDO abort that `plan` never saw.
+    let a = DEMO_DRIVE.find("[[object]]\nindex = 0x1403").unwrap();
+    let b = DEMO_DRIVE.find("[[object]]\nindex = 0x1600").unwrap();
+    let drive = format!("{}{}", &DEMO_DRIVE[..a], &DEMO_DRIVE[b..]);
+    let e = Machine::parse(Path::new("m.toml"), DEMO_MACHINE, |rel| {
+        DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), &drive)
+    })
+    .unwrap_err();
+    match e {
+        ConfigError::Invalid {
+            table,
+            key,
+            message,
+            ..
+        } => {
+            assert_eq!((table.as_str(), key.as_str()), ("axis X", "dictionary"));
+            assert!(
+                message.starts_with("start-up writes 0x1403:01"),
+                "{message}"
+            );
+        }
+        other => panic!("{other}"),
+    }
+}

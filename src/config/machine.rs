@@ -976,6 +976,7 @@ impl Machine {
                 a.node,
                 false,
             )?;
+            pdo_objects(&ctx, &table, &dict, &setpoint_pdo, &feedback_pdo)?;
             let (si, ss) = a.mode.setpoint_object();
             for (idx, sub, what) in [
                 (0x6040u16, 0u8, "controlword 0x6040"),
@@ -1212,6 +1213,48 @@ impl Machine {
     pub fn axis(&self, name: &str) -> Option<&AxisConfig> {
         self.axes.iter().find(|a| a.name == name)
     }
+}
+
+/// Checks that the drive's dictionary has every object start-up reads or writes for the process
+/// data: the COB-ID of each of the four RPDOs and TPDOs (those not used are switched off), and
+/// the transmission type and mapping entries of the two the axis uses. Without this, a missing
+/// object would end `run` on an SDO abort that `plan` never saw.
+fn pdo_objects(
+    ctx: &Ctx,
+    table: &str,
+    dict: &DriveDictionary,
+    setpoint: &PdoConfig,
+    feedback: &PdoConfig,
+) -> Result<(), ConfigError> {
+    let mut need: Vec<(u16, u8, &str)> = Vec::new();
+    for k in 0..4u16 {
+        need.push((0x1400 + k, 1, "dictionary"));
+        need.push((0x1800 + k, 1, "dictionary"));
+    }
+    for (p, comm, map, key) in [
+        (setpoint, 0x1400u16, 0x1600u16, "setpoint_pdo.number"),
+        (feedback, 0x1800, 0x1A00, "feedback_pdo.number"),
+    ] {
+        let k = u16::from(p.number - 1);
+        need.push((comm + k, 2, key));
+        need.push((map + k, 0, key));
+        for i in 1..=p.mapping.len() {
+            need.push((map + k, i as u8, key));
+        }
+    }
+    for (index, sub, key) in need {
+        if dict.sub(index, sub).is_none() {
+            return Err(ctx.err(
+                table,
+                key,
+                format!(
+                    "start-up writes 0x{index:04X}:{sub:02X} for the process data, and it is not in {}",
+                    dict.file.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Checks that SYNC takes a CAN-ID of its own: none CiA 301 restricts (NMT, every node's SDO
