@@ -40,7 +40,8 @@
 //!
 //! Before the first cycle, [`gateway::startup`] has used SDO ([`canopen`]: the codecs and the
 //! client of canopen-rs, with our server and abort tables) to check each drive's identity,
-//! write the machine file's settings, remap the PDOs, set 0x60C2 to the SYNC period and the
+//! read its position actual (every axis inside its travel before anything is written), write the
+//! machine file's settings, remap the PDOs, set 0x60C2 to the SYNC period and the
 //! mode; [`cia402`] then walks each drive to Operation enabled through the RPDO's controlword,
 //! and IP mode starts only once statusword bit 12 answers controlword bit 4 (bumpless: the
 //! first setpoint is position actual).

@@ -156,3 +156,10 @@ fn candump_lines() {
     s.extend(single.iter().filter(|l| !l.is_empty()));
     run_seeded(&s, 4000, 3, fuzzing::candump::log);
 }
+
+#[test]
+fn machine_files() {
+    let s = seeds("dictionaries/machines", &[".toml"]);
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 3000, 2, fuzzing::machine::machine_file);
+}

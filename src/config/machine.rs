@@ -13,6 +13,7 @@ use serde::Deserialize;
 use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use super::{ConfigError, parse_toml};
 use crate::interp::filter::{AxisFilter, FilterKind, FilterSpec};
+use crate::planner::MAX_LIMIT;
 
 /// The most axes a machine may have.
 pub const MAX_AXES: usize = 8;
@@ -175,6 +176,125 @@ struct RawFilter {
 
 /// The longest post-interpolation filter a machine file may ask for.
 pub const MAX_FILTER_MS: f64 = 1000.0;
+
+/// The fewest counts an axis's travel may span: an encoder that cannot tell this many positions
+/// apart over the whole travel cannot position the axis (`counts_per_mm = 0.001` turned a
+/// 100 mm move into no motion at all, and the run still ended well).
+pub const MIN_TRAVEL_COUNTS: f64 = 1000.0;
+/// The narrowest following-error window, counts (0x6065): setpoint and position actual are
+/// each rounded to a count, so a window of a few counts trips on rounding alone, and one that
+/// rounds to 0 trips at once.
+pub const MIN_FOLLOWING_ERROR_COUNTS: f64 = 10.0;
+/// The bound on the following-error window, counts, which a window must stay below: the largest
+/// value the gateway writes to 0x6065 (an INTEGER32 position difference); a wider window would
+/// be clamped to it, and a window that wide supervises nothing.
+pub const MAX_FOLLOWING_ERROR_COUNTS: f64 = i32::MAX as f64;
+/// The smallest axis limit (`max_vel_mm_s`, `max_acc_mm_s2`, `max_jerk_mm_s3`) and path
+/// acceleration a machine file may give. The planner honours limits within
+/// [`crate::planner::profile::MIN_LIMIT`]`..=`[`crate::planner::MAX_LIMIT`] after scaling by
+/// `path_acc_share` (at least [`MIN_PATH_ACC_SHARE`]); below, it would clamp them silently.
+pub const MIN_AXIS_LIMIT: f64 = 1.0e-3;
+/// The smallest `path_acc_share`.
+pub const MIN_PATH_ACC_SHARE: f64 = 1.0e-3;
+const _: () = assert!(MIN_AXIS_LIMIT * MIN_PATH_ACC_SHARE >= crate::planner::profile::MIN_LIMIT);
+/// Head-room of the drive's own velocity limit (0x607F) over `max_vel_mm_s`, for its position
+/// loop to catch up.
+pub const DRIVE_VELOCITY_HEADROOM: f64 = 1.5;
+
+/// Objects the gateway writes itself (at start-up or every cycle), or that decide how a drive
+/// reacts to a lost gateway: a machine file's `sdo` entry may not write them, since the value
+/// would override the machine file's own keys or switch off supervision. (first index, last
+/// index, what it is, why the gateway owns it).
+pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
+    (
+        0x1005,
+        0x1007,
+        "SYNC COB-ID, period and window",
+        "written from [sync] and [bus] cycle_us",
+    ),
+    (
+        0x1014,
+        0x1015,
+        "EMCY COB-ID and inhibit time",
+        "the gateway listens to EMCYs at 0x80 + node, undelayed",
+    ),
+    (
+        0x1016,
+        0x1016,
+        "heartbeat consumer",
+        "written from [heartbeat] gateway_node and drive_consumer_ms",
+    ),
+    (
+        0x1017,
+        0x1017,
+        "heartbeat producer",
+        "written from [heartbeat] drive_producer_ms",
+    ),
+    (
+        0x1019,
+        0x1019,
+        "SYNC counter overflow",
+        "the gateway's SYNC carries no counter",
+    ),
+    (
+        0x1029,
+        0x1029,
+        "error behaviour",
+        "decides the drive's reaction to a lost gateway",
+    ),
+    (
+        0x1400,
+        0x1BFF,
+        "PDO communication and mapping",
+        "written from setpoint_pdo and feedback_pdo",
+    ),
+    (
+        0x6007,
+        0x6007,
+        "abort connection option",
+        "decides the drive's reaction to a lost gateway",
+    ),
+    (0x6040, 0x6040, "controlword", "written every cycle"),
+    (0x6060, 0x6060, "modes of operation", "written from mode"),
+    (
+        0x6065,
+        0x6066,
+        "following error window and time-out",
+        "written from following_error_mm and following_error_timeout_ms",
+    ),
+    (0x607A, 0x607A, "target position", "written every cycle"),
+    (
+        0x607D,
+        0x607D,
+        "software position limits",
+        "written from min_mm and max_mm",
+    ),
+    (
+        0x607F,
+        0x607F,
+        "max profile velocity",
+        "written from max_vel_mm_s",
+    ),
+    (
+        0x60C0,
+        0x60C2,
+        "interpolation sub-mode, data and period",
+        "written from mode and [bus] cycle_us, and every cycle",
+    ),
+];
+
+/// CAN-IDs CiA 301 (§7.3.5, restricted CAN-IDs) reserves: no configurable object, SYNC
+/// included, may use them. They hold NMT, every node's default SDO channels and heartbeats.
+pub const RESTRICTED_CAN_IDS: &[(u16, u16, &str)] = &[
+    (0x000, 0x000, "NMT"),
+    (0x001, 0x07F, "reserved"),
+    (0x101, 0x180, "reserved"),
+    (0x581, 0x5FF, "default SDO (server to client)"),
+    (0x601, 0x67F, "default SDO (client to server)"),
+    (0x6E0, 0x6FF, "reserved"),
+    (0x701, 0x77F, "NMT error control (heartbeat, boot-up)"),
+    (0x780, 0x7FF, "reserved"),
+];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -523,22 +643,22 @@ fn planner_config(
             "corner_acc_mm_s2",
             raw.corner_acc_mm_s2,
             if min_acc.is_finite() { min_acc } else { 0.0 },
-            &|v| (0.0..=1e9).contains(&v),
+            &|v| (0.0..=MAX_LIMIT).contains(&v),
             "must be in 0..=1e9 (0: exact stop at every junction)",
         )?,
         path_acc_share: number(
             "path_acc_share",
             raw.path_acc_share,
             DEFAULT_PATH_ACC_SHARE,
-            &|v| v > 0.0 && v <= 1.0,
-            "must be in (0, 1]",
+            &|v| (MIN_PATH_ACC_SHARE..=1.0).contains(&v),
+            &format!("must be in {MIN_PATH_ACC_SHARE}..=1, the range the planner honours"),
         )?,
         path_acc_mm_s2: number(
             "path_acc_mm_s2",
             raw.path_acc_mm_s2,
             f64::INFINITY,
-            &|v| v > 0.0 && (v <= 1e9 || v == f64::INFINITY),
-            "must be greater than 0 and at most 1e9",
+            &|v| (MIN_AXIS_LIMIT..=MAX_LIMIT).contains(&v) || v == f64::INFINITY,
+            &format!("must be in {MIN_AXIS_LIMIT}..={MAX_LIMIT:e}, the range the planner honours"),
         )?,
         max_jerk_mm_s3: jerk,
         profile: raw.profile.unwrap_or_default(),
@@ -766,13 +886,19 @@ impl Machine {
             }
             for (key, v) in [
                 ("counts_per_mm", a.counts_per_mm),
-                ("max_vel_mm_s", a.max_vel_mm_s),
-                ("max_acc_mm_s2", a.max_acc_mm_s2),
-                ("max_jerk_mm_s3", a.max_jerk_mm_s3),
                 ("following_error_mm", a.following_error_mm),
             ] {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(ctx.err(table, key, format!("{v} must be a positive number")));
+                }
+            }
+            for (key, v) in [
+                ("max_vel_mm_s", a.max_vel_mm_s),
+                ("max_acc_mm_s2", a.max_acc_mm_s2),
+                ("max_jerk_mm_s3", a.max_jerk_mm_s3),
+            ] {
+                if !(MIN_AXIS_LIMIT..=MAX_LIMIT).contains(&v) {
+                    return Err(ctx.err(table, key, format!("{v} outside {MIN_AXIS_LIMIT}..={MAX_LIMIT:e}, the range the planner honours")));
                 }
             }
             if !(a.min_mm.is_finite() && a.max_mm.is_finite() && a.min_mm < a.max_mm) {
@@ -787,6 +913,7 @@ impl Machine {
                     return Err(ctx.err(table, key, "beyond the INT32 range of position counts"));
                 }
             }
+            supervision(&ctx, &table, a)?;
             let filter = a
                 .filter
                 .as_ref()
@@ -795,7 +922,14 @@ impl Machine {
             let dict = match dicts.iter().find(|(p, _)| *p == a.dictionary) {
                 Some((_, d)) => d.clone(),
                 None => {
-                    let d = Arc::new(load_dict(&a.dictionary)?);
+                    let d = Arc::new(load_dict(&a.dictionary).map_err(|e| {
+                        ConfigError::Referenced {
+                            file: path.to_path_buf(),
+                            table: table.clone(),
+                            key: "dictionary".into(),
+                            source: Box::new(e),
+                        }
+                    })?);
                     dicts.push((a.dictionary.clone(), d.clone()));
                     d
                 }
@@ -839,6 +973,7 @@ impl Machine {
                 a.node,
                 false,
             )?;
+            pdo_objects(&ctx, &table, &dict, &setpoint_pdo, &feedback_pdo)?;
             let (si, ss) = a.mode.setpoint_object();
             for (idx, sub, what) in [
                 (0x6040u16, 0u8, "controlword 0x6040"),
@@ -870,6 +1005,24 @@ impl Machine {
             let mut sdo = Vec::new();
             for (i, w) in a.sdo.iter().enumerate() {
                 let key = format!("sdo[{i}]");
+                if let Some((lo, hi, what, why)) = GATEWAY_OWNED
+                    .iter()
+                    .find(|(lo, hi, ..)| (*lo..=*hi).contains(&w.index))
+                {
+                    let range = if lo == hi {
+                        format!("0x{lo:04X}")
+                    } else {
+                        format!("0x{lo:04X}–0x{hi:04X}")
+                    };
+                    return Err(ctx.err(
+                        table.as_str(),
+                        &key,
+                        format!(
+                            "0x{:04X}:{:02X}: the gateway owns {range} ({what}: {why}); an sdo entry may not override it",
+                            w.index, w.sub
+                        ),
+                    ));
+                }
                 let def = dict.sub(w.index, w.sub).ok_or_else(|| {
                     ctx.err(
                         table.as_str(),
@@ -950,6 +1103,14 @@ impl Machine {
                 filter,
             });
         }
+        if !axes.iter().any(|a| a.xyz().is_some()) {
+            return Err(ctx.err(
+                format!("axis {}", axes[0].name),
+                "name",
+                "a machine needs an X, Y or Z axis: programs are planned in X, Y and Z, and the other axes hold their position",
+            ));
+        }
+        check_can_ids(&ctx, raw.sync.cob_id, &axes)?;
         let mut machine = Machine {
             file: path.to_path_buf(),
             name: raw.machine.name,
@@ -1051,6 +1212,150 @@ impl Machine {
     }
 }
 
+/// Checks that the drive's dictionary has every object start-up reads or writes for the process
+/// data: the COB-ID of each of the four RPDOs and TPDOs (those not used are switched off), and
+/// the transmission type and mapping entries of the two the axis uses. Without this, a missing
+/// object would end `run` on an SDO abort that `plan` never saw.
+fn pdo_objects(
+    ctx: &Ctx,
+    table: &str,
+    dict: &DriveDictionary,
+    setpoint: &PdoConfig,
+    feedback: &PdoConfig,
+) -> Result<(), ConfigError> {
+    let mut need: Vec<(u16, u8, &str)> = Vec::new();
+    for k in 0..4u16 {
+        need.push((0x1400 + k, 1, "dictionary"));
+        need.push((0x1800 + k, 1, "dictionary"));
+    }
+    for (p, comm, map, key) in [
+        (setpoint, 0x1400u16, 0x1600u16, "setpoint_pdo.number"),
+        (feedback, 0x1800, 0x1A00, "feedback_pdo.number"),
+    ] {
+        let k = u16::from(p.number - 1);
+        need.push((comm + k, 2, key));
+        need.push((map + k, 0, key));
+        for i in 1..=p.mapping.len() {
+            need.push((map + k, i as u8, key));
+        }
+    }
+    for (index, sub, key) in need {
+        if dict.sub(index, sub).is_none() {
+            return Err(ctx.err(
+                table,
+                key,
+                format!(
+                    "start-up writes 0x{index:04X}:{sub:02X} for the process data, and it is not in {}",
+                    dict.file.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that SYNC takes a CAN-ID of its own: none CiA 301 restricts (NMT, every node's SDO
+/// channels and heartbeats), and none of the machine's nodes' EMCYs or PDOs. A shared
+/// identifier makes a drive take one object for the other.
+fn check_can_ids(ctx: &Ctx, sync: u16, axes: &[AxisConfig]) -> Result<(), ConfigError> {
+    if let Some((lo, hi, what)) = RESTRICTED_CAN_IDS
+        .iter()
+        .find(|(lo, hi, _)| (*lo..=*hi).contains(&sync))
+    {
+        return Err(ctx.err(
+            "sync",
+            "cob_id",
+            format!(
+                "0x{sync:03X} is a restricted CAN-ID of CiA 301 (0x{lo:03X}–0x{hi:03X}: {what})"
+            ),
+        ));
+    }
+    for a in axes {
+        for (id, what) in [
+            (crate::canopen::cob::EMCY + u16::from(a.node), "EMCY"),
+            (a.setpoint_pdo.cob_id, "setpoint PDO"),
+            (a.feedback_pdo.cob_id, "feedback PDO"),
+        ] {
+            if id == sync {
+                return Err(ctx.err(
+                    "sync",
+                    "cob_id",
+                    format!(
+                        "0x{sync:03X} is the {what} of axis {} (node {})",
+                        a.name, a.node
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that the drive can supervise the axis as the file asks: a count fine enough to position
+/// it, a following-error window (0x6065) that is neither tripped by rounding nor clamped nor as
+/// long as the travel, and a velocity limit (0x607F) that fits the drive's UNSIGNED32.
+fn supervision(ctx: &Ctx, table: &str, a: &RawAxis) -> Result<(), ConfigError> {
+    let travel_mm = a.max_mm - a.min_mm;
+    let travel_counts = travel_mm * a.counts_per_mm;
+    if travel_counts < MIN_TRAVEL_COUNTS {
+        return Err(ctx.err(
+            table,
+            "counts_per_mm",
+            format!(
+                "{}: the travel [{}, {}] mm spans {travel_counts} counts, fewer than {MIN_TRAVEL_COUNTS}: one count ({} mm) is too coarse to position the axis",
+                a.counts_per_mm, a.min_mm, a.max_mm, 1.0 / a.counts_per_mm
+            ),
+        ));
+    }
+    let window_counts = a.following_error_mm * a.counts_per_mm;
+    if window_counts.round() < MIN_FOLLOWING_ERROR_COUNTS {
+        return Err(ctx.err(
+            table,
+            "following_error_mm",
+            format!(
+                "{} mm is {} counts in 0x6065 at counts_per_mm = {}, fewer than {MIN_FOLLOWING_ERROR_COUNTS}: setpoint and position actual are each rounded to a count, so the window would trip on rounding alone",
+                a.following_error_mm,
+                window_counts.round(),
+                a.counts_per_mm
+            ),
+        ));
+    }
+    if window_counts.round() >= MAX_FOLLOWING_ERROR_COUNTS {
+        return Err(ctx.err(
+            table,
+            "following_error_mm",
+            format!(
+                "{} mm is {window_counts:.0} counts at counts_per_mm = {}, not below the {MAX_FOLLOWING_ERROR_COUNTS} counts (2³¹ − 1) the gateway can write to 0x6065: it would be clamped there, and a jam never detected",
+                a.following_error_mm, a.counts_per_mm
+            ),
+        ));
+    }
+    if a.following_error_mm >= travel_mm {
+        return Err(ctx.err(
+            table,
+            "following_error_mm",
+            format!(
+                "{} mm is not shorter than the travel ({travel_mm} mm): a jam would never be detected",
+                a.following_error_mm
+            ),
+        ));
+    }
+    let vmax_counts = a.max_vel_mm_s * a.counts_per_mm * DRIVE_VELOCITY_HEADROOM;
+    if vmax_counts.ceil() > f64::from(u32::MAX) {
+        return Err(ctx.err(
+            table,
+            "max_vel_mm_s",
+            format!(
+                "{} mm/s × counts_per_mm {} × {DRIVE_VELOCITY_HEADROOM} = {vmax_counts:.0} counts/s, above the {} the drive's velocity limit 0x607F (UNSIGNED32) can hold",
+                a.max_vel_mm_s,
+                a.counts_per_mm,
+                u32::MAX
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Checks an axis's `filter`: `time_ms` within 0..=[`MAX_FILTER_MS`] and, for a linear filter,
 /// a whole number of cycles (its ramps last whole cycles; rather than round a time the file
 /// states, the file is refused with the multiples on either side).
@@ -1116,6 +1421,16 @@ fn pdo(
             ),
         ));
     }
+    if !receive && raw.transmission != 1 {
+        return Err(ctx.err(
+            table,
+            &format!("{key}.transmission"),
+            format!(
+                "{}: the gateway checks statusword and position actual on every SYNC, so the feedback must be sent on every SYNC (1)",
+                raw.transmission
+            ),
+        ));
+    }
     if raw.mapping.is_empty() || raw.mapping.len() > 8 {
         return Err(ctx.err(table, &format!("{key}.mapping"), "1 to 8 entries"));
     }
@@ -1141,6 +1456,19 @@ fn pdo(
                 table,
                 &k,
                 format!("0x{m:08X}: {} is not PDO-mappable", def.name),
+            ));
+        }
+        if let Some(j) = mapping
+            .iter()
+            .position(|p: &MapEntry| p.index == e.index && p.sub == e.sub)
+        {
+            return Err(ctx.err(
+                table,
+                &k,
+                format!(
+                    "0x{m:08X}: {} is mapped twice (also {key}.mapping[{j}])",
+                    def.name
+                ),
             ));
         }
         let want = def.data_type.size() * 8;

@@ -46,6 +46,18 @@ pub enum ConfigError {
         /// What is wrong, with the bound.
         message: String,
     },
+    /// A file that a key names (a drive dictionary) could not be loaded: the key, then why.
+    #[error("{file}: [{table}] {key}: {source}")]
+    Referenced {
+        /// The file that names it.
+        file: PathBuf,
+        /// The table, e.g. `axis X`.
+        table: String,
+        /// The key, e.g. `dictionary`.
+        key: String,
+        /// Why the named file could not be loaded (it names that file).
+        source: Box<ConfigError>,
+    },
 }
 
 pub(crate) fn read_toml<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, ConfigError> {
@@ -59,6 +71,21 @@ pub(crate) fn parse_toml<T: serde::de::DeserializeOwned>(
 ) -> Result<T, ConfigError> {
     toml::from_str(text).map_err(|e| ConfigError::Parse {
         file: path.to_path_buf(),
-        message: e.to_string().trim_end().to_string(),
+        message: toml_message(&e, text),
     })
+}
+
+/// The parser's message with the line and column of the error, and without the excerpt of the
+/// file that the parser's own `Display` quotes: a path given by mistake (a key pointing at
+/// `/etc/shadow`) must not have its contents printed.
+fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    let message = e.message().trim_end();
+    match e.span().and_then(|s| text.get(..s.start)) {
+        Some(before) => {
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!("line {line}, column {column}: {message}")
+        }
+        None => message.to_string(),
+    }
 }

@@ -12,6 +12,7 @@ pub mod candump;
 pub mod control;
 pub mod eds;
 pub mod gcode;
+pub mod machine;
 
 /// A deterministic generator of fuzz inputs from seed files (xorshift64*; no dependency).
 #[derive(Debug, Clone)]

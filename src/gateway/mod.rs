@@ -60,6 +60,23 @@ pub enum GatewayError {
         /// Travel.
         max_mm: f64,
     },
+    /// An axis stands outside its travel before start-up: refused before anything was written to
+    /// a drive (its software limits 0x607D would make it move as soon as it is enabled).
+    #[error(
+        "axis {axis} (node {node}) is at {position_mm:.4} mm, outside its travel [{min_mm}, {max_mm}] mm: nothing was written to the drives and none was enabled; jog the axis into its travel first, with its software limits (0x607D) not yet applied (a jog command comes with `canmotion serve`)"
+    )]
+    StartOutsideTravel {
+        /// Axis letter.
+        axis: String,
+        /// Its node.
+        node: u8,
+        /// Position actual (0x6064), mm.
+        position_mm: f64,
+        /// Travel.
+        min_mm: f64,
+        /// Travel.
+        max_mm: f64,
+    },
     /// The program moves an axis the machine does not have.
     #[error("{file}:{line}: the program moves {axis}, which machine '{machine}' does not have")]
     NoSuchAxis {
@@ -577,7 +594,8 @@ fn csv_row(r: &CycleRecord, n: usize, period_s: f64) -> String {
 /// enabled), then planned from the position at which the drives were armed. A program run from
 /// its start is [`run`]'s; [`resume`] continues an interrupted one.
 pub trait MotionSource {
-    /// After start-up, before any drive is enabled: `start_mm` is position actual (X, Y, Z),
+    /// During start-up, before anything is written to a drive, every axis inside its travel:
+    /// `start_mm` is position actual (X, Y, Z),
     /// `start_counts` per axis in machine order. An error ends the run with every drive sent to
     /// Pre-operational, nothing enabled.
     fn check(
@@ -676,28 +694,29 @@ async fn run_async(
     control::CONTROL.reset(ramp.is_ok());
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
-    // A stop signal during start-up (SDO configuration, nothing enabled) ends it there.
+    // Check the program against the travel from where the machine is, before anything is
+    // written to a drive. A refusal leaves the drives as it found them: disabled, and
+    // Pre-operational. With every axis inside its travel (which start-up checks first), the
+    // element checks cover the whole path: a line from a point inside to a point inside stays
+    // inside, and an arc is checked over its extent. A stop signal during start-up (SDO
+    // configuration, nothing enabled) ends it there.
     let started = tokio::select! {
-        r = startup::start(machine, bus, &mut io) => Ok(r),
+        r = startup::start(machine, bus, &mut io, |counts| {
+            let mut start_mm = Vector3::zeros();
+            for (a, c) in machine.axes.iter().zip(counts) {
+                if let Some(i) = a.xyz() {
+                    start_mm[i] = a.counts_to_mm(*c);
+                }
+            }
+            source.check(machine, start_mm, counts)
+        }) => Ok(r),
         s = stop_signal() => Err(s),
     };
-    let start_counts = match started {
-        Ok(r) => r?,
+    match started {
+        Ok(r) => {
+            r?;
+        }
         Err(signal) => return Err(pre_operational(machine, &io, signal).await),
-    };
-    let mut start_mm = Vector3::zeros();
-    for (a, c) in machine.axes.iter().zip(&start_counts) {
-        if let Some(i) = a.xyz() {
-            start_mm[i] = a.counts_to_mm(*c);
-        }
-    }
-    // Check the program against the travel from where the machine is, before any motion. A
-    // refusal leaves the drives as it found them: disabled, and Pre-operational.
-    if let Err(e) = source.check(machine, start_mm, &start_counts) {
-        for a in &machine.axes {
-            let _ = io.nmt(crate::canopen::nmt::PRE_OPERATIONAL, a.node).await;
-        }
-        return Err(e);
     }
     // A signal during the check (a resume's confirmation): nothing is enabled yet.
     if let Some(signal) = rt::signal::STOP.first() {

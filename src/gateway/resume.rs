@@ -19,7 +19,9 @@
 //!    recorded element.
 //! 3. The full start-up of every node runs again ([`super::startup`]: reset communication,
 //!    identity, every setting written and read back, PDO remap read back, mode confirmed by
-//!    0x6061): a drive that reset gets its whole configuration back.
+//!    0x6061): a drive that reset gets its whole configuration back. Steps 4 and 5 run within
+//!    it, once position actual is read and every axis found inside its travel, before anything
+//!    is written to a drive.
 //! 4. Each axis's position actual must be within [`MAX_RETURN_MM`] of the stop point; further
 //!    means the position was lost (an incremental encoder after a power cycle) or the machine
 //!    was moved by hand: home it, or run from the start.

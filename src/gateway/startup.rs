@@ -1,6 +1,11 @@
 //! Start-up over SDO and NMT, in the order CiA 301/402 ask for (see the checklist):
-//! reset communication, boot-ups, identity, the machine file's writes, limits, heartbeats, PDO
-//! remap with read-back, SYNC, mode (confirmed by 0x6061), IP period, NMT start.
+//! reset communication, boot-ups, identity, position actual (every axis inside its travel, and
+//! the caller's check of the motion from there), heartbeats, the machine file's writes, limits,
+//! PDO remap with read-back, SYNC, mode (confirmed by 0x6061), IP period, NMT start.
+//!
+//! Nothing is written to a drive before every axis is known to stand inside its travel: the
+//! software position limits (0x607D) written to a drive outside them make it pull towards them
+//! as soon as it is enabled, uncommanded.
 
 use std::time::Duration;
 
@@ -119,7 +124,6 @@ async fn check_identity(io: &NodeIo, a: &AxisConfig) -> Result<(), GatewayError>
 
 async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), GatewayError> {
     let n = a.node;
-    check_identity(io, a).await?;
     // Heartbeats: the drive produces, and consumes the gateway's.
     let hb = &m.heartbeat;
     write_checked(io, n, 0x1017, 0, Value::Unsigned16(hb.drive_producer_ms)).await?;
@@ -150,7 +154,9 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     write_checked(io, n, 0x607D, 1, Value::Integer32(counts(a.min_mm))).await?;
     write_checked(io, n, 0x607D, 2, Value::Integer32(counts(a.max_mm))).await?;
     // The drive's own velocity limit, with head-room for its position loop to catch up.
-    let vmax = (a.max_vel_mm_s * a.counts_per_mm * 1.5).ceil() as u32;
+    // (The machine file's validation keeps it within UNSIGNED32.)
+    let vmax = (a.max_vel_mm_s * a.counts_per_mm * crate::config::machine::DRIVE_VELOCITY_HEADROOM)
+        .ceil() as u32;
     write_checked(io, n, 0x607F, 0, Value::Unsigned32(vmax)).await?;
     // Process data: our two PDOs, every other one off.
     let rx = a.setpoint_pdo.number;
@@ -220,8 +226,36 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     Ok(())
 }
 
+/// Refuses a start with an axis outside its travel (`counts`: position actual per axis, machine
+/// order).
+pub fn check_in_travel(m: &Machine, counts: &[i32]) -> Result<(), GatewayError> {
+    for (a, &c) in m.axes.iter().zip(counts) {
+        let position_mm = a.counts_to_mm(c);
+        if !(a.min_mm..=a.max_mm).contains(&position_mm) {
+            return Err(GatewayError::StartOutsideTravel {
+                axis: a.name.clone(),
+                node: a.node,
+                position_mm,
+                min_mm: a.min_mm,
+                max_mm: a.max_mm,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Bring every axis's drive to Operational, configured. Returns position actual per axis.
-pub async fn start(m: &Machine, bus: &Bus, io: &mut NodeIo) -> Result<Vec<i32>, GatewayError> {
+///
+/// Before anything is written to a drive, position actual (0x6064) of every axis is read: an
+/// axis outside its travel refuses the start ([`GatewayError::StartOutsideTravel`]), and so does
+/// `check` (the motion from there, given position actual per axis). On a refusal the drives are
+/// left as their boot-up left them: Pre-operational, disabled, with their own settings.
+pub async fn start(
+    m: &Machine,
+    bus: &Bus,
+    io: &mut NodeIo,
+    check: impl FnOnce(&[i32]) -> Result<(), GatewayError>,
+) -> Result<Vec<i32>, GatewayError> {
     let nodes: Vec<u8> = m.axes.iter().map(|a| a.node).collect();
     io.clear_bootups();
     for &n in &nodes {
@@ -246,17 +280,24 @@ pub async fn start(m: &Machine, bus: &Bus, io: &mut NodeIo) -> Result<Vec<i32>, 
         m.heartbeat.gateway_node,
         Duration::from_millis(u64::from(m.heartbeat.gateway_producer_ms)),
     );
-    for a in &m.axes {
-        configure_axis(io, m, a).await?;
-    }
     let mut pos = Vec::new();
     for a in &m.axes {
+        check_identity(io, a).await?;
         pos.push(
             match io.read(a.node, 0x6064, 0, DataType::Integer32).await? {
                 Value::Integer32(v) => v,
                 _ => 0,
             },
         );
+    }
+    if let Err(e) = check_in_travel(m, &pos).and_then(|()| check(&pos)) {
+        for &n in &nodes {
+            let _ = io.nmt(nmt::PRE_OPERATIONAL, n).await;
+        }
+        return Err(e);
+    }
+    for a in &m.axes {
+        configure_axis(io, m, a).await?;
     }
     for &n in &nodes {
         io.nmt(nmt::START, n).await?;
