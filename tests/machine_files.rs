@@ -293,7 +293,13 @@ fn a_bad_dictionary_names_the_key_and_never_echoes_the_file() {
             table, key, source, ..
         } => {
             assert_eq!((table.as_str(), key.as_str()), ("axis X", "dictionary"));
-            assert!(matches!(**source, ConfigError::Read { .. }), "{source:?}");
+            assert!(
+                matches!(
+                    **source,
+                    ConfigError::File(canmotion::files::FileError::Read { .. })
+                ),
+                "{source:?}"
+            );
         }
         other => panic!("{other:?}"),
     }

@@ -15,15 +15,8 @@ pub use machine::{AxisConfig, AxisMode, Machine, PdoConfig};
 /// A configuration error: which file, which table and key, and what is wrong.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
-    /// The file could not be read.
-    #[error("{file}: cannot read: {source}")]
-    Read {
-        /// The file.
-        file: PathBuf,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// The file is not a regular file, too large, or not text (see [`crate::files`]).
+    /// The file could not be read, is not a regular file, too large, or not text (see
+    /// [`crate::files`]).
     #[error(transparent)]
     File(#[from] crate::files::FileError),
     /// The file is not valid TOML or does not fit the schema (unknown key, wrong type).
