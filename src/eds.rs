@@ -40,8 +40,9 @@
 //!   (a 24-bit mapping entry could not be checked against a 32-bit entry).
 //! - UNICODE_STRING becomes `string` (the text in UTF-8); TIME_OF_DAY and TIME_DIFFERENCE become
 //!   `octets`; OCTET_STRING and DOMAIN defaults are hex digits (CiA 306), any other text is taken
-//!   as its bytes; a default the format cannot carry (bytes ≥ 0x80 in an octet string, longer
-//!   than 32 bytes, a u64 above i64::MAX) is replaced (empty, truncated, 0) with a note.
+//!   as its bytes; strings of any length are kept whole (up to 64 KiB); a default the format
+//!   cannot carry (bytes ≥ 0x80 in an octet string, longer than 64 KiB, a u64 above i64::MAX) is
+//!   replaced (empty, truncated, 0) with a note.
 //!   Other data types (complex 0x20–0x25, manufacturer types 0x40…) are skipped with a note.
 //! - `rwr` and `rww` become `rw` (they only say which PDO direction may map the entry).
 //! - A PDO-mappable variable-length entry loses the flag (our loader cannot map it).
@@ -68,8 +69,8 @@ use canopen_rs::DataType;
 use crate::config::DriveDictionary;
 use crate::config::dictionary::type_name;
 
-/// Longest string value the dictionary format holds (canopen-rs's `MAX_STRING_LEN`).
-const MAX_STRING: usize = canopen_rs::MAX_STRING_LEN;
+/// Longest string value the dictionary format holds ([`crate::canopen::MAX_OBJECT_BYTES`]).
+const MAX_STRING: usize = crate::canopen::MAX_OBJECT_BYTES;
 
 /// Why an import failed.
 #[derive(Debug, thiserror::Error)]
@@ -2513,7 +2514,13 @@ mod tests {
         assert_eq!(v(0x0A, "4142").unwrap(), Val::Text("AB".into()));
         assert_eq!(v(0x0A, "ABCD").unwrap(), Val::Text(String::new()));
         assert_eq!(v(0x0F, "@AB").unwrap(), Val::Text("@AB".into()));
-        assert_eq!(v(0x09, &"x".repeat(40)).unwrap(), Val::Text("x".repeat(32)));
+        // Strings of any length are kept whole (issue 13: a 34-byte device name was cut to 32).
+        assert_eq!(v(0x09, &"x".repeat(40)).unwrap(), Val::Text("x".repeat(40)));
+        let long = "y".repeat(crate::canopen::MAX_OBJECT_BYTES + 9);
+        assert_eq!(
+            parse_value(t(0x09), &long, None).unwrap().val,
+            Val::Text("y".repeat(crate::canopen::MAX_OBJECT_BYTES))
+        );
     }
 
     #[test]
@@ -2684,7 +2691,7 @@ mod tests {
         assert_eq!(
             rel.dictionary
                 .default_for(rel.dictionary.sub(0x1800, 0).unwrap(), 3),
-            canopen_rs::Value::Unsigned32(0x183)
+            Some(canopen_rs::Value::Unsigned32(0x183))
         );
         let fixed = import_node(&text, 5).unwrap();
         assert!(

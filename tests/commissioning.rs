@@ -529,3 +529,73 @@ fn cli_replays_with_the_machine_file() {
     let o = canmotion(&["monitor", "--replay", rec.to_str().unwrap(), "--count", "2"]);
     assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 2);
 }
+
+/// Issue 13, defect 3: SDO transfers of any length. A drive dictionary with a 1000-byte DOMAIN
+/// and a 34-byte device name; `NodeIo` downloads and uploads them segmented and block against
+/// the simulated drive, and `sdo read` returns the name whole (canopen-rs's client stopped at
+/// 32 bytes and reported that as the node's abort).
+#[test]
+fn sdo_transfers_of_any_length_segmented_and_block() {
+    use canmotion::canopen::sdo_client::Mode;
+    use canmotion::gateway::io::NodeIo;
+    let name = "canmotion simulated servo, 34 byte";
+    assert_eq!(name.len(), 34);
+    let text = canmotion::config::machine::DEMO_DRIVE.replace(
+        "default = \"canmotion sim servo\"",
+        &format!("default = {name:?}"),
+    ) + "\n[[object]]\nindex = 0x2000\nname = \"Data block\"\ntype = \"domain\"\naccess = \"rw\"\ndefault = \"\"\n";
+    let d = Arc::new(DriveDictionary::parse(Path::new("long.toml"), &text).expect("dictionary"));
+    let bus = Bus::InProc(InProcBus::new());
+    let mut bootups = bus.open(&[Filter::exact(0x705)]).unwrap();
+    let _drives = runner::spawn(&bus, vec![SimDrive::new(d, 5)]).expect("spawn");
+    bootups
+        .recv_timeout(Duration::from_secs(5))
+        .unwrap()
+        .expect("boot-up within 5 s");
+    let r = sdo::read(
+        &bus,
+        Node(5),
+        addr("1008"),
+        Some(SdoType::String),
+        Mode::Segmented,
+    )
+    .expect("a 34-byte name");
+    assert_eq!(r, ReadValue::Text(name.as_bytes().to_vec()));
+    let r = sdo::read(
+        &bus,
+        Node(5),
+        addr("1008"),
+        Some(SdoType::String),
+        Mode::Block,
+    )
+    .expect("a 34-byte name, block");
+    assert_eq!(r, ReadValue::Text(name.as_bytes().to_vec()));
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let io = NodeIo::start(&bus, &[5]).unwrap();
+        for (i, mode) in [Mode::Segmented, Mode::Block].into_iter().enumerate() {
+            let data: Vec<u8> = (0..1000).map(|k| (k * 13 + i * 7) as u8).collect();
+            io.download(5, 0x2000, 0, &data, mode)
+                .await
+                .expect("download");
+            for up in [Mode::Segmented, Mode::Block] {
+                assert_eq!(
+                    io.upload_with(5, 0x2000, 0, up).await.expect("upload"),
+                    data,
+                    "down {mode:?}, up {up:?}"
+                );
+            }
+        }
+        // Beyond what the drive keeps (64 KiB): the node's abort, named as such.
+        let big = vec![0u8; canmotion::canopen::MAX_OBJECT_BYTES + 1];
+        match io.download(5, 0x2000, 0, &big, Mode::Segmented).await {
+            Err(canmotion::gateway::GatewayError::SdoAbort { node: 5, code, .. }) => {
+                assert_eq!(code, canmotion::canopen::AbortCode::LENGTH_TOO_HIGH)
+            }
+            other => panic!("{other:?}"),
+        }
+    });
+}

@@ -318,10 +318,10 @@ fn python_canopen_datatypes_cover_every_type() {
     assert_eq!(fixed(d, 0x2010, 0), Value::Integer32(-1));
     assert_eq!(fixed(d, 0x2015, 0), Value::Integer64(-64));
     assert_eq!(fixed(d, 0x201B, 0), Value::Unsigned64(64));
-    match fixed(d, 0x200B, 0) {
-        Value::VisibleString(s) => assert_eq!(s.as_bytes(), "abc✓".as_bytes()),
-        v => panic!("{v:?}"),
-    }
+    assert_eq!(
+        d.sub(0x200B, 0).unwrap().default,
+        DefaultValue::Bytes("abc✓".as_bytes().to_vec())
+    );
     // Odd widths keep their range and lose PDO mapping; fixed widths keep it.
     let s = d.sub(0x2010, 0).unwrap();
     assert_eq!(

@@ -11,6 +11,18 @@ pub mod od;
 pub mod sdo_client;
 pub mod sdo_server;
 
+/// The longest byte string (`VISIBLE_STRING`, `OCTET_STRING`, `DOMAIN`) an object dictionary
+/// entry holds, as a default or written over SDO: 64 KiB, far above any device name or parameter
+/// block, and a bound on what a misbehaving client can make a (simulated) drive keep.
+pub const MAX_OBJECT_BYTES: usize = 64 * 1024;
+
+/// A value's little-endian bytes, as an SDO transfer carries them.
+pub fn value_bytes(v: &canopen_rs::Value) -> Vec<u8> {
+    let mut buf = [0u8; canopen_rs::MAX_STRING_LEN];
+    let n = v.encode_le(&mut buf).unwrap_or(0);
+    buf[..n].to_vec()
+}
+
 pub use abort::AbortCode;
 pub use emcy::Emcy;
 pub use od::Od;

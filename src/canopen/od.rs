@@ -11,12 +11,32 @@ use super::abort::AbortCode;
 use crate::config::DriveDictionary;
 use crate::config::dictionary::{SubDef, value_as_f64, value_as_i128};
 
+/// The value of one entry: a number, or the bytes of a byte string of any length.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Entry {
+    /// Every type but the byte strings.
+    Value(Value),
+    /// `VISIBLE_STRING`, `OCTET_STRING`, `DOMAIN`: up to
+    /// [`super::MAX_OBJECT_BYTES`].
+    Bytes(Vec<u8>),
+}
+
+impl Entry {
+    /// The bytes an SDO upload carries.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        match self {
+            Entry::Value(v) => super::value_bytes(v),
+            Entry::Bytes(b) => b.clone(),
+        }
+    }
+}
+
 /// Current values of a node's object dictionary.
 #[derive(Debug, Clone)]
 pub struct Od {
     dict: Arc<DriveDictionary>,
     node: u8,
-    values: BTreeMap<(u16, u8), Value>,
+    values: BTreeMap<(u16, u8), Entry>,
 }
 
 impl Od {
@@ -41,8 +61,11 @@ impl Od {
         let dict = self.dict.clone();
         for (&idx, obj) in dict.objects.range(range) {
             for (&sub, def) in &obj.subs {
-                self.values
-                    .insert((idx, sub), dict.default_for(def, self.node));
+                let entry = match dict.default_for(def, self.node) {
+                    Some(v) => Entry::Value(v),
+                    None => Entry::Bytes(dict.default_bytes(def, self.node)),
+                };
+                self.values.insert((idx, sub), entry);
             }
         }
     }
@@ -62,9 +85,17 @@ impl Od {
         self.values.contains_key(&(index, sub))
     }
 
-    /// The current value.
+    /// The current value of a numeric entry (`None` for a byte string: see [`Od::entry`]).
     pub fn get(&self, index: u16, sub: u8) -> Option<Value> {
-        self.values.get(&(index, sub)).copied()
+        match self.values.get(&(index, sub))? {
+            Entry::Value(v) => Some(*v),
+            Entry::Bytes(_) => None,
+        }
+    }
+
+    /// The current value of any entry.
+    pub fn entry(&self, index: u16, sub: u8) -> Option<&Entry> {
+        self.values.get(&(index, sub))
     }
 
     /// The current value as an integer (0 when absent or not an integer).
@@ -93,14 +124,19 @@ impl Od {
                 DataType::Real64 => Value::Real64(v as f64),
                 _ => return,
             };
-            self.values.insert((index, sub), value);
+            self.values.insert((index, sub), Entry::Value(value));
         }
     }
 
     /// Store a value (already checked) from the device side.
     pub fn set(&mut self, index: u16, sub: u8, v: Value) {
-        if self.values.contains_key(&(index, sub)) {
-            self.values.insert((index, sub), v);
+        self.set_entry(index, sub, Entry::Value(v));
+    }
+
+    /// Store an entry (already checked) from the device side.
+    pub fn set_entry(&mut self, index: u16, sub: u8, e: Entry) {
+        if let Some(slot) = self.values.get_mut(&(index, sub)) {
+            *slot = e;
         }
     }
 
@@ -113,8 +149,8 @@ impl Od {
         }
     }
 
-    /// SDO upload rules: the value, or the abort code.
-    pub fn sdo_read(&self, index: u16, sub: u8) -> Result<Value, AbortCode> {
+    /// SDO upload rules: the entry's bytes, or the abort code.
+    pub fn sdo_read(&self, index: u16, sub: u8) -> Result<Vec<u8>, AbortCode> {
         if let Some(a) = self.missing(index, sub) {
             return Err(a);
         }
@@ -122,7 +158,7 @@ impl Od {
         if !def.access.readable() {
             return Err(AbortCode::WRITE_ONLY);
         }
-        Ok(self.get(index, sub).expect("exists"))
+        Ok(self.entry(index, sub).expect("exists").to_bytes())
     }
 
     /// SDO download rules before any data arrives: the entry exists, is writable, and `size`
@@ -146,7 +182,7 @@ impl Od {
             return Err(AbortCode::LENGTH_MISMATCH);
         }
         if let Some(size) = size
-            && size > canopen_rs::MAX_STRING_LEN
+            && size > super::MAX_OBJECT_BYTES
         {
             return Err(AbortCode::LENGTH_TOO_HIGH);
         }
@@ -154,10 +190,13 @@ impl Od {
     }
 
     /// SDO download rules on the data: decode to the entry's type and check its range. Does not
-    /// store: the device applies its own rules, then calls [`Od::set`].
-    pub fn sdo_decode_write(&self, index: u16, sub: u8, data: &[u8]) -> Result<Value, AbortCode> {
+    /// store: the device applies its own rules, then calls [`Od::set_entry`].
+    pub fn sdo_decode_write(&self, index: u16, sub: u8, data: &[u8]) -> Result<Entry, AbortCode> {
         self.sdo_check_write(index, sub, Some(data.len()))?;
         let def = self.def(index, sub).expect("exists");
+        if def.data_type.fixed_size().is_none() {
+            return Ok(Entry::Bytes(data.to_vec()));
+        }
         let value =
             Value::decode_le(def.data_type, data).map_err(|_| AbortCode::LENGTH_MISMATCH)?;
         if let Some(x) = value_as_f64(&value) {
@@ -168,6 +207,6 @@ impl Od {
                 return Err(AbortCode::VALUE_TOO_LOW);
             }
         }
-        Ok(value)
+        Ok(Entry::Value(value))
     }
 }

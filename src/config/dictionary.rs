@@ -34,7 +34,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use canopen_rs::{ByteString, DataType, Value};
+use canopen_rs::{DataType, Value};
+
+pub use crate::canopen::MAX_OBJECT_BYTES;
+use crate::canopen::value_bytes as encode;
 use serde::Deserialize;
 
 use super::{ConfigError, read_toml};
@@ -117,8 +120,11 @@ struct RawSub {
 /// A default value, possibly depending on the node id.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DefaultValue {
-    /// A fixed value.
+    /// A fixed value (every type but the byte strings).
     Fixed(Value),
+    /// The bytes of a `VISIBLE_STRING`, `OCTET_STRING` or `DOMAIN`, of any length up to
+    /// [`MAX_OBJECT_BYTES`].
+    Bytes(Vec<u8>),
     /// `$NODEID + offset` (numeric types only).
     NodeIdPlus(u64),
 }
@@ -322,17 +328,12 @@ fn parse_value(
             }
             match t {
                 DataType::VisibleString | DataType::OctetString | DataType::Domain => {
-                    let b = ByteString::from_bytes(s.as_bytes()).map_err(|_| {
-                        ctx.err(
-                            key,
-                            format!("string longer than {} bytes", canopen_rs::MAX_STRING_LEN),
-                        )
-                    })?;
-                    Ok(DefaultValue::Fixed(match t {
-                        DataType::VisibleString => Value::VisibleString(b),
-                        DataType::OctetString => Value::OctetString(b),
-                        _ => Value::Domain(b),
-                    }))
+                    if s.len() > MAX_OBJECT_BYTES {
+                        return Err(
+                            ctx.err(key, format!("string longer than {MAX_OBJECT_BYTES} bytes"))
+                        );
+                    }
+                    Ok(DefaultValue::Bytes(s.as_bytes().to_vec()))
                 }
                 _ => Err(ctx.err(key, format!("a string for type {}", type_name(t)))),
             }
@@ -548,7 +549,7 @@ impl DriveDictionary {
         let fixed = |idx: u16, sub: u8| -> Option<i128> {
             match &self.objects.get(&idx)?.subs.get(&sub)?.default {
                 DefaultValue::Fixed(v) => value_as_i128(v),
-                DefaultValue::NodeIdPlus(_) => None,
+                DefaultValue::NodeIdPlus(_) | DefaultValue::Bytes(_) => None,
             }
         };
         for (idx, sub, key, want) in [
@@ -583,13 +584,24 @@ impl DriveDictionary {
     }
 
     /// Default value of a sub-entry for a node.
-    pub fn default_for(&self, def: &SubDef, node: u8) -> Value {
+    pub fn default_for(&self, def: &SubDef, node: u8) -> Option<Value> {
         match &def.default {
-            DefaultValue::Fixed(v) => *v,
-            DefaultValue::NodeIdPlus(off) => {
+            DefaultValue::Fixed(v) => Some(*v),
+            DefaultValue::NodeIdPlus(off) => Some(
                 int_value(def.data_type, i128::from(*off) + i128::from(node))
-                    .unwrap_or(Value::Unsigned32(0))
-            }
+                    .unwrap_or(Value::Unsigned32(0)),
+            ),
+            DefaultValue::Bytes(_) => None,
+        }
+    }
+
+    /// The default of an entry for `node` as the bytes an SDO upload carries (little-endian for
+    /// numbers; byte strings of any length as they are).
+    pub fn default_bytes(&self, def: &SubDef, node: u8) -> Vec<u8> {
+        match (&def.default, self.default_for(def, node)) {
+            (DefaultValue::Bytes(b), _) => b.clone(),
+            (_, Some(v)) => encode(&v),
+            (_, None) => Vec::new(),
         }
     }
 }
@@ -651,7 +663,7 @@ default = 3
         )
         .unwrap();
         let s = d.sub(0x1800, 1).unwrap();
-        assert_eq!(d.default_for(s, 5), Value::Unsigned32(0x185));
+        assert_eq!(d.default_for(s, 5), Some(Value::Unsigned32(0x185)));
         assert_eq!(d.identity.device_type, 0x192);
     }
 

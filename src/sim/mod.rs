@@ -574,10 +574,11 @@ impl SimDrive {
         }
         if id == cob::SDO_RX + u16::from(self.node) {
             let mut server = std::mem::take(&mut self.sdo);
-            let r = server.handle(self, data);
+            let mut answers = Vec::new();
+            server.handle(self, data, &mut answers);
             self.sdo = server;
-            if let Some(r) = r {
-                out.push(Frame::new(cob::SDO_TX + u16::from(self.node), &r).expect("id"));
+            for r in &answers {
+                out.push(Frame::new(cob::SDO_TX + u16::from(self.node), r).expect("id"));
             }
             out.append(&mut self.deferred);
             self.refresh();
@@ -1146,7 +1147,7 @@ impl SimDrive {
 }
 
 impl SdoTarget for SimDrive {
-    fn sdo_read(&mut self, index: u16, sub: u8) -> Result<Value, AbortCode> {
+    fn sdo_read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, AbortCode> {
         self.od.sdo_read(index, sub)
     }
 
@@ -1160,9 +1161,11 @@ impl SdoTarget for SimDrive {
     }
 
     fn sdo_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
-        let v = self.od.sdo_decode_write(index, sub, data)?;
-        self.check_device_rules(index, sub, &v)?;
-        self.od.set(index, sub, v);
+        let e = self.od.sdo_decode_write(index, sub, data)?;
+        if let crate::canopen::od::Entry::Value(v) = &e {
+            self.check_device_rules(index, sub, v)?;
+        }
+        self.od.set_entry(index, sub, e);
         if index == 0x1003 {
             for s in 1..=8 {
                 self.od.set_int(0x1003, s, 0);

@@ -508,63 +508,79 @@ fn expedited_download_frames_are_byte_exact() {
     assert_eq!(out, [[0xC6, 0x17, 0x10, 0x00, 2, 0, 0, 0]]);
 }
 
-#[test]
-fn against_our_sdo_server_up_to_its_length() {
-    use crate::canopen::sdo_server::{SdoServer, SdoTarget};
-    use canopen_rs::Value;
-    struct Table(HashMap<(u16, u8), Vec<u8>>);
-    impl SdoTarget for Table {
-        fn sdo_read(&mut self, index: u16, sub: u8) -> Result<Value, AbortCode> {
-            let d = self.0.get(&(index, sub)).ok_or(AbortCode::NO_OBJECT)?;
-            Ok(Value::Domain(
-                canopen_rs::ByteString::from_bytes(d).map_err(|_| AbortCode::GENERAL)?,
-            ))
-        }
-        fn sdo_check_write(&mut self, _: u16, _: u8, _: Option<usize>) -> Result<(), AbortCode> {
-            Ok(())
-        }
-        fn sdo_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
-            self.0.insert((index, sub), data.to_vec());
-            Ok(())
+/// Runs a transfer against our own server (`crate::canopen::sdo_server`) over a byte table.
+fn against_our_server(
+    table: &mut ByteTable,
+    mut client: SdoClient,
+    mut out: Vec<[u8; 8]>,
+) -> Result<Outcome, SdoError> {
+    use crate::canopen::sdo_server::SdoServer;
+    let mut server = SdoServer::new();
+    let mut queue: VecDeque<[u8; 8]> = out.drain(..).collect();
+    while let Some(req) = queue.pop_front() {
+        let mut answers = Vec::new();
+        server.handle(table, &req, &mut answers);
+        for a in answers {
+            if let Step::Done(r) = client.on_response(&a, T0, &mut out) {
+                return r;
+            }
+            queue.extend(out.drain(..));
         }
     }
-    for n in [1, 4, 5, 7, 8, 20, 32] {
-        let data = bytes(n);
-        let mut table = Table(HashMap::from([(KEY, data.clone())]));
-        let mut server = SdoServer::new();
-        let mut out = Vec::new();
-        let mut c = SdoClient::upload(KEY.0, KEY.1, Mode::Segmented, T0, &mut out);
-        let result = loop {
-            let req = out.pop().expect("a request");
-            let resp = server.handle(&mut table, &req).expect("an answer");
-            if let Step::Done(r) = c.on_response(&resp, T0, &mut out) {
-                break r;
-            }
-        };
-        assert_eq!(result, Ok(Outcome::Uploaded(data.clone())), "{n}");
-        let mut c = SdoClient::download(0x2001, 0, data.clone(), Mode::Segmented, T0, &mut out);
-        let result = loop {
-            let req = out.pop().expect("a request");
-            let resp = server.handle(&mut table, &req).expect("an answer");
-            if let Step::Done(r) = c.on_response(&resp, T0, &mut out) {
-                break r;
-            }
-        };
-        assert_eq!(result, Ok(Outcome::Downloaded));
-        assert_eq!(table.0[&(0x2001, 0)], data);
-    }
-    // Block transfers are not ours (yet): the server aborts, and that is the node's abort.
-    let mut table = Table(HashMap::new());
-    let mut out = Vec::new();
-    let mut c = SdoClient::upload(KEY.0, KEY.1, Mode::Block, T0, &mut out);
-    let resp = server_once(&mut table, &out[0]);
-    assert!(matches!(
-        c.on_response(&resp, T0, &mut out),
-        Step::Done(Err(SdoError::Aborted { .. }))
-    ));
+    panic!("the transfer stalled");
+}
 
-    fn server_once(t: &mut Table, req: &[u8; 8]) -> [u8; 8] {
-        SdoServer::new().handle(t, req).expect("an answer")
+/// A byte store served by our server.
+struct ByteTable(HashMap<(u16, u8), Vec<u8>>);
+
+impl crate::canopen::sdo_server::SdoTarget for ByteTable {
+    fn sdo_read(&mut self, index: u16, sub: u8) -> Result<Vec<u8>, AbortCode> {
+        self.0
+            .get(&(index, sub))
+            .cloned()
+            .ok_or(AbortCode::NO_OBJECT)
+    }
+    fn sdo_check_write(&mut self, _: u16, _: u8, _: Option<usize>) -> Result<(), AbortCode> {
+        Ok(())
+    }
+    fn sdo_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        self.0.insert((index, sub), data.to_vec());
+        Ok(())
+    }
+}
+
+#[test]
+fn against_our_sdo_server_any_length_both_modes() {
+    for n in [0, 1, 4, 5, 7, 8, 20, 32, 33, 34, 127 * 7, 1000, 5000] {
+        for mode in [Mode::Segmented, Mode::Block] {
+            let data = bytes(n);
+            let mut table = ByteTable(HashMap::from([(KEY, data.clone())]));
+            let mut out = Vec::new();
+            let c = SdoClient::upload(KEY.0, KEY.1, mode, T0, &mut out);
+            assert_eq!(
+                against_our_server(&mut table, c, out),
+                Ok(Outcome::Uploaded(data.clone())),
+                "upload {n} {mode:?}"
+            );
+            let mut out = Vec::new();
+            let c = SdoClient::download(0x2001, 0, data.clone(), mode, T0, &mut out);
+            assert_eq!(
+                against_our_server(&mut table, c, out),
+                Ok(Outcome::Downloaded)
+            );
+            assert_eq!(table.0[&(0x2001, 0)], data, "download {n} {mode:?}");
+        }
+    }
+    // A missing object: the node's abort, in both modes.
+    for mode in [Mode::Segmented, Mode::Block] {
+        let mut out = Vec::new();
+        let c = SdoClient::upload(0x3000, 0, mode, T0, &mut out);
+        assert_eq!(
+            against_our_server(&mut ByteTable(HashMap::new()), c, out),
+            Err(SdoError::Aborted {
+                code: AbortCode::NO_OBJECT
+            })
+        );
     }
 }
 
