@@ -1,5 +1,6 @@
-//! Pins the gaps of canopen-rs 0.6 (`canopen_rs::sdo::SdoServer` over its `ObjectDictionary`)
-//! that made us write our own SDO server (`src/canopen/sdo_server.rs`).
+//! Pins the gaps of canopen-rs 0.6 (`canopen_rs::sdo::SdoServer` over its `ObjectDictionary`,
+//! and its `SdoClient`) that made us write our own SDO server (`src/canopen/sdo_server.rs`) and
+//! client (`src/canopen/sdo_client.rs`).
 //!
 //! Each test asserts canopen-rs's CURRENT behaviour, next to what CiA 301 requires and what our
 //! own dictionary answers. When one of them fails, upstream has changed: reconsider whether our
@@ -171,4 +172,55 @@ fn gap_c_no_value_range_check() {
         ours.sdo_decode_write(0x6060, 0, &[0xFF]),
         Err(AbortCode::VALUE_TOO_LOW)
     );
+}
+
+/// (d) CiA 301 §7.2.4.3: segmented and block transfers have no length limit. canopen-rs's
+/// client keeps a transfer in a buffer of `MAX_STRING_LEN` (32) bytes: an upload of a longer
+/// object (a 34-byte device name) ends in `SdoEvent::Aborted(0x08000000)`, its own failure
+/// reported as if the node had aborted. Ours (`canmotion::canopen::sdo_client`) uploads it
+/// whole, from our server too.
+#[test]
+fn gap_d_the_client_stops_at_32_bytes_and_calls_it_the_nodes_abort() {
+    use canmotion::canopen::sdo_client::{Mode, Outcome, SdoClient, Step};
+    use canmotion::canopen::{SdoServer as OurServer, SdoTarget};
+    use canopen_rs::sdo::{SdoClient as TheirClient, SdoEvent};
+    struct Name(Vec<u8>);
+    impl SdoTarget for Name {
+        fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, AbortCode> {
+            Ok(self.0.clone())
+        }
+        fn sdo_check_write(&mut self, _: u16, _: u8, _: Option<usize>) -> Result<(), AbortCode> {
+            Ok(())
+        }
+        fn sdo_write(&mut self, _: u16, _: u8, _: &[u8]) -> Result<(), AbortCode> {
+            Ok(())
+        }
+    }
+    let name = b"canmotion simulated servo, 34 byte".to_vec();
+    let mut target = Name(name.clone());
+    // Theirs, against our server (which answers correctly: 34 bytes, 5 segments).
+    let mut server = OurServer::new();
+    let mut client = TheirClient::new(NodeId::new(1).unwrap());
+    let mut req = client.read(Address::new(0x1008, 0), canopen_rs::DataType::VisibleString);
+    let event = loop {
+        let mut out = Vec::new();
+        server.handle(&mut target, &req, &mut out);
+        match client.on_response(&out[0]) {
+            SdoEvent::Send(next) => req = next,
+            done => break done,
+        }
+    };
+    assert_eq!(event, SdoEvent::Aborted(0x0800_0000)); // CiA 301: the 34 bytes
+    // Ours.
+    let mut server = OurServer::new();
+    let mut out = Vec::new();
+    let mut c = SdoClient::upload(0x1008, 0, Mode::Segmented, Default::default(), &mut out);
+    let result = loop {
+        let mut answers = Vec::new();
+        server.handle(&mut target, &out.remove(0), &mut answers);
+        if let Step::Done(r) = c.on_response(&answers[0], Default::default(), &mut out) {
+            break r;
+        }
+    };
+    assert_eq!(result, Ok(Outcome::Uploaded(name)));
 }
