@@ -191,3 +191,57 @@ fn a_square_under_g64_p_is_rounded_where_that_is_faster() {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Issue 11, item 4: a helix's limits come from its true curvature `κ = r/(r² + c²)` and its
+    /// torsion, not from its projected circle. Steep helices (small radius, long pitch, as in
+    /// LinuxCNC's `sam_violation1.ngc`) in every plane, both profiles: the setpoints keep every
+    /// axis's velocity, acceleration and jerk, and the helix runs faster than the projected
+    /// circle's centripetal limit `√(A·√3/2·r)` would allow once the pitch dominates.
+    #[test]
+    fn steep_helices_keep_the_limits_and_run_at_their_curvature(
+        radius in 0.2..5.0f64,
+        pitch_per_turn in 1.0..60.0f64,
+        turns in 0.25..3.0f64,
+        plane in 0..3usize,
+        s_curve in any::<bool>(),
+    ) {
+        let (code, a, b, n, i_word, j_word) = [
+            ("G17", 'X', 'Y', 'Z', 'I', 'J'),
+            ("G18", 'Z', 'X', 'Y', 'K', 'I'),
+            ("G19", 'Y', 'Z', 'X', 'J', 'K'),
+        ][plane];
+        let theta = turns * std::f64::consts::TAU;
+        let text = format!(
+            "G21 G90 {code} G0 {a}{r:.6} {b}0 {n}0\nG3 {a}{ea:.6} {b}{eb:.6} {n}{h:.6} {i_word}{ci:.6} {j_word}0 P{p} F6000\nM2\n",
+            r = radius,
+            ea = radius * theta.cos(),
+            eb = radius * theta.sin(),
+            h = pitch_per_turn * turns,
+            ci = -radius,
+            p = turns.ceil() as u32,
+        );
+        let profile = if s_curve { ProfileKind::SCurve } else { ProfileKind::Trapezoid };
+        let cfg = config(profile);
+        let prog = parse_program(&text, "helix.ngc", Vector3::zeros())
+            .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
+        let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let peak = plan
+            .segments()
+            .iter()
+            .filter(|s| matches!(s.path, SegmentPath::Arc(_)))
+            .map(|s| s.v_peak_mm_s)
+            .fold(0.0, f64::max);
+        let c = pitch_per_turn / std::f64::consts::TAU;
+        let cos2 = radius * radius / (radius * radius + c * c);
+        // The smallest acceleration share the helix can see, and the circle's bound.
+        let a_min = 0.75 * 1000.0;
+        let circle_v = (a_min * 0.75f64.sqrt() * radius).sqrt();
+        if cos2 < 0.05 && !s_curve && turns > 1.0 {
+            prop_assert!(peak > 1.5 * circle_v, "peak {peak} mm/s, projected circle {circle_v} mm/s\n{text}");
+        }
+        setpoints::limits_hold(plan, &limits(), &cfg).map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
+    }
+}

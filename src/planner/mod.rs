@@ -1444,6 +1444,7 @@ fn arc_limits(
     let mut acc_budget_mm_s2 = f64::INFINITY;
     let mut jerk_budget_mm_s3 = f64::INFINITY;
     let mut acc_share = Vector3::zeros();
+    let mut jerk_share = Vector3::zeros();
     for i in 0..3 {
         let n_i = arc.normal[i].abs().min(1.0);
         let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
@@ -1452,22 +1453,42 @@ fn arc_limits(
             v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / speed_share);
         }
         acc_share[i] = (p_i + n_i * sin_a).min(1.0);
+        // The jerk of a helix also has a binormal part (torsion), whose share along the helix
+        // axis is cos α.
+        jerk_share[i] = (p_i + n_i * (sin_a + cos_a)).min(1.0);
         if acc_share[i] > 0.0 {
             acc_budget_mm_s2 = acc_budget_mm_s2.min(share * limits.max_acc_mm_s2[i] / acc_share[i]);
-            jerk_budget_mm_s3 = jerk_budget_mm_s3.min(share * cfg.max_jerk_mm_s3[i] / acc_share[i]);
+        }
+        if jerk_share[i] > 0.0 {
+            jerk_budget_mm_s3 =
+                jerk_budget_mm_s3.min(share * cfg.max_jerk_mm_s3[i] / jerk_share[i]);
         }
     }
+    // A helix of radius r and helix angle α (pitch c = r·tan α per radian) has the curvature
+    // κ = r/(r² + c²) = cos²α/r and the torsion τ = sin α·cos α/r: its path speed v moves the
+    // point round the axis at the angular speed v·cos α/r. Its limits therefore take κ, not
+    // the 1/r of its projected circle (for a plane arc, α = 0, they are the same):
+    // - centripetal: v²·κ ≤ A·√3/2;
+    // - chord: one period's step covers the angle v·T·cos α/r, and the chord of a helix bows
+    //   only radially (its axial part is linear in the angle on both), so the in-plane rule
+    //   holds for v·cos α: v ≤ 2·√(2rε − ε²)/(T·cos α);
+    // - jerk: at constant speed the acceleration v²κ·N turns with N, whose rate is
+    //   v·√(κ² + τ²) = v·cos α/r, so the jerk of following the curve is v³·κ·cos α/r =
+    //   v³·cos³α/r² ≤ J/4; the term of the path acceleration, 3·v·κ·a_t ≤ J/4, gives
+    //   a_t ≤ J·r/(12·v·cos²α).
     let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
+    let curvature_per_mm = cos_a * cos_a / radius_mm;
     let centripetal_mm_s2 = acc_budget_mm_s2 * (0.75f64).sqrt();
-    v_max_mm_s = v_max_mm_s.min((centripetal_mm_s2 * radius_mm).sqrt());
+    v_max_mm_s = v_max_mm_s.min((centripetal_mm_s2 / curvature_per_mm).sqrt());
     let eps = cfg.chord_tol_mm;
     if eps > 0.0 && eps < radius_mm {
-        v_max_mm_s =
-            v_max_mm_s.min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / cfg.period_s);
+        v_max_mm_s = v_max_mm_s
+            .min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / (cfg.period_s * cos_a));
     }
     if cfg.jerk_limited() {
-        // v³/r² ≤ J/4 (and 3 v a_t / r ≤ J/4 below).
-        v_max_mm_s = v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt());
+        // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ J/4 below).
+        v_max_mm_s =
+            v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt() / cos_a);
     }
     let v_limit_mm_s = v_max_mm_s;
     let v_max_mm_s = v_max_mm_s.min(feed_mm_s);
@@ -1475,7 +1496,7 @@ fn arc_limits(
     let mut jerk_mm_s3 = 0.5 * jerk_budget_mm_s3;
     if cfg.jerk_limited() {
         if v_max_mm_s > 0.0 {
-            acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 * radius_mm / (12.0 * v_max_mm_s));
+            acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 / (12.0 * v_max_mm_s * curvature_per_mm));
         }
     } else {
         jerk_mm_s3 = f64::INFINITY;
@@ -1486,7 +1507,7 @@ fn arc_limits(
         acc_mm_s2,
         jerk_mm_s3,
         axis_acc_mm_s2: acc_share * acc_budget_mm_s2,
-        axis_jerk_mm_s3: acc_share * jerk_budget_mm_s3,
+        axis_jerk_mm_s3: jerk_share * jerk_budget_mm_s3,
     }
 }
 
