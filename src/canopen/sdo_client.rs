@@ -157,6 +157,40 @@ fn addressed(cmd: u8, index: u16, sub: u8) -> [u8; 8] {
     f
 }
 
+/// Pushes one sub-block of a block transfer: the segments of `data` from `start`, at most
+/// `blksize`, numbered from 1, the last one of the data flagged (bit 7); the number pushed.
+pub(super) fn push_sub_block(data: &[u8], start: usize, blksize: u8, out: &mut Vec<[u8; 8]>) -> u8 {
+    let mut pos = start;
+    let mut count = 0u8;
+    loop {
+        count += 1;
+        let len = (data.len() - pos).min(7);
+        let last = pos + len >= data.len();
+        let mut f = [0u8; 8];
+        f[0] = count | if last { 0x80 } else { 0 };
+        f[1..1 + len].copy_from_slice(&data[pos..pos + len]);
+        out.push(f);
+        pos += len;
+        if last || count == blksize {
+            return count;
+        }
+    }
+}
+
+/// The end frame of a block transfer of `data` (client download end, `ccs = 6`, and server
+/// upload end, `scs = 6`, share it): `n`, the bytes of the last segment that held no data, and
+/// the CRC when both sides use one.
+pub(super) fn block_end_frame(data: &[u8], crc: bool) -> [u8; 8] {
+    let used = data.len() - 7 * (data.len().saturating_sub(1) / 7);
+    let n = if data.is_empty() { 7 } else { 7 - used };
+    let mut e = [0u8; 8];
+    e[0] = 0xC1 | ((n as u8) << 2);
+    if crc {
+        e[1..3].copy_from_slice(&crc16(data).to_le_bytes());
+    }
+    e
+}
+
 /// CRC-16/XMODEM (polynomial 0x1021, start 0), the block transfer's CRC (CiA 301 §7.2.4.3.16).
 pub fn crc16(data: &[u8]) -> u16 {
     let mut crc: u16 = 0;
@@ -364,14 +398,9 @@ impl SdoClient {
                     return self.done(Outcome::Uploaded(f[4..4 + n].to_vec()));
                 }
                 let size = s.then(|| u32::from_le_bytes([f[4], f[5], f[6], f[7]]) as usize);
-                if size.is_some_and(|n| n > self.max_len) {
-                    return self.fail(
-                        "the object is longer than the gateway accepts",
-                        AbortCode::OUT_OF_MEMORY,
-                        out,
-                    );
+                if let Err(step) = self.expect_size(size, out) {
+                    return step;
                 }
-                self.buf = Vec::with_capacity(size.unwrap_or(0).min(self.max_len));
                 out.push([0x60, 0, 0, 0, 0, 0, 0, 0]);
                 self.state = State::UploadSegment {
                     size,
@@ -439,13 +468,7 @@ impl SdoClient {
                 let pos = (start + 7 * usize::from(ackseq)).min(self.buf.len());
                 let all_sent = start + 7 * usize::from(count) >= self.buf.len();
                 if all_sent && ackseq == count {
-                    // End: n = bytes of the last segment that held no data.
-                    let used = self.buf.len() - 7 * (self.buf.len().saturating_sub(1) / 7);
-                    let n = if self.buf.is_empty() { 7 } else { 7 - used };
-                    let mut e = [0u8; 8];
-                    e[0] = 0xC1 | ((n as u8) << 2);
-                    e[1..3].copy_from_slice(&crc16(&self.buf).to_le_bytes());
-                    out.push(e);
+                    out.push(block_end_frame(&self.buf, true));
                     self.state = State::BlockDownloadEnd;
                     return Step::Pending;
                 }
@@ -474,14 +497,9 @@ impl SdoClient {
                 let crc = f[0] & 0x04 != 0;
                 let size = (f[0] & 0x02 != 0)
                     .then(|| u32::from_le_bytes([f[4], f[5], f[6], f[7]]) as usize);
-                if size.is_some_and(|n| n > self.max_len) {
-                    return self.fail(
-                        "the object is longer than the gateway accepts",
-                        AbortCode::OUT_OF_MEMORY,
-                        out,
-                    );
+                if let Err(step) = self.expect_size(size, out) {
+                    return step;
                 }
-                self.buf = Vec::with_capacity(size.unwrap_or(0).min(self.max_len));
                 out.push([0xA3, 0, 0, 0, 0, 0, 0, 0]);
                 self.state = State::BlockUploadSub {
                     size,
@@ -562,6 +580,20 @@ impl SdoClient {
         }
     }
 
+    /// An upload announced `size` bytes (if it said): refused beyond the client's bound, else
+    /// the buffer is made ready for them.
+    fn expect_size(&mut self, size: Option<usize>, out: &mut Vec<[u8; 8]>) -> Result<(), Step> {
+        if size.is_some_and(|n| n > self.max_len) {
+            return Err(self.fail(
+                "the object is longer than the gateway accepts",
+                AbortCode::OUT_OF_MEMORY,
+                out,
+            ));
+        }
+        self.buf = Vec::with_capacity(size.unwrap_or(0).min(self.max_len));
+        Ok(())
+    }
+
     fn send_download_segment(&mut self, pos: usize, toggle: bool, out: &mut Vec<[u8; 8]>) -> Step {
         let len = (self.buf.len() - pos).min(7);
         let last = pos + len >= self.buf.len();
@@ -578,22 +610,7 @@ impl SdoClient {
         if !(1..=127).contains(&blksize) {
             return self.fail("invalid block size", AbortCode(0x0504_0002), out);
         }
-        let total = self.buf.len();
-        let mut pos = start;
-        let mut count = 0u8;
-        loop {
-            count += 1;
-            let len = (total - pos).min(7);
-            let last = pos + len >= total;
-            let mut f = [0u8; 8];
-            f[0] = count | if last { 0x80 } else { 0 };
-            f[1..1 + len].copy_from_slice(&self.buf[pos..pos + len]);
-            out.push(f);
-            pos += len;
-            if last || count == blksize {
-                break;
-            }
-        }
+        let count = push_sub_block(&self.buf, start, blksize, out);
         self.state = State::BlockDownloadSub { start, count };
         Step::Pending
     }

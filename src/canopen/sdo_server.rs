@@ -11,7 +11,7 @@
 //! pushes them to `out`.
 
 use super::abort::AbortCode;
-use super::sdo_client::crc16;
+use super::sdo_client::{block_end_frame, crc16, push_sub_block as sub_block};
 
 /// What the server serves.
 pub trait SdoTarget {
@@ -109,23 +109,17 @@ fn addressed(cs: u8, index: u16, sub: u8) -> [u8; 8] {
     r
 }
 
-/// Pushes one sub-block of `data` from `start`, at most `blksize` segments; the number sent.
-fn sub_block(data: &[u8], start: usize, blksize: u8, out: &mut Vec<[u8; 8]>) -> u8 {
-    let mut pos = start;
-    let mut count = 0u8;
-    loop {
-        count += 1;
-        let len = (data.len() - pos).min(7);
-        let last = pos + len >= data.len();
-        let mut f = [0u8; 8];
-        f[0] = count | if last { 0x80 } else { 0 };
-        f[1..1 + len].copy_from_slice(&data[pos..pos + len]);
-        out.push(f);
-        pos += len;
-        if last || count == blksize {
-            return count;
-        }
+/// Whether a segmented or block download of `size` bytes (when indicated) may start.
+fn may_start_download(
+    target: &mut impl SdoTarget,
+    index: u16,
+    sub: u8,
+    size: Option<usize>,
+) -> Result<(), AbortCode> {
+    if size.is_some_and(|n| n > MAX_LEN) {
+        return Err(AbortCode::LENGTH_TOO_HIGH);
     }
+    target.sdo_check_write(index, sub, size)
 }
 
 impl SdoServer {
@@ -202,10 +196,7 @@ impl SdoServer {
             });
         }
         let size = s.then(|| u32::from_le_bytes([req[4], req[5], req[6], req[7]]) as usize);
-        if size.is_some_and(|n| n > MAX_LEN) {
-            return Some(abort(index, sub, AbortCode::LENGTH_TOO_HIGH));
-        }
-        if let Err(code) = target.sdo_check_write(index, sub, size) {
+        if let Err(code) = may_start_download(target, index, sub, size) {
             return Some(abort(index, sub, code));
         }
         self.transfer = Transfer::Download {
@@ -396,15 +387,8 @@ impl SdoServer {
                 }
                 let sent_all = start + 7 * usize::from(count) >= data.len();
                 if sent_all && ackseq == count {
-                    let used = data.len() - 7 * (data.len().saturating_sub(1) / 7);
-                    let n = if data.is_empty() { 7 } else { 7 - used };
-                    let mut e = [0u8; 8];
-                    e[0] = 0xC1 | ((n as u8) << 2);
-                    if crc {
-                        e[1..3].copy_from_slice(&crc16(&data).to_le_bytes());
-                    }
                     self.transfer = Transfer::BlockUploadEnd;
-                    return Some(e);
+                    return Some(block_end_frame(&data, crc));
                 }
                 let start = start + 7 * usize::from(ackseq);
                 let count = sub_block(&data, start, blksize, out);
@@ -437,10 +421,7 @@ impl SdoServer {
             (0, _) => {
                 let size = (req[0] & 0x02 != 0)
                     .then(|| u32::from_le_bytes([req[4], req[5], req[6], req[7]]) as usize);
-                if size.is_some_and(|n| n > MAX_LEN) {
-                    return Some(abort(index, sub, AbortCode::LENGTH_TOO_HIGH));
-                }
-                if let Err(code) = target.sdo_check_write(index, sub, size) {
+                if let Err(code) = may_start_download(target, index, sub, size) {
                     return Some(abort(index, sub, code));
                 }
                 self.transfer = Transfer::BlockDownload {
