@@ -265,6 +265,19 @@ impl fmt::Display for Place<'_> {
     }
 }
 
+/// `'F' is followed by ` after a word's letter; `found ` inside an expression.
+struct FollowedBy(char);
+
+impl fmt::Display for FollowedBy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_ascii_alphabetic() {
+            write!(f, "'{}' is followed by ", self.0)
+        } else {
+            f.write_str("found ")
+        }
+    }
+}
+
 /// ` after line N` when lines were read, else nothing.
 struct AfterLine(usize);
 
@@ -471,6 +484,35 @@ pub enum ErrorKind {
     /// A program number with other words on its line.
     #[error("a program number (O-word) must be alone on its line")]
     ProgramNumberNotAlone,
+    /// An `O` right after the digits of a word's value (`X2O`): most likely the letter O typed
+    /// for a zero, since an O-word could not be there.
+    #[error("the letter O in '{written}' looks typed for a zero: did you mean '{suggested}'?")]
+    LetterOForZero {
+        /// The word as written, e.g. `X2O`, `X1O5`.
+        written: String,
+        /// The word with its O's as zeros, e.g. `X20`.
+        suggested: String,
+    },
+    /// Letters where a word's value should be that name no function: `FOO` is `F`, then `OO`.
+    #[error("{}'{text}', which is neither a number nor a function", FollowedBy(*letter))]
+    NotANumber {
+        /// The word's letter (`[`, `#` or `=` inside an expression, a parameter or an
+        /// assignment).
+        letter: char,
+        /// The letters, as written.
+        text: String,
+    },
+    /// A function name with no `[` after it, where a word's value should be: `X SIN 30`.
+    #[error(
+        "{}the function name {name}, which needs its argument in brackets: {name}[...]",
+        FollowedBy(*letter)
+    )]
+    FunctionWithoutBracket {
+        /// The word's letter (as for [`ErrorKind::NotANumber`]).
+        letter: char,
+        /// The function, upper case, e.g. `SIN`.
+        name: String,
+    },
     /// A line longer than [`MAX_LINE_BYTES`].
     #[error("line longer than {max_bytes} bytes")]
     LineTooLong {
