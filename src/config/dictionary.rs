@@ -702,9 +702,9 @@ default = 3
         let e = load("[[object]]\nindex = 0x1800\nname = \"TPDO1\"\n[[object.sub]]\nsub = 1\nname = \"COB-ID\"\ntype = \"u32\"\naccess = \"rw\"\n")
             .unwrap_err()
             .to_string();
-        assert!(
-            e.contains(": [object 0x1800 sub 1] missing field `default`"),
-            "{e}"
+        assert_eq!(
+            e,
+            "d.toml: line 44, column 1: [object 0x1800 sub 1] missing field `default`"
         );
     }
 }
