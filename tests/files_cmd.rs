@@ -338,3 +338,50 @@ fn optimize_reads_programs_as_plan_does() {
     assert!(stderr(&plan).contains(&where_), "{}", stderr(&plan));
     assert!(stderr(&out).contains(&where_), "{}", stderr(&out));
 }
+
+#[test]
+fn a_program_that_cannot_be_read_is_named_without_a_line_or_column() {
+    // A missing file: the path and the system's reason, no `:0:0`.
+    for command in ["plan", "run"] {
+        let out = run_within(
+            {
+                let mut c = canmotion();
+                c.args([command, "/nonexistent.ngc"]);
+                c
+            },
+            Duration::from_secs(30),
+        );
+        assert!(!out.status.success());
+        let err = stderr(&out);
+        assert!(
+            err.contains("/nonexistent.ngc: cannot read: No such file or directory"),
+            "{command}: {err}"
+        );
+        assert!(!err.contains(":0"), "{command}: {err}");
+    }
+    // A standard input that cannot be read (a directory): its name and the reason, no line.
+    for command in ["plan", "run"] {
+        let mut cmd = canmotion();
+        cmd.args([command, "-"]);
+        let mut child = cmd
+            .stdin(std::fs::File::open("/").unwrap())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while child.try_wait().unwrap().is_none() {
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                panic!("{command} - still running after 30 s");
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let out = child.wait_with_output().unwrap();
+        assert!(!out.status.success());
+        let err = stderr(&out);
+        assert!(err.contains("<stdin>: cannot read"), "{command}: {err}");
+        assert!(err.contains("Is a directory"), "{command}: {err}");
+        assert!(!err.contains("<stdin>:1"), "{command}: {err}");
+    }
+}

@@ -701,4 +701,22 @@ default = 3
             "{e}"
         );
     }
+
+    #[test]
+    fn schema_errors_name_the_object() {
+        let e = load("[[object]]\nindex = 0x6040\nname = \"CW\"\ntype = \"u16\"\naccess = \"rw\"\ndefault = 0\ncolour = 1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(": [object 0x6040] unknown field `colour`"),
+            "{e}"
+        );
+        let e = load("[[object]]\nindex = 0x1800\nname = \"TPDO1\"\n[[object.sub]]\nsub = 1\nname = \"COB-ID\"\ntype = \"u32\"\naccess = \"rw\"\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "d.toml: line 44, column 1: [object 0x1800 sub 1] missing field `default`"
+        );
+    }
 }

@@ -1771,4 +1771,46 @@ mod tests {
             "{e}"
         );
     }
+
+    #[test]
+    fn schema_errors_name_the_table() {
+        // An unknown key in the second [[axis]] entry: the entry by its axis name.
+        let y = "name = \"Y\"\nnode = 2";
+        let text = DEMO_MACHINE.replacen(y, &format!("{y}\ncolour = \"red\""), 1);
+        let e = parse(&text).unwrap_err();
+        match &e {
+            ConfigError::Parse {
+                table,
+                line: Some(_),
+                ..
+            } => assert_eq!(table.as_deref(), Some("axis Y")),
+            other => panic!("{other:?}"),
+        }
+        let msg = e.to_string();
+        assert!(msg.starts_with("six.toml: line "), "{msg}");
+        assert!(msg.contains(": [axis Y] unknown field `colour`"), "{msg}");
+        // In [bus], after the axes' inline tables and multi-line arrays.
+        let text = DEMO_MACHINE.replacen("bitrate = 1000000", "bitrate = 1000000\nspeed = 1", 1);
+        let msg = parse(&text).unwrap_err().to_string();
+        assert!(msg.contains(": [bus] unknown field `speed`"), "{msg}");
+        // A wrong type inside an axis's inline table, and a missing key (the span is the header).
+        let text = DEMO_MACHINE.replacen(
+            "number = 1, transmission = 1",
+            "number = \"one\", transmission = 1",
+            1,
+        );
+        let msg = parse(&text).unwrap_err().to_string();
+        assert!(msg.contains(": [axis X] invalid type"), "{msg}");
+        let text = DEMO_MACHINE.replacen("gateway_producer_ms = 100", "", 1);
+        let msg = parse(&text).unwrap_err().to_string();
+        assert!(
+            msg.contains(": [heartbeat] missing field `gateway_producer_ms`"),
+            "{msg}"
+        );
+        // An unknown table is a key of the top level: no table named.
+        let msg = parse(&format!("{DEMO_MACHINE}\n[spindle]\nrpm = 1\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("column 2: unknown field `spindle`"), "{msg}");
+    }
 }

@@ -246,7 +246,7 @@ pub(super) fn real_value(
             sign * real_value(chars, i, params, depth + 1, letter)?
         }
         Some(c) if c.is_ascii_digit() || matches!(c, '+' | '-' | '.') => number(chars, i, letter)?,
-        Some(c) if c.is_ascii_alphabetic() => function(chars, i, params, depth + 1)?,
+        Some(c) if c.is_ascii_alphabetic() => function(chars, i, params, depth + 1, letter)?,
         _ => return Err((col, ErrorKind::ExpectedNumber { letter })),
     };
     if !value.is_finite() {
@@ -451,12 +451,19 @@ fn apply(op: Op, a: f64, b: f64) -> Result<f64, ErrorKind> {
     }
 }
 
-/// A function call at `*i` (on its name).
+/// The functions of [`function`], by name.
+const FUNCTIONS: [&str; 14] = [
+    "ABS", "ACOS", "ASIN", "ATAN", "COS", "SIN", "TAN", "EXP", "FIX", "FUP", "ROUND", "LN", "SQRT",
+    "EXISTS",
+];
+
+/// A function call at `*i` (on its name), as the value of `letter`'s word.
 fn function(
     chars: &[char],
     i: &mut usize,
     params: &Params,
     depth: usize,
+    letter: char,
 ) -> Result<f64, ExprError> {
     let col = *i + 1;
     let start = *i;
@@ -469,9 +476,21 @@ fn function(
         .iter()
         .map(|c| c.to_ascii_uppercase())
         .collect();
+    let end = *i;
     skip_blanks(chars, i);
     if chars.get(*i) != Some(&'[') {
-        return Err(syntax(col, "'[' after a function name"));
+        // Say what the letters were taken for: `FOO` is F with the value `OO`.
+        return Err((
+            col,
+            if FUNCTIONS.contains(&name.as_str()) {
+                ErrorKind::FunctionWithoutBracket { letter, name }
+            } else {
+                ErrorKind::NotANumber {
+                    letter,
+                    text: chars.get(start..end).unwrap_or_default().iter().collect(),
+                }
+            },
+        ));
     }
     if name == "EXISTS" {
         *i += 1;
@@ -604,6 +623,15 @@ mod tests {
             e("FOO[1]").1,
             ErrorKind::UnknownFunction { name: "FOO".into() }
         );
+        // Every listed function is one (so the messages about them hold).
+        for name in FUNCTIONS {
+            let text = match name {
+                "ATAN" => "ATAN[1]/[1]".to_string(),
+                "EXISTS" => "EXISTS[#<a>]".to_string(),
+                _ => format!("{name}[1]"),
+            };
+            assert!(eval_with(&text, &Params::default()).is_ok(), "{text}");
+        }
         let deep = format!("{}1{}", "[".repeat(500), "]".repeat(500));
         assert_eq!(
             e(&deep).1,

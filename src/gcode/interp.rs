@@ -1382,9 +1382,10 @@ impl<R: BufRead> Interpreter<R> {
                 Err(e) => {
                     return Err(Error {
                         file: self.file.clone(),
-                        line: self.line + 1,
+                        line: 0,
                         col: 0,
                         kind: ErrorKind::Read {
+                            lines_read: self.line,
                             message: e.to_string(),
                         },
                     });

@@ -282,7 +282,11 @@ impl Scanner {
                         'O' => {
                             let only_n = self.words.iter().all(|w| w.letter == 'N');
                             if !only_n || !self.assignments.is_empty() {
-                                return Err((col, ErrorKind::ProgramNumberNotAlone));
+                                return Err((
+                                    col,
+                                    o_for_zero(chars, i, &self.words, &self.assignments)
+                                        .unwrap_or(ErrorKind::ProgramNumberNotAlone),
+                                ));
                             }
                             let control = scan_o_word(chars, i, params)?;
                             self.words.clear();
@@ -323,6 +327,45 @@ impl Scanner {
             LineKind::Words
         })
     }
+}
+
+/// `X2O`: an `O` at `o` right after the digits of the line's last word, where no O-word may
+/// be, is most likely the letter typed for a zero. From that word's letter, the run of digits,
+/// points and O's is the word as written; with its O's as zeros, what was meant. `None` after
+/// an assignment (the digits may be its value).
+fn o_for_zero(
+    chars: &[char],
+    o: usize,
+    words: &[Word],
+    assignments: &[(ParamRef, f64)],
+) -> Option<ErrorKind> {
+    if !assignments.is_empty() {
+        return None;
+    }
+    let last = words.last()?;
+    if !o
+        .checked_sub(1)
+        .and_then(|k| chars.get(k))
+        .is_some_and(char::is_ascii_digit)
+    {
+        return None;
+    }
+    let start = last.col.checked_sub(1)?;
+    let mut end = o + 1;
+    while chars
+        .get(end)
+        .is_some_and(|c| c.is_ascii_digit() || matches!(c, '.' | 'o' | 'O'))
+    {
+        end += 1;
+    }
+    let written: String = chars.get(start..end)?.iter().collect();
+    let mut suggested = String::with_capacity(written.len());
+    suggested.push(*chars.get(start)?);
+    suggested.extend(written.chars().skip(1).map(|c| match c {
+        'o' | 'O' => '0',
+        c => c,
+    }));
+    Some(ErrorKind::LetterOForZero { written, suggested })
 }
 
 /// The label and keyword of an O-word line, read without evaluating anything (to find the end
@@ -631,6 +674,87 @@ mod tests {
                 "{line}"
             );
         }
+    }
+
+    #[test]
+    fn the_letter_o_typed_for_a_zero_is_named() {
+        // `X2O`: the O right after the digit, pointing at the O.
+        assert_eq!(
+            scan("G1 X2O F100").unwrap_err(),
+            (
+                6,
+                ErrorKind::LetterOForZero {
+                    written: "X2O".into(),
+                    suggested: "X20".into()
+                }
+            )
+        );
+        let e = scan("G1 x1.5o0o Y2").unwrap_err();
+        assert_eq!(
+            e.1,
+            ErrorKind::LetterOForZero {
+                written: "x1.5o0o".into(),
+                suggested: "x1.5000".into()
+            }
+        );
+        assert_eq!(
+            e.1.to_string(),
+            "the letter O in 'x1.5o0o' looks typed for a zero: did you mean 'x1.5000'?"
+        );
+        assert_eq!(
+            scan("G0 X1O5").unwrap_err().1,
+            ErrorKind::LetterOForZero {
+                written: "X1O5".into(),
+                suggested: "X105".into()
+            }
+        );
+        // An O-word after a blank or after an assignment's value is still a misplaced program
+        // number; a control line after N stays valid.
+        assert_eq!(
+            scan("#1=2O").unwrap_err(),
+            (5, ErrorKind::ProgramNumberNotAlone)
+        );
+        assert_eq!(
+            scan("G0 X2 O12").unwrap_err(),
+            (7, ErrorKind::ProgramNumberNotAlone)
+        );
+        assert_eq!(scan("N10O1234"), Ok(LineKind::ProgramNumber));
+    }
+
+    #[test]
+    fn letters_after_a_word_letter_say_what_they_were_taken_for() {
+        // `FOO`: F, then `OO` where its value should be.
+        let e = scan("G1 X1 FOO").unwrap_err();
+        assert_eq!(
+            e,
+            (
+                8,
+                ErrorKind::NotANumber {
+                    letter: 'F',
+                    text: "OO".into()
+                }
+            )
+        );
+        assert_eq!(
+            e.1.to_string(),
+            "'F' is followed by 'OO', which is neither a number nor a function"
+        );
+        // A function name without its brackets.
+        let e = scan("G1 X sin 30").unwrap_err();
+        assert_eq!(
+            e,
+            (
+                6,
+                ErrorKind::FunctionWithoutBracket {
+                    letter: 'X',
+                    name: "SIN".into()
+                }
+            )
+        );
+        assert_eq!(
+            e.1.to_string(),
+            "'X' is followed by the function name SIN, which needs its argument in brackets: SIN[...]"
+        );
     }
 
     #[test]

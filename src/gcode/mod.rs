@@ -232,18 +232,62 @@ pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Progra
     Program::collect(Interpreter::new(text.as_bytes(), file, setup))
 }
 
-/// An error: where it is and what is wrong. Displays as `file:line:col: message`.
+/// An error: where it is and what is wrong. Displays as `file:line:col: message`, or
+/// `file:line: message` with no column, or `file: message` when it concerns no line (a read
+/// error, a bad setup).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}:{line}:{col}: {kind}")]
+#[error("{}{kind}", Place { file, line: *line, col: *col })]
 pub struct Error {
     /// Name of the source.
     pub file: String,
-    /// 1-based line (0 for errors that concern no line, such as a bad setup).
+    /// 1-based line (0 for errors that concern no line: a bad setup, a read error).
     pub line: usize,
     /// 1-based column in characters (0 when there is no line).
     pub col: usize,
     /// What is wrong.
     pub kind: ErrorKind,
+}
+
+/// `file:line:col: `, without the parts that are 0 (unknown).
+struct Place<'a> {
+    file: &'a str,
+    line: usize,
+    col: usize,
+}
+
+impl fmt::Display for Place<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match (self.line, self.col) {
+            (0, _) => write!(f, "{}: ", self.file),
+            (line, 0) => write!(f, "{}:{line}: ", self.file),
+            (line, col) => write!(f, "{}:{line}:{col}: ", self.file),
+        }
+    }
+}
+
+/// `'F' is followed by ` after a word's letter; `found ` inside an expression.
+struct FollowedBy(char);
+
+impl fmt::Display for FollowedBy {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_ascii_alphabetic() {
+            write!(f, "'{}' is followed by ", self.0)
+        } else {
+            f.write_str("found ")
+        }
+    }
+}
+
+/// ` after line N` when lines were read, else nothing.
+struct AfterLine(usize);
+
+impl fmt::Display for AfterLine {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.0 {
+            0 => Ok(()),
+            n => write!(f, " after line {n}"),
+        }
+    }
 }
 
 impl Error {
@@ -440,15 +484,46 @@ pub enum ErrorKind {
     /// A program number with other words on its line.
     #[error("a program number (O-word) must be alone on its line")]
     ProgramNumberNotAlone,
+    /// An `O` right after the digits of a word's value (`X2O`): most likely the letter O typed
+    /// for a zero, since an O-word could not be there.
+    #[error("the letter O in '{written}' looks typed for a zero: did you mean '{suggested}'?")]
+    LetterOForZero {
+        /// The word as written, e.g. `X2O`, `X1O5`.
+        written: String,
+        /// The word with its O's as zeros, e.g. `X20`.
+        suggested: String,
+    },
+    /// Letters where a word's value should be that name no function: `FOO` is `F`, then `OO`.
+    #[error("{}'{text}', which is neither a number nor a function", FollowedBy(*letter))]
+    NotANumber {
+        /// The word's letter (`[`, `#` or `=` inside an expression, a parameter or an
+        /// assignment).
+        letter: char,
+        /// The letters, as written.
+        text: String,
+    },
+    /// A function name with no `[` after it, where a word's value should be: `X SIN 30`.
+    #[error(
+        "{}the function name {name}, which needs its argument in brackets: {name}[...]",
+        FollowedBy(*letter)
+    )]
+    FunctionWithoutBracket {
+        /// The word's letter (as for [`ErrorKind::NotANumber`]).
+        letter: char,
+        /// The function, upper case, e.g. `SIN`.
+        name: String,
+    },
     /// A line longer than [`MAX_LINE_BYTES`].
     #[error("line longer than {max_bytes} bytes")]
     LineTooLong {
         /// The limit.
         max_bytes: usize,
     },
-    /// The input could not be read.
-    #[error("cannot read the program: {message}")]
+    /// The input could not be read (the error has no line or column: line 0).
+    #[error("cannot read the program{}: {message}", AfterLine(*lines_read))]
     Read {
+        /// How many lines were read whole before the error.
+        lines_read: usize,
         /// The I/O error.
         message: String,
     },
@@ -706,6 +781,54 @@ mod tests {
         assert_eq!(items, vec![Ok(Item::End(ProgramEnd::EndOfText))]);
     }
 
+    /// Fails every read after handing out `text`.
+    struct FailsAfter<'a>(&'a [u8]);
+
+    impl std::io::Read for FailsAfter<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.0.is_empty() {
+                return Err(std::io::Error::other("disk on fire"));
+            }
+            let n = self.0.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            self.0 = &self.0[n..];
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn errors_with_no_place_show_none() {
+        // A read error has no line or column: the lines read before it are said instead.
+        let read = |text: &'static str| {
+            let reader = std::io::BufReader::new(FailsAfter(text.as_bytes()));
+            let items: Vec<_> =
+                Interpreter::new(reader, "p.ngc", Setup::new(v(0.0, 0.0, 0.0))).collect();
+            items.into_iter().find_map(Result::err).unwrap()
+        };
+        let e = read("");
+        assert_eq!(
+            e.kind,
+            ErrorKind::Read {
+                lines_read: 0,
+                message: "disk on fire".into()
+            }
+        );
+        assert_eq!((e.line, e.col), (0, 0));
+        assert_eq!(
+            e.to_string(),
+            "p.ngc: cannot read the program: disk on fire"
+        );
+        let e = read("G0 X1\nG0 X2\n");
+        assert_eq!(
+            e.to_string(),
+            "p.ngc: cannot read the program after line 2: disk on fire"
+        );
+        // A bad setup concerns no line either.
+        let e = parse_program("G0 X1", "p.ngc", v(f64::NAN, 0.0, 0.0)).unwrap_err();
+        assert_eq!(e.line, 0);
+        assert!(e.to_string().starts_with("p.ngc: "), "{e}");
+    }
+
     #[test]
     fn percent_markers() {
         let p = parse_program("%\nG0 X1\n%\nG0 X2", "p", Vector3::zeros()).unwrap();
@@ -805,7 +928,7 @@ mod tests {
     #[test]
     fn bad_setups_are_reported_at_line_zero() {
         let e = parse_program("G0 X1", "p", v(f64::NAN, 0.0, 0.0)).unwrap_err();
-        assert_eq!(e.to_string(), "p:0:0: start position is not finite");
+        assert_eq!(e.to_string(), "p: start position is not finite");
         let mut s = Setup::new(Vector3::zeros());
         s.arc_tolerance_mm = 0.0;
         let e = parse_program_with("G0 X1", "p", s).unwrap_err();
