@@ -202,6 +202,8 @@ pub struct CyclicMaster {
     override_wanted: (f64, bool),
     /// A stop on the path was asked for ([`Self::stop_on_path`]): why, once the hold is done.
     stop_asked: Option<String>,
+    /// The run ended in a fault stop (see [`Self::fault_stop`]).
+    fault_stop: bool,
 }
 
 impl CyclicMaster {
@@ -244,6 +246,7 @@ impl CyclicMaster {
             streaming_cycles: 0,
             override_wanted: (1.0, false),
             stop_asked: None,
+            fault_stop: false,
             axes,
         }
     }
@@ -263,6 +266,15 @@ impl CyclicMaster {
     /// Why the run failed, once it has.
     pub fn failure(&self) -> Option<&str> {
         self.failure.as_deref()
+    }
+    /// Whether the run stopped on a fault: a drive fault or following error (statusword bits 3,
+    /// 13, a fault EMCY), missing process data, a lost heartbeat, a boot-up, the bus, or a stop
+    /// signal escalated to the fault stop ([`Self::alarm`], [`Self::bus_lost`]). Not an orderly
+    /// end: the program's end, a stop on the path, an enable that timed out. After a fault stop
+    /// the drives keep consuming the gateway's heartbeat, so that they still stop by themselves
+    /// should the gateway die next.
+    pub fn fault_stop(&self) -> bool {
+        self.fault_stop
     }
     /// The positions at which the drives were armed (the start of the motion), once armed.
     pub fn armed_mm(&self) -> Option<Vector3<f64>> {
@@ -316,6 +328,7 @@ impl CyclicMaster {
         }
         self.reset[i] = true;
         self.frozen[i] = true;
+        self.fault_stop = true;
         let a = &self.axes[i];
         let completed = match self.completed_line {
             Some(l) => format!("last completed program line {l}"),
@@ -409,6 +422,7 @@ impl CyclicMaster {
     /// Raise an alarm on an axis (by node id), from outside the cyclic data: an EMCY, a lost
     /// heartbeat, a boot-up. The axis is frozen and the group stops.
     pub fn alarm(&mut self, node: u8, message: String) {
+        self.fault_stop = true;
         if let Some(i) = self.axes.iter().position(|a| a.node == node) {
             self.frozen[i] = true;
         }
@@ -442,6 +456,7 @@ impl CyclicMaster {
     /// controlled stop is possible. Every setpoint is held where it is, and the run ends now
     /// ([`Phase::Done`]: no more frames).
     pub fn bus_lost(&mut self, message: String) {
+        self.fault_stop = true;
         self.frozen.iter_mut().for_each(|f| *f = true);
         self.fail(message);
         self.set_phase(Phase::Done);
@@ -532,6 +547,7 @@ impl CyclicMaster {
                         continue;
                     }
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
                         "following error (statusword bit 13)"
@@ -550,6 +566,7 @@ impl CyclicMaster {
                         && !self.frozen[i] =>
                 {
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let msg = format!(
                         "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
@@ -565,6 +582,7 @@ impl CyclicMaster {
                     && !self.frozen[i] =>
                 {
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let msg = format!(
                         "axis {} (node {}): no process data (TPDO 0x{:03X}) since start",
@@ -602,6 +620,7 @@ impl CyclicMaster {
                             Action::Done => {}
                             Action::Next(_) => all = false,
                             Action::Fault => {
+                                self.fault_stop = true;
                                 let a = &self.axes[i];
                                 let msg = format!(
                                     "axis {} (node {}): fault reset did not clear the fault",

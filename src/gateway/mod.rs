@@ -234,6 +234,19 @@ pub enum GatewayError {
         /// The first signal.
         signal: rt::signal::Signal,
     },
+    /// The run ended in order, but a drive could not be told to stop consuming the gateway's
+    /// heartbeat (0x1016): it will report the heartbeat's loss once the gateway exits.
+    #[error(
+        "the run ended in order, but axis {axis} (node {node}) could not be told to stop watching the gateway's heartbeat (0x1016:1 = 0): {source}; it will report a heartbeat loss (EMCY 0x8130, a fault with 0x6007 = 1) once the gateway has exited"
+    )]
+    HeartbeatStillConsumed {
+        /// Axis.
+        axis: String,
+        /// Node.
+        node: u8,
+        /// The SDO error.
+        source: Box<GatewayError>,
+    },
     /// A resume (`run --resume`) was refused before any motion: changed program, another
     /// machine, an axis too far from the stop point, no confirmation (see [`resume`]).
     #[error("{0}")]
@@ -819,10 +832,22 @@ async fn run_async(
                 source,
             })?;
     }
+    // The orderly end: the drives are disabled and Pre-operational (the cyclic thread's end);
+    // before the gateway's heartbeat stops, they stop consuming it. After a fault stop they
+    // keep consuming it: should the gateway die now, each drive still stops by itself.
+    let disarmed = if master.fault_stop() || port_err.is_some() {
+        Ok(())
+    } else {
+        startup::stop_consuming_heartbeat(machine, &io).await
+    };
+    io.stop_heartbeat();
     plan_result?;
     // A failure of the motion first: when the bus failed during it, the failure says so, with
     // what the motion did about it.
     if let Some(f) = master.failure() {
+        if let Err(e) = &disarmed {
+            tracing::warn!("{e}");
+        }
         return Err(GatewayError::Motion(Box::new(MotionFailure {
             message: f.to_string(),
             detected_cycle: master.failure_cycle,
@@ -839,6 +864,7 @@ async fn run_async(
     if let Some(e) = port_err {
         return Err(GatewayError::Bus(e));
     }
+    disarmed?;
     let final_counts = master.final_counts();
     Ok(Summary {
         program_s: master.motion().map_or(0.0, |m| m.duration_s()),
