@@ -452,3 +452,70 @@ fn a_clean_run_leaves_no_drive_watching_the_gateways_heartbeat() {
         }
     }
 }
+
+#[test]
+fn reset_reports_an_emcy_without_the_fault_bit_as_information() {
+    let _one = one_at_a_time();
+    // Node 2 faults on a following error; 0x6007 = 0: a lost heartbeat is reported (EMCY
+    // 0x8130) without a fault. After the fault stop the drives keep consuming the gateway's
+    // heartbeat, so node 2's 0x8130 arrives some 500 ms after the run, inside a watch window
+    // that starts right after it.
+    let m = machine(|t| t);
+    let bus = Bus::InProc(InProcBus::new());
+    let dict = drive_dict(|t| {
+        t.replace(
+            "default = 1                  # 0 no action",
+            "default = 0                  # 0 no action",
+        )
+    });
+    let def = dict.sub(0x6007, 0).unwrap();
+    assert_eq!(
+        dict.default_for(def, 2),
+        canopen_rs::Value::Integer16(0),
+        "0x6007's default"
+    );
+    let drives = m
+        .axes
+        .iter()
+        .map(|a| {
+            let d = SimDrive::new(dict.clone(), a.node);
+            if a.node == 2 {
+                d.with_inject(Inject::FollowingError { after: ms(300) })
+            } else {
+                d
+            }
+        })
+        .collect();
+    let _sims = runner::spawn(&bus, drives).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = canmotion::gateway::run(
+        &m,
+        &bus,
+        &RunOptions {
+            program_name: "fault.ngc".into(),
+            program_text: LONG.into(),
+            log: Some(dir.path().join("fault.csv")),
+            simulate: false,
+        },
+    );
+    assert!(matches!(out, Err(GatewayError::Motion(_))), "{out:?}");
+    let opts = reset::ResetOptions {
+        observe: Duration::from_millis(2000),
+        ..Default::default()
+    };
+    let reports = reset::reset(&bus, &[2], &opts).unwrap();
+    let rep = &reports[0];
+    assert!(matches!(rep.outcome, ResetOutcome::Cleared { .. }), "{rep}");
+    assert!(rep.ok(), "{rep}");
+    assert_eq!(
+        rep.info_emcys.iter().map(|e| e.0).collect::<Vec<_>>(),
+        [0x8130],
+        "{rep}"
+    );
+    assert!(
+        rep.to_string().contains(
+            "node 2: EMCY 0x8130 (life guard or heartbeat error) after the fault cleared, with no fault in the statusword"
+        ),
+        "{rep}"
+    );
+}
