@@ -133,3 +133,32 @@ fn lost_rpdos_do_not_stop_a_run() {
         assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
     }
 }
+
+#[test]
+fn a_warning_emcy_is_counted_and_the_run_goes_on() {
+    // EMCY 0x4210 with statusword bit 7 (warning) and not bit 3 (fault), mid-motion.
+    let o = run(
+        machine(|t| t),
+        &[(
+            1,
+            Inject::Warning {
+                code: 0x4210,
+                after: ms(300),
+            },
+        )],
+        LONG,
+    );
+    let summary = o.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+    let w = summary
+        .warnings
+        .iter()
+        .find(|w| w.code == 0x4210)
+        .unwrap_or_else(|| panic!("no warning 0x4210 counted: {summary}"));
+    assert_eq!((w.node, w.count), (1, 1), "{summary}");
+    assert!(
+        summary
+            .to_string()
+            .contains("axis X (node 1): EMCY 0x4210 device temperature ×1"),
+        "{summary}"
+    );
+}

@@ -276,6 +276,15 @@ impl CyclicMaster {
     pub fn fault_stop(&self) -> bool {
         self.fault_stop
     }
+    /// The latest feedback (statusword, position, the cycle it arrived in) of axis `i`, machine
+    /// order, once one has arrived.
+    pub fn feedback(&self, i: usize) -> Option<Feedback> {
+        self.fb.get(i).copied().flatten()
+    }
+    /// The number of the last cycle run (0 before the first).
+    pub fn cycle_number(&self) -> u64 {
+        self.cycle
+    }
     /// The positions at which the drives were armed (the start of the motion), once armed.
     pub fn armed_mm(&self) -> Option<Vector3<f64>> {
         self.armed_mm

@@ -380,7 +380,8 @@ pub struct Summary {
     pub bus: cyclic_bus::BusReport,
 }
 
-/// An EMCY after which the drive kept running (see [`emcy::is_warning`]), counted.
+/// An EMCY after which the drive kept running (its statusword without the fault bit 3: a warning,
+/// bit 7, or a communication warning), counted.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Warning {
     /// Axis letter.
@@ -954,6 +955,7 @@ fn cyclic_thread(
     let mut armed_tx = Some(armed_tx);
     let mut dropped = 0u64;
     let mut seen_emcys = vec![0usize; machine.axes.len()];
+    let mut pending_emcys: Vec<PendingEmcy> = Vec::with_capacity(4 * machine.axes.len());
     let mut bootups_at_start: Vec<u32> = {
         let g = health.lock().unwrap();
         machine
@@ -1008,38 +1010,17 @@ fn cyclic_thread(
         if let Ok(g) = health.try_lock() {
             for (i, a) in machine.axes.iter().enumerate() {
                 let Some(h) = g.get(&a.node) else { continue };
+                // The statusword decides what an EMCY was (CiA 402): with the fault bit (3) a
+                // fault, which stops the group; without it a warning (bit 7, or a
+                // communication warning), counted in the summary. The EMCY can arrive before
+                // the TPDO that carries the fault bit: one without it waits for a TPDO
+                // received after it.
                 for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
-                    if emcy::is_warning(e.code) {
-                        let cycle = ticker.timing.cycles;
-                        match warnings
-                            .iter_mut()
-                            .find(|w: &&mut Warning| w.node == a.node && w.code == e.code)
-                        {
-                            Some(w) => {
-                                w.count += 1;
-                                w.last_cycle = cycle;
-                            }
-                            None => warnings.push(Warning {
-                                axis: a.name.clone(),
-                                node: a.node,
-                                code: e.code,
-                                count: 1,
-                                first_cycle: cycle,
-                                last_cycle: cycle,
-                            }),
-                        }
-                    } else {
-                        master.alarm(
-                            a.node,
-                            format!(
-                                "axis {} (node {}): EMCY 0x{:04X} {}",
-                                a.name,
-                                a.node,
-                                e.code,
-                                emcy::meaning(e.code)
-                            ),
-                        );
-                    }
+                    pending_emcys.push(PendingEmcy {
+                        axis: i,
+                        code: e.code,
+                        seen_cycle: master.cycle_number(),
+                    });
                 }
                 seen_emcys[i] = h.emcys.len();
                 if h.bootups > bootups_at_start[i] {
@@ -1062,6 +1043,31 @@ fn cyclic_thread(
                 }
             }
         }
+        let cycle = ticker.timing.cycles;
+        pending_emcys.retain(|p| {
+            let a = &machine.axes[p.axis];
+            let Some(fb) = master.feedback(p.axis) else {
+                return true;
+            };
+            if fb.statusword & crate::cia402::statusword::FAULT != 0 {
+                master.alarm(
+                    a.node,
+                    format!(
+                        "axis {} (node {}): EMCY 0x{:04X} {}",
+                        a.name,
+                        a.node,
+                        p.code,
+                        emcy::meaning(p.code)
+                    ),
+                );
+                return false;
+            }
+            if fb.cycle <= p.seen_cycle {
+                return true; // no TPDO since the EMCY yet
+            }
+            count_warning(&mut warnings, a, p.code, cycle);
+            false
+        });
         if master.phase() == Phase::Armed
             && let Some(tx) = armed_tx.take()
         {
@@ -1150,6 +1156,41 @@ fn cyclic_thread(
         bit12_to_failure_s,
         detected_ns: fail_ns,
         bus: bus.report(),
+    }
+}
+
+/// An EMCY waiting for the statusword that says what it was.
+struct PendingEmcy {
+    /// Axis, machine order.
+    axis: usize,
+    code: u16,
+    /// The master's cycle number when it was seen.
+    seen_cycle: u64,
+}
+
+/// Count a warning of `axis` in `cycle`.
+fn count_warning(
+    warnings: &mut Vec<Warning>,
+    axis: &crate::config::AxisConfig,
+    code: u16,
+    cycle: u64,
+) {
+    match warnings
+        .iter_mut()
+        .find(|w| w.node == axis.node && w.code == code)
+    {
+        Some(w) => {
+            w.count += 1;
+            w.last_cycle = cycle;
+        }
+        None => warnings.push(Warning {
+            axis: axis.name.clone(),
+            node: axis.node,
+            code,
+            count: 1,
+            first_cycle: cycle,
+            last_cycle: cycle,
+        }),
     }
 }
 
