@@ -162,3 +162,42 @@ fn a_warning_emcy_is_counted_and_the_run_goes_on() {
         "{summary}"
     );
 }
+
+/// A drive that takes 2.6 s to reach Operation enabled (a brake to release).
+const SLOW_ENABLE: Inject = Inject::SlowEnable {
+    delay: std::time::Duration::from_millis(2600),
+};
+
+#[test]
+fn a_slow_drive_is_accepted_within_its_enable_timeout() {
+    let o = run(
+        machine(|t| {
+            t.replace(
+                "following_error_timeout_ms = 10",
+                "enable_timeout_ms = 4000\nfollowing_error_timeout_ms = 10",
+            )
+        }),
+        &[(1, SLOW_ENABLE)],
+        PROGRAM,
+    );
+    assert_eq!(o.machine.axes[0].enable_timeout_ms, 4000);
+    let summary = o.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.streaming_cycles > 0, "{summary}");
+}
+
+#[test]
+fn a_slow_drive_is_refused_after_the_default_enable_timeout() {
+    let o = run(machine(|t| t), &[(1, SLOW_ENABLE)], PROGRAM);
+    assert_eq!(o.machine.axes[0].enable_timeout_ms, 2000);
+    let f = failure(&o);
+    assert!(
+        f.message.starts_with(
+            "drives did not reach Operation enabled: X (node 1) in Switched on after its enable_timeout_ms of 2000 ms"
+        ),
+        "{f}"
+    );
+    // Detected at the time-out, not before: no other axis named.
+    assert!(!f.message.contains("node 2"), "{f}");
+    let t = f.detected_cycle.unwrap() as f64 * f.period_s;
+    assert!(t > 2.0, "detected {t} s into the run");
+}

@@ -32,7 +32,8 @@ use crate::config::{AxisConfig, AxisMode, Machine};
 use crate::interp::filter::AxisFilter;
 use crate::interp::{Interpolator, Status};
 
-/// Cycles a drive may take to reach Operation enabled, or to answer bit 4 with bit 12.
+/// How long the drives may take to reach Switch on disabled at the end. (Reaching Operation
+/// enabled, and answering bit 4 with bit 12, have each axis's `enable_timeout_ms`.)
 const STATE_TIMEOUT_S: f64 = 2.0;
 /// How long the final position may take to settle within one count.
 const SETTLE_TIMEOUT_S: f64 = 3.0;
@@ -65,6 +66,8 @@ pub struct AxisIo {
     max_mm: f64,
     max_vel_mm_s: f64,
     max_acc_mm_s2: f64,
+    /// `enable_timeout_ms`: to reach Operation enabled, and then to set statusword bit 12.
+    enable_timeout_ms: u32,
 }
 
 impl AxisIo {
@@ -91,7 +94,12 @@ impl AxisIo {
             max_mm: a.max_mm,
             max_vel_mm_s: a.max_vel_mm_s,
             max_acc_mm_s2: a.max_acc_mm_s2,
+            enable_timeout_ms: a.enable_timeout_ms,
         }
+    }
+
+    fn enable_timeout_s(&self) -> f64 {
+        f64::from(self.enable_timeout_ms) / 1000.0
     }
 
     fn to_counts(&self, mm: f64) -> i32 {
@@ -650,22 +658,29 @@ impl CyclicMaster {
                         // The IP buffer is preloaded with position actual (this cycle's RPDO
                         // already carries it), and bit 4 goes out from the next cycle on.
                         self.set_phase(Phase::Arming);
-                    } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                    } else {
+                        let t = self.phase_time_s();
                         let late: Vec<String> = (0..n)
-                            .filter(|&i| states[i] != Some(State::OperationEnabled))
+                            .filter(|&i| {
+                                states[i] != Some(State::OperationEnabled)
+                                    && t > self.axes[i].enable_timeout_s()
+                            })
                             .map(|i| {
                                 format!(
-                                    "{} (node {}) in {}",
+                                    "{} (node {}) in {} after its enable_timeout_ms of {} ms",
                                     self.axes[i].name,
                                     self.axes[i].node,
-                                    states[i].map_or("no statusword", |s| s.name())
+                                    states[i].map_or("no statusword", |s| s.name()),
+                                    self.axes[i].enable_timeout_ms
                                 )
                             })
                             .collect();
-                        self.fail(format!(
-                            "drives did not reach Operation enabled within {STATE_TIMEOUT_S} s: {}",
-                            late.join(", ")
-                        ));
+                        if !late.is_empty() {
+                            self.fail(format!(
+                                "drives did not reach Operation enabled: {}",
+                                late.join(", ")
+                            ));
+                        }
                     }
                 }
             }
@@ -690,17 +705,29 @@ impl CyclicMaster {
                     }
                     self.armed_mm = Some(p);
                     self.set_phase(Phase::Armed);
-                } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                } else {
+                    let t = self.phase_time_s();
                     let late: Vec<String> = (0..n)
                         .filter(|&i| {
-                            self.fb[i].is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
+                            t > self.axes[i].enable_timeout_s()
+                                && self.fb[i]
+                                    .is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
                         })
-                        .map(|i| format!("{} (node {})", self.axes[i].name, self.axes[i].node))
+                        .map(|i| {
+                            format!(
+                                "{} (node {}, enable_timeout_ms {} ms)",
+                                self.axes[i].name,
+                                self.axes[i].node,
+                                self.axes[i].enable_timeout_ms
+                            )
+                        })
                         .collect();
-                    self.fail(format!(
-                        "statusword bit 12 (IP active / following) not set within {STATE_TIMEOUT_S} s on {}; check 0x60C2 equals the SYNC period",
-                        late.join(", ")
-                    ));
+                    if !late.is_empty() {
+                        self.fail(format!(
+                            "statusword bit 12 (IP active / following) not set within the enable time-out on {}; check 0x60C2 equals the SYNC period",
+                            late.join(", ")
+                        ));
+                    }
                 }
             }
             Phase::Armed if self.motion.is_some() => {
