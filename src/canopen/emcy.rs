@@ -200,8 +200,10 @@ mod tests {
         assert_eq!(meaning(0x8199), "communication");
         assert_eq!(meaning(0x2111), "current, device input side");
         for code in 0u16..=0xFFFF {
-            let class_known =
-                !matches!(code >> 12, 0xA..=0xE) && !(0xF100..=0xFEFF).contains(&code);
+            // No class: 0x0100-0x0FFF, 0xA000-0xEFFF, 0xF100-0xFEFF.
+            let class_known = !(0x0100..=0x0FFF).contains(&code)
+                && !matches!(code >> 12, 0xA..=0xE)
+                && !(0xF100..=0xFEFF).contains(&code);
             assert_eq!(
                 meaning(code) != "unknown EMCY code",
                 class_known,
