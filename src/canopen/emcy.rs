@@ -48,8 +48,12 @@ pub mod code {
 /// Whether the drive faulted is not the code's to say: the statusword's fault bit (CiA 402 bit 3)
 /// says it; a drive reports a warning (bit 7) with the same kind of code.
 pub fn meaning(code: u16) -> &'static str {
-    match code {
-        // Named codes.
+    named(code).unwrap_or_else(|| class(code))
+}
+
+/// The codes with a name of their own.
+fn named(code: u16) -> Option<&'static str> {
+    Some(match code {
         0x1000 => "generic error",
         0x2310 => "continuous over-current",
         0x3210 => "DC-link over-voltage",
@@ -69,9 +73,15 @@ pub fn meaning(code: u16) -> &'static str {
         0x8250 => "RPDO timeout",
         0x8611 => "following error",
         0x8612 => "reference limit (software position limit)",
-        // Classes and sub-classes, CiA 301 Table 21 (CiA 402's where noted).
+        _ => return None,
+    })
+}
+
+/// The class or sub-class of a code, CiA 301 Table 21 (CiA 402's where noted).
+fn class(code: u16) -> &'static str {
+    match code {
         0x0000..=0x00FF => "error reset or no error",
-        0x1001..=0x10FF => "generic error",
+        0x1000..=0x10FF => "generic error",
         0x2000..=0x20FF => "current",
         0x2100..=0x21FF => "current, device input side",
         0x2200..=0x22FF => "current inside the device",
