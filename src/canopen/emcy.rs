@@ -210,8 +210,9 @@ mod tests {
         assert_eq!(meaning(0x8199), "communication");
         assert_eq!(meaning(0x2111), "current, device input side");
         for code in 0u16..=0xFFFF {
-            // No class: 0x0100-0x0FFF, 0xA000-0xEFFF, 0xF100-0xFEFF.
+            // No class: 0x0100-0x0FFF, 0x1100-0x1FFF, 0xA000-0xEFFF, 0xF100-0xFEFF.
             let class_known = !(0x0100..=0x0FFF).contains(&code)
+                && !(0x1100..=0x1FFF).contains(&code)
                 && !matches!(code >> 12, 0xA..=0xE)
                 && !(0xF100..=0xFEFF).contains(&code);
             assert_eq!(
