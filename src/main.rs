@@ -591,8 +591,10 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                         // The cycle and bus figures up to the stop: they matter most when it
                         // failed.
                         eprint!(
-                            "cycles            {} in all ({} overruns)\n{}",
-                            f.timing.cycles, f.timing.overruns, f.bus
+                            "cycles            {} in all ({})\n{}",
+                            f.timing.cycles,
+                            f.timing.overruns_text(),
+                            f.bus
                         );
                     }
                     let hint = match (outcome.resume, &state) {

@@ -133,3 +133,71 @@ fn lost_rpdos_do_not_stop_a_run() {
         assert!((s.final_counts[i] - want).abs() <= 1, "{s}");
     }
 }
+
+#[test]
+fn a_warning_emcy_is_counted_and_the_run_goes_on() {
+    // EMCY 0x4210 with statusword bit 7 (warning) and not bit 3 (fault), mid-motion.
+    let o = run(
+        machine(|t| t),
+        &[(
+            1,
+            Inject::Warning {
+                code: 0x4210,
+                after: ms(300),
+            },
+        )],
+        LONG,
+    );
+    let summary = o.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+    let w = summary
+        .warnings
+        .iter()
+        .find(|w| w.code == 0x4210)
+        .unwrap_or_else(|| panic!("no warning 0x4210 counted: {summary}"));
+    assert_eq!((w.node, w.count), (1, 1), "{summary}");
+    assert!(
+        summary
+            .to_string()
+            .contains("axis X (node 1): EMCY 0x4210 device temperature ×1"),
+        "{summary}"
+    );
+}
+
+/// A drive that takes 2.6 s to reach Operation enabled (a brake to release).
+const SLOW_ENABLE: Inject = Inject::SlowEnable {
+    delay: std::time::Duration::from_millis(2600),
+};
+
+#[test]
+fn a_slow_drive_is_accepted_within_its_enable_timeout() {
+    let o = run(
+        machine(|t| {
+            t.replace(
+                "following_error_timeout_ms = 10",
+                "enable_timeout_ms = 4000\nfollowing_error_timeout_ms = 10",
+            )
+        }),
+        &[(1, SLOW_ENABLE)],
+        PROGRAM,
+    );
+    assert_eq!(o.machine.axes[0].enable_timeout_ms, 4000);
+    let summary = o.result.as_ref().unwrap_or_else(|e| panic!("{e}"));
+    assert!(summary.streaming_cycles > 0, "{summary}");
+}
+
+#[test]
+fn a_slow_drive_is_refused_after_the_default_enable_timeout() {
+    let o = run(machine(|t| t), &[(1, SLOW_ENABLE)], PROGRAM);
+    assert_eq!(o.machine.axes[0].enable_timeout_ms, 2000);
+    let f = failure(&o);
+    assert!(
+        f.message.starts_with(
+            "drives did not reach Operation enabled: X (node 1) in Switched on after its enable_timeout_ms of 2000 ms"
+        ),
+        "{f}"
+    );
+    // Detected at the time-out, not before: no other axis named.
+    assert!(!f.message.contains("node 2"), "{f}");
+    let t = f.detected_cycle.unwrap() as f64 * f.period_s;
+    assert!(t > 2.0, "detected {t} s into the run");
+}

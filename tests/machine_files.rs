@@ -380,3 +380,21 @@ fn a_dictionary_without_the_pdo_objects_start_up_writes_is_refused_at_load() {
         other => panic!("{other}"),
     }
 }
+
+#[test]
+fn an_enable_timeout_outside_its_bounds_is_refused_on_its_key() {
+    let from = "following_error_timeout_ms = 10";
+    for bad in ["0", "60001"] {
+        assert_refused(
+            from,
+            &format!("enable_timeout_ms = {bad}\n{from}"),
+            "axis X",
+            "enable_timeout_ms",
+            &format!("{bad} outside 1..=60000 ms"),
+        );
+    }
+    let m = parse(&DEMO_MACHINE.replacen(from, &format!("enable_timeout_ms = 60000\n{from}"), 1))
+        .unwrap();
+    assert_eq!(m.axes[0].enable_timeout_ms, 60_000);
+    assert_eq!(m.axes[1].enable_timeout_ms, 2000);
+}

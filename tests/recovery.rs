@@ -380,3 +380,142 @@ fn reset_reports_a_fault_that_comes_back() {
         "{text}"
     );
 }
+
+/// The EMCYs (COB-ID 0x81–0xFF, 8 bytes) arriving on `port` within `within` of now: the wait
+/// ends at the first one or at the deadline.
+fn first_emcy(
+    port: &mut dyn canmotion::bus::Port,
+    within: Duration,
+) -> Option<canmotion::canopen::Emcy> {
+    let end = Instant::now() + within;
+    loop {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return None;
+        }
+        if let Ok(Some(f)) = port.recv_timeout(left.min(Duration::from_millis(50)))
+            && let Some(e) = canmotion::canopen::Emcy::from_frame(&f)
+        {
+            return Some(e);
+        }
+    }
+}
+
+#[test]
+fn a_clean_run_leaves_no_drive_watching_the_gateways_heartbeat() {
+    let _one = one_at_a_time();
+    let m = machine(|t| t);
+    let r = rig(&m, &[], &[]);
+    let rec = Recorder::start(&r.bus);
+    for run in 0..2 {
+        let summary = canmotion::gateway::run(&m, &r.bus, &opts(&r, PROGRAM, "clean.csv"))
+            .unwrap_or_else(|e| panic!("run {run}: {e}"));
+        // From the end of the run on (the port sees only frames sent after it opened). EMCYs
+        // share 0x080 + node with SYNC's 0x080: `first_emcy` skips SYNC.
+        let mut emcys = r
+            .bus
+            .open(&[canmotion::bus::Filter {
+                id: 0x080,
+                mask: 0x780,
+            }])
+            .unwrap();
+        // The gateway's heartbeat has stopped; the drives' consumer time is 500 ms.
+        let e = first_emcy(emcys.as_mut(), Duration::from_secs(2));
+        assert_eq!(e, None, "run {run}: {summary}");
+    }
+    // Each start-up armed the consumer again before NMT start, and each end disarmed it (read
+    // back) before the gateway's heartbeat stopped.
+    let frames = rec.stop();
+    for a in &m.axes {
+        let sdo = 0x600 + u16::from(a.node);
+        let writes: Vec<(u64, u32)> = frames
+            .iter()
+            .filter(|(_, f)| f.id() == sdo && f.data()[..4] == [0x23, 0x16, 0x10, 0x01])
+            .map(|(t, f)| (*t, u32::from_le_bytes(f.data()[4..8].try_into().unwrap())))
+            .collect();
+        let starts: Vec<u64> = frames
+            .iter()
+            .filter(|(_, f)| f.id() == 0 && f.data() == [0x01, a.node])
+            .map(|(t, _)| *t)
+            .collect();
+        assert_eq!(writes.len(), 4, "node {}: {writes:?}", a.node);
+        assert_eq!(starts.len(), 2, "node {}", a.node);
+        for run in 0..2 {
+            let (armed_at, armed) = writes[2 * run];
+            let (_, disarmed) = writes[2 * run + 1];
+            assert_eq!((armed, disarmed), (0x007F_01F4, 0), "node {}", a.node);
+            assert!(
+                armed_at < starts[run],
+                "node {}: armed after NMT start",
+                a.node
+            );
+        }
+    }
+}
+
+#[test]
+fn reset_reports_an_emcy_without_the_fault_bit_as_information() {
+    let _one = one_at_a_time();
+    // Node 2 faults on a following error; 0x6007 = 0: a lost heartbeat is reported (EMCY
+    // 0x8130) without a fault. After the fault stop the drives keep consuming the gateway's
+    // heartbeat, so node 2's 0x8130 arrives some 500 ms after the run, inside a watch window
+    // that starts right after it.
+    let m = machine(|t| t);
+    let bus = Bus::InProc(InProcBus::new());
+    let dict = drive_dict(|t| {
+        t.replace(
+            "default = 1                  # 0 no action",
+            "default = 0                  # 0 no action",
+        )
+    });
+    let def = dict.sub(0x6007, 0).unwrap();
+    assert_eq!(
+        dict.default_for(def, 2),
+        canopen_rs::Value::Integer16(0),
+        "0x6007's default"
+    );
+    let drives = m
+        .axes
+        .iter()
+        .map(|a| {
+            let d = SimDrive::new(dict.clone(), a.node);
+            if a.node == 2 {
+                d.with_inject(Inject::FollowingError { after: ms(300) })
+            } else {
+                d
+            }
+        })
+        .collect();
+    let _sims = runner::spawn(&bus, drives).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let out = canmotion::gateway::run(
+        &m,
+        &bus,
+        &RunOptions {
+            program_name: "fault.ngc".into(),
+            program_text: LONG.into(),
+            log: Some(dir.path().join("fault.csv")),
+            simulate: false,
+        },
+    );
+    assert!(matches!(out, Err(GatewayError::Motion(_))), "{out:?}");
+    let opts = reset::ResetOptions {
+        observe: Duration::from_millis(2000),
+        ..Default::default()
+    };
+    let reports = reset::reset(&bus, &[2], &opts).unwrap();
+    let rep = &reports[0];
+    assert!(matches!(rep.outcome, ResetOutcome::Cleared { .. }), "{rep}");
+    assert!(rep.ok(), "{rep}");
+    assert_eq!(
+        rep.info_emcys.iter().map(|e| e.0).collect::<Vec<_>>(),
+        [0x8130],
+        "{rep}"
+    );
+    assert!(
+        rep.to_string().contains(
+            "node 2: EMCY 0x8130 (life guard or heartbeat error) after the fault cleared, with no fault in the statusword"
+        ),
+        "{rep}"
+    );
+}

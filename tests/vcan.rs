@@ -556,3 +556,33 @@ fn gateway_gone(gone: impl FnOnce(&mut std::process::Child)) {
     let _ = gw.kill();
     let _ = gw.wait();
 }
+
+/// After `canmotion run` exits with 0, no drive sends an EMCY within 2 s: the drives stopped
+/// consuming the gateway's heartbeat (0x1016:1 = 0) before it stopped (issue 13, defect 1).
+#[test]
+fn vcan0_no_drive_sends_an_emcy_after_a_clean_run() {
+    let _g = lock();
+    let _drives = simdrive(&[1, 2, 3], None);
+    let out = run_square();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "canmotion run failed: {stderr}");
+    // Opened once the gateway has exited: only what the drives send from then on. EMCYs share
+    // 0x080 + node with SYNC's 0x080, which nobody sends any more.
+    let mut port = Bus::SocketCan(IFACE.into())
+        .open(&[canmotion::bus::Filter {
+            id: 0x080,
+            mask: 0x780,
+        }])
+        .unwrap();
+    let end = Instant::now() + Duration::from_secs(2);
+    loop {
+        let left = end.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        if let Ok(Some(f)) = port.recv_timeout(left.min(Duration::from_millis(50))) {
+            let e = canmotion::canopen::Emcy::from_frame(&f);
+            assert!(e.is_none(), "{} after a clean run", e.unwrap());
+        }
+    }
+}

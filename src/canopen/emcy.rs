@@ -41,24 +41,25 @@ pub mod code {
     pub const POSITION_LIMIT: u16 = 0x8612;
 }
 
-/// Whether an EMCY code is a communication warning after which the drive keeps running
-/// (SYNC late, CAN overrun, error passive, recovered from bus-off, SYNC length): reported, but
-/// not a reason to stop the group. Every other non-zero code is.
-pub fn is_warning(code: u16) -> bool {
-    matches!(code, 0x8100 | 0x8110 | 0x8120 | 0x8140 | 0x8240)
+/// What an EMCY code means: the code itself where it is one of CiA 301 Table 21's or CiA 402's
+/// (IEC 61800-7-201 Annex) named codes, otherwise its class (CiA 301 Table 21: the high byte, or
+/// the high nibble for the classes that have sub-classes). Only a code of no class is unknown.
+///
+/// Whether the drive faulted is not the code's to say: the statusword's fault bit (CiA 402 bit 3)
+/// says it; a drive reports a warning (bit 7) with the same kind of code.
+pub fn meaning(code: u16) -> &'static str {
+    named(code).unwrap_or_else(|| class(code))
 }
 
-/// What an EMCY code means.
-pub fn meaning(code: u16) -> &'static str {
-    match code {
-        0x0000 => "error reset or no error",
+/// The codes with a name of their own.
+fn named(code: u16) -> Option<&'static str> {
+    Some(match code {
         0x1000 => "generic error",
         0x2310 => "continuous over-current",
         0x3210 => "DC-link over-voltage",
         0x3220 => "DC-link under-voltage",
         0x4310 => "excess drive temperature",
-        0x5000..=0x50FF => "device hardware",
-        0x6000..=0x60FF => "device software",
+        0x6320 => "parameter error",
         0x8100 => "communication error (SYNC missing or generic)",
         0x8110 => "CAN overrun (objects lost)",
         0x8120 => "CAN in error passive mode",
@@ -72,6 +73,43 @@ pub fn meaning(code: u16) -> &'static str {
         0x8250 => "RPDO timeout",
         0x8611 => "following error",
         0x8612 => "reference limit (software position limit)",
+        _ => return None,
+    })
+}
+
+/// The class or sub-class of a code, CiA 301 Table 21 (CiA 402's where noted).
+fn class(code: u16) -> &'static str {
+    match code {
+        0x0000..=0x00FF => "error reset or no error",
+        0x1000..=0x10FF => "generic error",
+        0x2000..=0x20FF => "current",
+        0x2100..=0x21FF => "current, device input side",
+        0x2200..=0x22FF => "current inside the device",
+        0x2300..=0x23FF => "current, device output side",
+        0x2400..=0x2FFF => "current",
+        0x3000..=0x30FF => "voltage",
+        0x3100..=0x31FF => "mains voltage",
+        0x3200..=0x32FF => "voltage inside the device",
+        0x3300..=0x33FF => "output voltage",
+        0x3400..=0x3FFF => "voltage",
+        0x4000..=0x40FF => "temperature",
+        0x4100..=0x41FF => "ambient temperature",
+        0x4200..=0x42FF => "device temperature",
+        0x4300..=0x43FF => "drive temperature (CiA 402)",
+        0x4400..=0x4FFF => "temperature",
+        0x5000..=0x5FFF => "device hardware",
+        0x6000..=0x60FF => "device software",
+        0x6100..=0x61FF => "internal software",
+        0x6200..=0x62FF => "user software",
+        0x6300..=0x63FF => "data set",
+        0x6400..=0x6FFF => "device software",
+        0x7000..=0x7FFF => "additional modules",
+        0x8000..=0x80FF => "monitoring",
+        0x8100..=0x81FF => "communication",
+        0x8200..=0x82FF => "protocol error",
+        0x8300..=0x8FFF => "monitoring",
+        0x9000..=0x9FFF => "external error",
+        0xF000..=0xF0FF => "additional functions",
         0xFF00..=0xFFFF => "device specific",
         _ => "unknown EMCY code",
     }
@@ -162,5 +200,26 @@ mod tests {
         assert_eq!(theirs.error_register.0, 0x21);
         assert_eq!(theirs.vendor_specific, [1, 2, 3, 4, 5]);
         assert!(e.to_string().contains("following error"));
+    }
+
+    #[test]
+    fn every_code_of_a_known_class_has_a_meaning() {
+        assert_eq!(meaning(0x4210), "device temperature");
+        assert_eq!(meaning(0x4310), "excess drive temperature");
+        assert_eq!(meaning(0x8130), "life guard or heartbeat error");
+        assert_eq!(meaning(0x8199), "communication");
+        assert_eq!(meaning(0x2111), "current, device input side");
+        for code in 0u16..=0xFFFF {
+            // No class: 0x0100-0x0FFF, 0x1100-0x1FFF, 0xA000-0xEFFF, 0xF100-0xFEFF.
+            let class_known = !(0x0100..=0x0FFF).contains(&code)
+                && !(0x1100..=0x1FFF).contains(&code)
+                && !matches!(code >> 12, 0xA..=0xE)
+                && !(0xF100..=0xFEFF).contains(&code);
+            assert_eq!(
+                meaning(code) != "unknown EMCY code",
+                class_known,
+                "0x{code:04X}"
+            );
+        }
     }
 }

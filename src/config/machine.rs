@@ -158,6 +158,8 @@ struct RawAxis {
     max_jerk_mm_s3: f64,
     following_error_mm: f64,
     following_error_timeout_ms: u16,
+    #[serde(default = "default_enable_timeout_ms")]
+    enable_timeout_ms: u32,
     setpoint_pdo: RawPdo,
     feedback_pdo: RawPdo,
     #[serde(default)]
@@ -173,6 +175,17 @@ struct RawFilter {
     kind: FilterKind,
     time_ms: f64,
 }
+
+fn default_enable_timeout_ms() -> u32 {
+    DEFAULT_ENABLE_TIMEOUT_MS
+}
+
+/// `[axis] enable_timeout_ms` when the file gives none: how long the drive has to reach
+/// Operation enabled, and then to set statusword bit 12 (IP active / following).
+pub const DEFAULT_ENABLE_TIMEOUT_MS: u32 = 2000;
+/// The bounds of `enable_timeout_ms`. CiA 402 sets no limit; drives with a brake to release or a
+/// commutation to find take seconds, and a minute is beyond any of them.
+pub const ENABLE_TIMEOUT_MS: std::ops::RangeInclusive<u32> = 1..=60_000;
 
 /// The longest post-interpolation filter a machine file may ask for.
 pub const MAX_FILTER_MS: f64 = 1000.0;
@@ -435,6 +448,9 @@ pub struct AxisConfig {
     pub following_error_mm: f64,
     /// Following error time-out (0x6066).
     pub following_error_timeout_ms: u16,
+    /// How long the drive has to reach Operation enabled, and then again to set statusword bit
+    /// 12 (IP active / following), ms.
+    pub enable_timeout_ms: u32,
     /// The RPDO that carries controlword and setpoint.
     pub setpoint_pdo: PdoConfig,
     /// The TPDO that carries statusword and position actual.
@@ -872,6 +888,18 @@ impl Machine {
                     ),
                 ));
             }
+            if !ENABLE_TIMEOUT_MS.contains(&a.enable_timeout_ms) {
+                return Err(ctx.err(
+                    table,
+                    "enable_timeout_ms",
+                    format!(
+                        "{} outside {}..={} ms",
+                        a.enable_timeout_ms,
+                        ENABLE_TIMEOUT_MS.start(),
+                        ENABLE_TIMEOUT_MS.end()
+                    ),
+                ));
+            }
             if !names.insert(a.name.clone()) {
                 return Err(ctx.err(table, "name", "axis defined twice"));
             }
@@ -1097,6 +1125,7 @@ impl Machine {
                 max_jerk_mm_s3: a.max_jerk_mm_s3,
                 following_error_mm: a.following_error_mm,
                 following_error_timeout_ms: a.following_error_timeout_ms,
+                enable_timeout_ms: a.enable_timeout_ms,
                 setpoint_pdo,
                 feedback_pdo,
                 sdo,

@@ -32,7 +32,8 @@ use crate::config::{AxisConfig, AxisMode, Machine};
 use crate::interp::filter::AxisFilter;
 use crate::interp::{Interpolator, Status};
 
-/// Cycles a drive may take to reach Operation enabled, or to answer bit 4 with bit 12.
+/// How long the drives may take to reach Switch on disabled at the end. (Reaching Operation
+/// enabled, and answering bit 4 with bit 12, have each axis's `enable_timeout_ms`.)
 const STATE_TIMEOUT_S: f64 = 2.0;
 /// How long the final position may take to settle within one count.
 const SETTLE_TIMEOUT_S: f64 = 3.0;
@@ -65,6 +66,8 @@ pub struct AxisIo {
     max_mm: f64,
     max_vel_mm_s: f64,
     max_acc_mm_s2: f64,
+    /// `enable_timeout_ms`: to reach Operation enabled, and then to set statusword bit 12.
+    enable_timeout_ms: u32,
 }
 
 impl AxisIo {
@@ -91,7 +94,12 @@ impl AxisIo {
             max_mm: a.max_mm,
             max_vel_mm_s: a.max_vel_mm_s,
             max_acc_mm_s2: a.max_acc_mm_s2,
+            enable_timeout_ms: a.enable_timeout_ms,
         }
+    }
+
+    fn enable_timeout_s(&self) -> f64 {
+        f64::from(self.enable_timeout_ms) / 1000.0
     }
 
     fn to_counts(&self, mm: f64) -> i32 {
@@ -202,6 +210,8 @@ pub struct CyclicMaster {
     override_wanted: (f64, bool),
     /// A stop on the path was asked for ([`Self::stop_on_path`]): why, once the hold is done.
     stop_asked: Option<String>,
+    /// The run ended in a fault stop (see [`Self::fault_stop`]).
+    fault_stop: bool,
 }
 
 impl CyclicMaster {
@@ -244,6 +254,7 @@ impl CyclicMaster {
             streaming_cycles: 0,
             override_wanted: (1.0, false),
             stop_asked: None,
+            fault_stop: false,
             axes,
         }
     }
@@ -263,6 +274,24 @@ impl CyclicMaster {
     /// Why the run failed, once it has.
     pub fn failure(&self) -> Option<&str> {
         self.failure.as_deref()
+    }
+    /// Whether the run stopped on a fault: a drive fault or following error (statusword bits 3,
+    /// 13, a fault EMCY), missing process data, a lost heartbeat, a boot-up, the bus, or a stop
+    /// signal escalated to the fault stop ([`Self::alarm`], [`Self::bus_lost`]). Not an orderly
+    /// end: the program's end, a stop on the path, an enable that timed out. After a fault stop
+    /// the drives keep consuming the gateway's heartbeat, so that they still stop by themselves
+    /// should the gateway die next.
+    pub fn fault_stop(&self) -> bool {
+        self.fault_stop
+    }
+    /// The latest feedback (statusword, position, the cycle it arrived in) of axis `i`, machine
+    /// order, once one has arrived.
+    pub fn feedback(&self, i: usize) -> Option<Feedback> {
+        self.fb.get(i).copied().flatten()
+    }
+    /// The number of the last cycle run (0 before the first).
+    pub fn cycle_number(&self) -> u64 {
+        self.cycle
     }
     /// The positions at which the drives were armed (the start of the motion), once armed.
     pub fn armed_mm(&self) -> Option<Vector3<f64>> {
@@ -316,6 +345,7 @@ impl CyclicMaster {
         }
         self.reset[i] = true;
         self.frozen[i] = true;
+        self.fault_stop = true;
         let a = &self.axes[i];
         let completed = match self.completed_line {
             Some(l) => format!("last completed program line {l}"),
@@ -409,6 +439,7 @@ impl CyclicMaster {
     /// Raise an alarm on an axis (by node id), from outside the cyclic data: an EMCY, a lost
     /// heartbeat, a boot-up. The axis is frozen and the group stops.
     pub fn alarm(&mut self, node: u8, message: String) {
+        self.fault_stop = true;
         if let Some(i) = self.axes.iter().position(|a| a.node == node) {
             self.frozen[i] = true;
         }
@@ -442,6 +473,7 @@ impl CyclicMaster {
     /// controlled stop is possible. Every setpoint is held where it is, and the run ends now
     /// ([`Phase::Done`]: no more frames).
     pub fn bus_lost(&mut self, message: String) {
+        self.fault_stop = true;
         self.frozen.iter_mut().for_each(|f| *f = true);
         self.fail(message);
         self.set_phase(Phase::Done);
@@ -532,6 +564,7 @@ impl CyclicMaster {
                         continue;
                     }
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
                         "following error (statusword bit 13)"
@@ -550,6 +583,7 @@ impl CyclicMaster {
                         && !self.frozen[i] =>
                 {
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let msg = format!(
                         "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
@@ -565,6 +599,7 @@ impl CyclicMaster {
                     && !self.frozen[i] =>
                 {
                     self.frozen[i] = true;
+                    self.fault_stop = true;
                     let a = &self.axes[i];
                     let msg = format!(
                         "axis {} (node {}): no process data (TPDO 0x{:03X}) since start",
@@ -602,6 +637,7 @@ impl CyclicMaster {
                             Action::Done => {}
                             Action::Next(_) => all = false,
                             Action::Fault => {
+                                self.fault_stop = true;
                                 let a = &self.axes[i];
                                 let msg = format!(
                                     "axis {} (node {}): fault reset did not clear the fault",
@@ -622,22 +658,29 @@ impl CyclicMaster {
                         // The IP buffer is preloaded with position actual (this cycle's RPDO
                         // already carries it), and bit 4 goes out from the next cycle on.
                         self.set_phase(Phase::Arming);
-                    } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                    } else {
+                        let t = self.phase_time_s();
                         let late: Vec<String> = (0..n)
-                            .filter(|&i| states[i] != Some(State::OperationEnabled))
+                            .filter(|&i| {
+                                states[i] != Some(State::OperationEnabled)
+                                    && t > self.axes[i].enable_timeout_s()
+                            })
                             .map(|i| {
                                 format!(
-                                    "{} (node {}) in {}",
+                                    "{} (node {}) in {} after its enable_timeout_ms of {} ms",
                                     self.axes[i].name,
                                     self.axes[i].node,
-                                    states[i].map_or("no statusword", |s| s.name())
+                                    states[i].map_or("no statusword", |s| s.name()),
+                                    self.axes[i].enable_timeout_ms
                                 )
                             })
                             .collect();
-                        self.fail(format!(
-                            "drives did not reach Operation enabled within {STATE_TIMEOUT_S} s: {}",
-                            late.join(", ")
-                        ));
+                        if !late.is_empty() {
+                            self.fail(format!(
+                                "drives did not reach Operation enabled: {}",
+                                late.join(", ")
+                            ));
+                        }
                     }
                 }
             }
@@ -662,17 +705,29 @@ impl CyclicMaster {
                     }
                     self.armed_mm = Some(p);
                     self.set_phase(Phase::Armed);
-                } else if self.phase_time_s() > STATE_TIMEOUT_S {
+                } else {
+                    let t = self.phase_time_s();
                     let late: Vec<String> = (0..n)
                         .filter(|&i| {
-                            self.fb[i].is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
+                            t > self.axes[i].enable_timeout_s()
+                                && self.fb[i]
+                                    .is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
                         })
-                        .map(|i| format!("{} (node {})", self.axes[i].name, self.axes[i].node))
+                        .map(|i| {
+                            format!(
+                                "{} (node {}, enable_timeout_ms {} ms)",
+                                self.axes[i].name,
+                                self.axes[i].node,
+                                self.axes[i].enable_timeout_ms
+                            )
+                        })
                         .collect();
-                    self.fail(format!(
-                        "statusword bit 12 (IP active / following) not set within {STATE_TIMEOUT_S} s on {}; check 0x60C2 equals the SYNC period",
-                        late.join(", ")
-                    ));
+                    if !late.is_empty() {
+                        self.fail(format!(
+                            "statusword bit 12 (IP active / following) not set within the enable time-out on {}; check 0x60C2 equals the SYNC period",
+                            late.join(", ")
+                        ));
+                    }
                 }
             }
             Phase::Armed if self.motion.is_some() => {

@@ -39,6 +39,8 @@ pub struct NodeIo {
     health: Health,
     bootup_notify: Arc<tokio::sync::Notify>,
     tasks: Vec<tokio::task::JoinHandle<()>>,
+    /// The gateway's heartbeat producer, once started.
+    heartbeat: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl NodeIo {
@@ -103,6 +105,7 @@ impl NodeIo {
             health,
             bootup_notify,
             tasks: vec![task],
+            heartbeat: None,
         })
     }
 
@@ -159,7 +162,8 @@ impl NodeIo {
             &[NmtState::Operational.byte()],
         )
         .expect("id");
-        self.tasks.push(tokio::spawn(async move {
+        self.stop_heartbeat();
+        self.heartbeat = Some(tokio::spawn(async move {
             let mut tick = tokio::time::interval(period);
             tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
             loop {
@@ -169,6 +173,13 @@ impl NodeIo {
                 }
             }
         }));
+    }
+
+    /// Stop the gateway's own heartbeat (it also stops when the `NodeIo` is dropped).
+    pub fn stop_heartbeat(&mut self) {
+        if let Some(t) = self.heartbeat.take() {
+            t.abort();
+        }
     }
 
     /// Runs one SDO transfer with `node` to its end: `start` makes the client and pushes its
@@ -313,5 +324,6 @@ impl Drop for NodeIo {
         for t in &self.tasks {
             t.abort();
         }
+        self.stop_heartbeat();
     }
 }

@@ -234,6 +234,19 @@ pub enum GatewayError {
         /// The first signal.
         signal: rt::signal::Signal,
     },
+    /// The run ended in order, but a drive could not be told to stop consuming the gateway's
+    /// heartbeat (0x1016): it will report the heartbeat's loss once the gateway exits.
+    #[error(
+        "the run ended in order, but axis {axis} (node {node}) could not be told to stop watching the gateway's heartbeat (0x1016:1 = 0): {source}; it will report a heartbeat loss (EMCY 0x8130, a fault with 0x6007 = 1) once the gateway has exited"
+    )]
+    HeartbeatStillConsumed {
+        /// Axis.
+        axis: String,
+        /// Node.
+        node: u8,
+        /// The SDO error.
+        source: Box<GatewayError>,
+    },
     /// A resume (`run --resume`) was refused before any motion: changed program, another
     /// machine, an axis too far from the stop point, no confirmation (see [`resume`]).
     #[error("{0}")]
@@ -367,7 +380,8 @@ pub struct Summary {
     pub bus: cyclic_bus::BusReport,
 }
 
-/// An EMCY after which the drive kept running (see [`emcy::is_warning`]), counted.
+/// An EMCY after which the drive kept running (its statusword without the fault bit 3: a warning,
+/// bit 7, or a communication warning), counted.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Warning {
     /// Axis letter.
@@ -382,6 +396,92 @@ pub struct Warning {
     pub first_cycle: u64,
     /// Cycle of the last.
     pub last_cycle: u64,
+    /// The cycles of the first [`WARNING_CYCLES`] (the rest are only counted), to tie them to a
+    /// late wake-up of the cyclic thread ([`late_wake_causes`]).
+    pub cycles: [u64; WARNING_CYCLES],
+}
+
+/// How many occurrences of a warning keep their cycle.
+pub const WARNING_CYCLES: usize = 8;
+
+/// How many cycles after a late wake-up of the cyclic thread a drive's warning is taken for its
+/// consequence: the drive notices the missing SYNC during the gap, and its EMCY reaches the
+/// summary once a TPDO after it shows no fault bit.
+pub const LATE_WAKE_WINDOW_CYCLES: u64 = 8;
+
+/// Drive warnings tied to a late wake-up of the cyclic thread.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LateWakeCause {
+    /// The late wake-up.
+    pub wake: rt::LateWake,
+    /// The nodes that warned within [`LATE_WAKE_WINDOW_CYCLES`] after it, ascending.
+    pub nodes: Vec<u8>,
+    /// Their EMCY codes, ascending.
+    pub codes: Vec<u16>,
+}
+
+impl std::fmt::Display for LateWakeCause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.nodes.len();
+        let what: Vec<String> = self
+            .codes
+            .iter()
+            .map(|&c| match c {
+                emcy::code::COMMUNICATION => "SYNC missing (EMCY 0x8100)".to_string(),
+                c => format!("EMCY 0x{c:04X} {}", emcy::meaning(c)),
+            })
+            .collect();
+        write!(
+            f,
+            "{n} drive{} reported {} in cycle {}: the cyclic thread woke {:.1} ms late (host not real-time; a PREEMPT_RT kernel or isolcpus helps)",
+            if n == 1 { "" } else { "s" },
+            what.join(", "),
+            self.wake.cycle,
+            self.wake.late.as_secs_f64() * 1e3
+        )
+    }
+}
+
+/// Ties each drive warning to a late wake-up of the cyclic thread in the
+/// [`LATE_WAKE_WINDOW_CYCLES`] cycles before it, if there was one (the latest such): a drive
+/// that sees a SYNC come late reports it, as a real one would. One cause per late wake-up that
+/// has warnings, in cycle order.
+pub fn late_wake_causes(warnings: &[Warning], late: &rt::LateWakes) -> Vec<LateWakeCause> {
+    let mut causes: Vec<LateWakeCause> = Vec::new();
+    for w in warnings {
+        let kept = (w.count as usize).min(WARNING_CYCLES);
+        for &c in &w.cycles[..kept] {
+            let Some(wake) = late
+                .iter()
+                .filter(|l| l.cycle <= c && c - l.cycle <= LATE_WAKE_WINDOW_CYCLES)
+                .last()
+            else {
+                continue;
+            };
+            let i = match causes.iter().position(|k| k.wake == *wake) {
+                Some(i) => i,
+                None => {
+                    causes.push(LateWakeCause {
+                        wake: *wake,
+                        nodes: Vec::new(),
+                        codes: Vec::new(),
+                    });
+                    causes.len() - 1
+                }
+            };
+            let k = &mut causes[i];
+            if !k.nodes.contains(&w.node) {
+                k.nodes.push(w.node);
+                k.nodes.sort_unstable();
+            }
+            if !k.codes.contains(&w.code) {
+                k.codes.push(w.code);
+                k.codes.sort_unstable();
+            }
+        }
+    }
+    causes.sort_by_key(|k| k.wake.cycle);
+    causes
 }
 
 impl std::fmt::Display for Warning {
@@ -405,8 +505,10 @@ impl std::fmt::Display for Summary {
         writeln!(f, "program time      {:.3} s", self.program_s)?;
         writeln!(
             f,
-            "cycles            {} streamed, {} in all ({} overruns)",
-            self.streaming_cycles, self.cycles, self.timing.overruns
+            "cycles            {} streamed, {} in all ({})",
+            self.streaming_cycles,
+            self.cycles,
+            self.timing.overruns_text()
         )?;
         for (i, a) in self.axes.iter().enumerate() {
             writeln!(
@@ -417,6 +519,9 @@ impl std::fmt::Display for Summary {
         }
         for w in &self.warnings {
             writeln!(f, "warning           {w}")?;
+        }
+        for c in late_wake_causes(&self.warnings, &self.timing.late_wakes) {
+            writeln!(f, "cause             {c}")?;
         }
         write!(f, "{}", self.bus)?;
         if self.log_dropped > 0 {
@@ -819,10 +924,22 @@ async fn run_async(
                 source,
             })?;
     }
+    // The orderly end: the drives are disabled and Pre-operational (the cyclic thread's end);
+    // before the gateway's heartbeat stops, they stop consuming it. After a fault stop they
+    // keep consuming it: should the gateway die now, each drive still stops by itself.
+    let disarmed = if master.fault_stop() || port_err.is_some() {
+        Ok(())
+    } else {
+        startup::stop_consuming_heartbeat(machine, &io).await
+    };
+    io.stop_heartbeat();
     plan_result?;
     // A failure of the motion first: when the bus failed during it, the failure says so, with
     // what the motion did about it.
     if let Some(f) = master.failure() {
+        if let Err(e) = &disarmed {
+            tracing::warn!("{e}");
+        }
         return Err(GatewayError::Motion(Box::new(MotionFailure {
             message: f.to_string(),
             detected_cycle: master.failure_cycle,
@@ -839,6 +956,7 @@ async fn run_async(
     if let Some(e) = port_err {
         return Err(GatewayError::Bus(e));
     }
+    disarmed?;
     let final_counts = master.final_counts();
     Ok(Summary {
         program_s: master.motion().map_or(0.0, |m| m.duration_s()),
@@ -928,6 +1046,7 @@ fn cyclic_thread(
     let mut armed_tx = Some(armed_tx);
     let mut dropped = 0u64;
     let mut seen_emcys = vec![0usize; machine.axes.len()];
+    let mut pending_emcys: Vec<PendingEmcy> = Vec::with_capacity(4 * machine.axes.len());
     let mut bootups_at_start: Vec<u32> = {
         let g = health.lock().unwrap();
         machine
@@ -982,38 +1101,17 @@ fn cyclic_thread(
         if let Ok(g) = health.try_lock() {
             for (i, a) in machine.axes.iter().enumerate() {
                 let Some(h) = g.get(&a.node) else { continue };
+                // The statusword decides what an EMCY was (CiA 402): with the fault bit (3) a
+                // fault, which stops the group; without it a warning (bit 7, or a
+                // communication warning), counted in the summary. The EMCY can arrive before
+                // the TPDO that carries the fault bit: one without it waits for a TPDO
+                // received after it.
                 for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
-                    if emcy::is_warning(e.code) {
-                        let cycle = ticker.timing.cycles;
-                        match warnings
-                            .iter_mut()
-                            .find(|w: &&mut Warning| w.node == a.node && w.code == e.code)
-                        {
-                            Some(w) => {
-                                w.count += 1;
-                                w.last_cycle = cycle;
-                            }
-                            None => warnings.push(Warning {
-                                axis: a.name.clone(),
-                                node: a.node,
-                                code: e.code,
-                                count: 1,
-                                first_cycle: cycle,
-                                last_cycle: cycle,
-                            }),
-                        }
-                    } else {
-                        master.alarm(
-                            a.node,
-                            format!(
-                                "axis {} (node {}): EMCY 0x{:04X} {}",
-                                a.name,
-                                a.node,
-                                e.code,
-                                emcy::meaning(e.code)
-                            ),
-                        );
-                    }
+                    pending_emcys.push(PendingEmcy {
+                        axis: i,
+                        code: e.code,
+                        seen_cycle: master.cycle_number(),
+                    });
                 }
                 seen_emcys[i] = h.emcys.len();
                 if h.bootups > bootups_at_start[i] {
@@ -1036,6 +1134,31 @@ fn cyclic_thread(
                 }
             }
         }
+        let cycle = ticker.timing.cycles;
+        pending_emcys.retain(|p| {
+            let a = &machine.axes[p.axis];
+            let Some(fb) = master.feedback(p.axis) else {
+                return true;
+            };
+            if fb.statusword & crate::cia402::statusword::FAULT != 0 {
+                master.alarm(
+                    a.node,
+                    format!(
+                        "axis {} (node {}): EMCY 0x{:04X} {}",
+                        a.name,
+                        a.node,
+                        p.code,
+                        emcy::meaning(p.code)
+                    ),
+                );
+                return false;
+            }
+            if fb.cycle <= p.seen_cycle {
+                return true; // no TPDO since the EMCY yet
+            }
+            count_warning(&mut warnings, a, p.code, cycle);
+            false
+        });
         if master.phase() == Phase::Armed
             && let Some(tx) = armed_tx.take()
         {
@@ -1127,6 +1250,49 @@ fn cyclic_thread(
     }
 }
 
+/// An EMCY waiting for the statusword that says what it was.
+struct PendingEmcy {
+    /// Axis, machine order.
+    axis: usize,
+    code: u16,
+    /// The master's cycle number when it was seen.
+    seen_cycle: u64,
+}
+
+/// Count a warning of `axis` in `cycle`.
+fn count_warning(
+    warnings: &mut Vec<Warning>,
+    axis: &crate::config::AxisConfig,
+    code: u16,
+    cycle: u64,
+) {
+    match warnings
+        .iter_mut()
+        .find(|w| w.node == axis.node && w.code == code)
+    {
+        Some(w) => {
+            if let Some(c) = w.cycles.get_mut(w.count as usize) {
+                *c = cycle;
+            }
+            w.count += 1;
+            w.last_cycle = cycle;
+        }
+        None => warnings.push(Warning {
+            axis: axis.name.clone(),
+            node: axis.node,
+            code,
+            count: 1,
+            first_cycle: cycle,
+            last_cycle: cycle,
+            cycles: {
+                let mut c = [0; WARNING_CYCLES];
+                c[0] = cycle;
+                c
+            },
+        }),
+    }
+}
+
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;
 
 fn spawn_logger(
@@ -1152,4 +1318,70 @@ fn spawn_logger(
         })
         .expect("spawn log thread");
     Ok((tx, t))
+}
+
+#[cfg(test)]
+mod late_wake_tests {
+    use super::*;
+
+    fn warning(node: u8, code: u16, at: &[u64]) -> Warning {
+        let mut cycles = [0; WARNING_CYCLES];
+        cycles[..at.len()].copy_from_slice(at);
+        Warning {
+            axis: ["X", "Y", "Z"][usize::from(node) - 1].into(),
+            node,
+            code,
+            count: at.len() as u32,
+            first_cycle: at[0],
+            last_cycle: *at.last().unwrap(),
+            cycles,
+        }
+    }
+
+    fn wake(cycle: u64, late_us: u64) -> rt::LateWake {
+        rt::LateWake {
+            cycle,
+            late: Duration::from_micros(late_us),
+        }
+    }
+
+    #[test]
+    fn warnings_after_a_late_wake_up_are_tied_to_it() {
+        let mut late = rt::LateWakes::default();
+        late.push(wake(40, 2500));
+        late.push(wake(2523, 6800));
+        // Nodes 1-3 warn 1-3 cycles after the late wake-up of cycle 2523; node 1 also in cycle
+        // 900, after no late wake-up; node 2's 0x4210 long after cycle 40's (not its cause).
+        let warnings = [
+            warning(1, 0x8100, &[900, 2524]),
+            warning(2, 0x8100, &[2526]),
+            warning(3, 0x8100, &[2525]),
+            warning(2, 0x4210, &[40 + LATE_WAKE_WINDOW_CYCLES + 1]),
+        ];
+        let causes = late_wake_causes(&warnings, &late);
+        assert_eq!(
+            causes,
+            [LateWakeCause {
+                wake: wake(2523, 6800),
+                nodes: vec![1, 2, 3],
+                codes: vec![0x8100],
+            }]
+        );
+        assert_eq!(
+            causes[0].to_string(),
+            "3 drives reported SYNC missing (EMCY 0x8100) in cycle 2523: the cyclic thread woke 6.8 ms late (host not real-time; a PREEMPT_RT kernel or isolcpus helps)"
+        );
+        // No late wake-up, no cause.
+        assert!(late_wake_causes(&warnings, &rt::LateWakes::default()).is_empty());
+    }
+
+    #[test]
+    fn one_overrun_is_singular() {
+        let mut t = Timing::default();
+        assert_eq!(t.overruns_text(), "0 overruns");
+        t.overruns = 1;
+        assert_eq!(t.overruns_text(), "1 overrun");
+        t.overruns = 7;
+        assert_eq!(t.overruns_text(), "7 overruns");
+    }
 }

@@ -144,6 +144,54 @@ pub struct Timing {
     pub overruns: u64,
     /// Largest lateness of a wake-up after its deadline.
     pub max_wake_late: Duration,
+    /// The latest wake-ups more than half a period late (a drive then sees a late SYNC).
+    pub late_wakes: LateWakes,
+}
+
+impl Timing {
+    /// `N overruns`, or `1 overrun`.
+    pub fn overruns_text(&self) -> String {
+        match self.overruns {
+            1 => "1 overrun".to_string(),
+            n => format!("{n} overruns"),
+        }
+    }
+}
+
+/// A wake-up of the cyclic thread more than half a period after its deadline.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LateWake {
+    /// The cycle it started ([`Timing::cycles`] after it).
+    pub cycle: u64,
+    /// How late.
+    pub late: Duration,
+}
+
+/// The latest [`LATE_WAKES`] late wake-ups, in a fixed ring: recording one on the cyclic path
+/// allocates nothing.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct LateWakes {
+    ring: [LateWake; LATE_WAKES],
+    /// How many were recorded in all (the ring keeps the latest).
+    pub total: u64,
+}
+
+/// How many late wake-ups [`LateWakes`] keeps.
+pub const LATE_WAKES: usize = 32;
+
+impl LateWakes {
+    /// Record one.
+    pub fn push(&mut self, w: LateWake) {
+        self.ring[(self.total % LATE_WAKES as u64) as usize] = w;
+        self.total += 1;
+    }
+
+    /// The ones kept, oldest first.
+    pub fn iter(&self) -> impl Iterator<Item = &LateWake> {
+        let n = self.total.min(LATE_WAKES as u64) as usize;
+        let start = (self.total as usize).wrapping_sub(n) % LATE_WAKES;
+        (0..n).map(move |k| &self.ring[(start + k) % LATE_WAKES])
+    }
 }
 
 /// A periodic schedule with absolute deadlines.
@@ -190,6 +238,12 @@ impl Ticker {
         let late = Duration::from_nanos(now_ns.saturating_sub(self.next_ns));
         self.timing.max_wake_late = self.timing.max_wake_late.max(late);
         self.timing.cycles += 1;
+        if late.as_nanos() as u64 > self.period_ns / 2 {
+            self.timing.late_wakes.push(LateWake {
+                cycle: self.timing.cycles,
+                late,
+            });
+        }
         self.next_ns += self.period_ns;
         if now_ns >= self.next_ns {
             let missed = (now_ns - self.next_ns) / self.period_ns + 1;
@@ -234,5 +288,27 @@ mod tests {
         assert_eq!((t.next_deadline_ns(), t.timing.overruns), (15 * ms, 2));
         assert_eq!(t.timing.cycles, 3);
         assert_eq!(t.timing.max_wake_late, Duration::from_micros(2500));
+        // Only the wake-up more than half a period late is kept, with its cycle.
+        let late: Vec<LateWake> = t.timing.late_wakes.iter().copied().collect();
+        assert_eq!(
+            late,
+            [LateWake {
+                cycle: 2,
+                late: Duration::from_micros(2500)
+            }]
+        );
+    }
+
+    #[test]
+    fn the_late_wake_ring_keeps_the_latest() {
+        let mut r = LateWakes::default();
+        for c in 0..(LATE_WAKES as u64 + 5) {
+            r.push(LateWake {
+                cycle: c,
+                late: Duration::ZERO,
+            });
+        }
+        let cycles: Vec<u64> = r.iter().map(|w| w.cycle).collect();
+        assert_eq!(cycles, (5..LATE_WAKES as u64 + 5).collect::<Vec<_>>());
     }
 }

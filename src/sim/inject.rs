@@ -1,7 +1,8 @@
 //! Misbehaviours a simulated drive can be told to show, for fault-reaction tests:
 //! `--inject following-error@2.0s`, `--inject silent@1.5s`, `--inject reboot@1.0s`,
 //! `--inject drop-rpdo=5%`, `--inject no-heartbeat@1s`, `--inject persistent-fault@1s`,
-//! `--inject recurring-fault@1s`, optionally for one node: `--inject 2:silent@1.5s`.
+//! `--inject recurring-fault@1s`, `--inject warning=0x4210@300ms`, `--inject slow-enable=2600ms`,
+//! optionally for one node: `--inject 2:silent@1.5s`.
 //!
 //! `--inject bus-off@T` and `--inject error-passive@T` stand in for the *gateway's* CAN
 //! controller: at T the drive sends the error frame a controller's driver would report
@@ -59,6 +60,20 @@ pub enum Inject {
         /// 0–100.
         percent: f64,
     },
+    /// The drive warns: EMCY `code` and statusword bit 7 (warning), without the fault bit; the
+    /// drive keeps running and the warning stays on until the next boot.
+    Warning {
+        /// EMCY code.
+        code: u16,
+        /// When, after motion start.
+        after: Duration,
+    },
+    /// The drive takes this long (from the first controlword asking for it) to go from Switched
+    /// on to Operation enabled: a drive with a brake to release or a commutation to find.
+    SlowEnable {
+        /// How long.
+        delay: Duration,
+    },
     /// A bus-off error frame is sent (see the module's documentation).
     BusOff {
         /// When, after motion start.
@@ -85,8 +100,9 @@ impl Inject {
             | Inject::PersistentFault { after }
             | Inject::RecurringFault { after }
             | Inject::BusOff { after }
-            | Inject::ErrorPassive { after } => Some(after),
-            Inject::DropRpdo { .. } => None,
+            | Inject::ErrorPassive { after }
+            | Inject::Warning { after, .. } => Some(after),
+            Inject::DropRpdo { .. } | Inject::SlowEnable { .. } => None,
         }
     }
 }
@@ -134,6 +150,19 @@ impl FromStr for Targeted {
         };
         let inject = if let Some((what, t)) = rest.split_once('@') {
             let after = parse_secs(t, spec)?;
+            if let Some(c) = what.strip_prefix("warning=") {
+                let code = c
+                    .strip_prefix("0x")
+                    .and_then(|h| u16::from_str_radix(h, 16).ok())
+                    .filter(|&c| c != 0)
+                    .ok_or_else(|| {
+                        format!("{spec:?}: {c:?} is not an EMCY code, e.g. warning=0x4210@300ms")
+                    })?;
+                return Ok(Targeted {
+                    node,
+                    inject: Inject::Warning { code, after },
+                });
+            }
             match what {
                 "following-error" => Inject::FollowingError { after },
                 "silent" => Inject::Silent { after },
@@ -149,6 +178,10 @@ impl FromStr for Targeted {
                     ));
                 }
             }
+        } else if let Some(d) = rest.strip_prefix("slow-enable=") {
+            Inject::SlowEnable {
+                delay: parse_secs(d, spec)?,
+            }
         } else if let Some(p) = rest.strip_prefix("drop-rpdo=") {
             let v = p
                 .strip_suffix('%')
@@ -162,7 +195,7 @@ impl FromStr for Targeted {
             Inject::DropRpdo { percent }
         } else {
             return Err(format!(
-                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T, bus-off@T, error-passive@T or drop-rpdo=P% (optionally NODE: first)"
+                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T, bus-off@T, error-passive@T, warning=CODE@T, slow-enable=T or drop-rpdo=P% (optionally NODE: first)"
             ));
         };
         Ok(Targeted { node, inject })
@@ -233,7 +266,24 @@ mod tests {
                 inject: Inject::ErrorPassive { after: ms(0) }
             })
         );
+        assert_eq!(
+            "1:warning=0x4210@300ms".parse(),
+            Ok(Targeted {
+                node: Some(1),
+                inject: Inject::Warning {
+                    code: 0x4210,
+                    after: ms(300)
+                }
+            })
+        );
+        assert_eq!(
+            "slow-enable=2600ms".parse::<Targeted>().map(|t| t.inject),
+            Ok(Inject::SlowEnable { delay: ms(2600) })
+        );
         for bad in [
+            "warning=4210@1s",
+            "warning=0x0@1s",
+            "slow-enable=2",
             "no-heartbeat",
             "silent@",
             "silent@2",

@@ -120,6 +120,10 @@ pub struct SimDrive {
     rpdo_dropped: u64,
     /// Error frames an injection produced, for the runner to send.
     bus_errors: Vec<crate::bus::ErrorFrame>,
+    /// An injected warning is on (statusword bit 7), until the next boot.
+    warning: bool,
+    /// When the controlword first asked for Operation enabled ([`Inject::SlowEnable`]).
+    enable_asked_at: Option<Duration>,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -175,6 +179,8 @@ impl SimDrive {
             rng: 0x9E37_79B9_7F4A_7C15 ^ u64::from(node),
             rpdo_dropped: 0,
             bus_errors: Vec::new(),
+            warning: false,
+            enable_asked_at: None,
         }
     }
 
@@ -243,7 +249,12 @@ impl SimDrive {
                 Inject::ErrorPassive { .. } => self
                     .bus_errors
                     .push(crate::bus::ErrorFrame::error_passive(128, 128)),
-                Inject::DropRpdo { .. } => {}
+                Inject::Warning { code, .. } => {
+                    self.warning = true;
+                    self.emcy(code, 0, out);
+                    self.refresh();
+                }
+                Inject::DropRpdo { .. } | Inject::SlowEnable { .. } => {}
             }
         }
     }
@@ -324,6 +335,8 @@ impl SimDrive {
         self.consumer = [(None, false); 4];
         self.last_physics = Some(now);
         self.heartbeat_off = false;
+        self.warning = false;
+        self.enable_asked_at = None;
         out.push(Frame::new(cob::HEARTBEAT + u16::from(self.node), &[0x00]).expect("id"));
         self.schedule_heartbeat(now);
         self.refresh();
@@ -838,6 +851,23 @@ impl SimDrive {
     fn on_controlword(&mut self, cw: u16, out: &mut Vec<Frame>) {
         let was_fault = self.power.state() == State::Fault;
         let was_enabled = self.power.is_operation_enabled();
+        if let Some(delay) = self.injects.iter().find_map(|(i, _)| match i {
+            Inject::SlowEnable { delay } => Some(*delay),
+            _ => None,
+        }) && !was_enabled
+        {
+            let mut next = self.power.clone();
+            next.on_controlword(cw);
+            if next.is_operation_enabled() {
+                let now = self.last_physics.unwrap_or_default();
+                let asked = *self.enable_asked_at.get_or_insert(now);
+                if now < asked + delay {
+                    return; // still releasing the brake: Switched on
+                }
+            } else {
+                self.enable_asked_at = None;
+            }
+        }
         self.power.on_controlword(cw);
         if self.power.is_operation_enabled() && !was_enabled {
             // Bumpless enable: the loop holds where the motor is.
@@ -1005,6 +1035,9 @@ impl SimDrive {
         }
         if self.limit_flag && enabled {
             s |= sw::INTERNAL_LIMIT;
+        }
+        if self.warning {
+            s |= sw::WARNING;
         }
         match self.mode() {
             7 if enabled && self.ip_active => s |= sw::OP_MODE_SPECIFIC_12,

@@ -8,8 +8,12 @@
 //! 3. controlword 0x6040 = 0x0000, then 0x0080: bit 7's rising edge is the fault reset
 //!    (transition 15; the frame with bit 7 low first, as the checklist asks);
 //! 4. the statusword must leave Fault (bit 3 clear) within [`ResetOptions::deadline`];
-//! 5. and stay clear, with no new EMCY from the node, for [`ResetOptions::observe`]: a fault
-//!    whose cause persists may let the drive out of Fault only to come back;
+//! 5. and stay clear for [`ResetOptions::observe`]: a fault whose cause persists may let the
+//!    drive out of Fault only to come back. A fault comes back when the statusword's fault bit
+//!    (bit 3) does; an EMCY in the window whose node's statusword has no fault bit is not a
+//!    returned fault (a warning, or the heartbeat loss a drive reports after the gateway's
+//!    heartbeat stopped, EMCY 0x8130): it is reported as information
+//!    ([`ResetReport::info_emcys`]);
 //! 6. bit 7 goes low again (0x0000: the drive stays in Switch on disabled), and 0x603F is read
 //!    again.
 //!
@@ -62,11 +66,12 @@ pub enum ResetOutcome {
     },
     /// Still in Fault at the deadline.
     NotCleared,
-    /// Out of Fault, then back in (or a new EMCY) within the observation window.
+    /// Out of Fault, then back in (statusword bit 3) within the observation window.
     CameBack {
         /// From the reset edge to the return.
         after: Duration,
-        /// The EMCY code that came with it, if one did.
+        /// The EMCY code that came with it (the first one the node sent in the window), if one
+        /// did.
         emcy: Option<u16>,
     },
 }
@@ -86,6 +91,9 @@ pub struct ResetReport {
     pub error_after: u16,
     /// The outcome.
     pub outcome: ResetOutcome,
+    /// EMCYs the node sent after the fault cleared while its statusword showed no fault (bit 3
+    /// clear): information, not a returned fault. Code, and the statusword read after it.
+    pub info_emcys: Vec<(u16, u16)>,
 }
 
 impl ResetReport {
@@ -126,15 +134,29 @@ impl fmt::Display for ResetReport {
             state_name(sw1),
             code(self.error_after)
         );
+        let info = |f: &mut fmt::Formatter<'_>| -> fmt::Result {
+            for &(c, sw) in &self.info_emcys {
+                write!(
+                    f,
+                    "\nnode {n}: EMCY {} after the fault cleared, with no fault in the statusword (0x{sw:04X}, {}): information, not a returned fault",
+                    code(c),
+                    state_name(sw)
+                )?;
+            }
+            Ok(())
+        };
         match self.outcome {
             ResetOutcome::NotFaulted => {
                 write!(f, "node {n}: not in Fault, nothing to reset: {before}")
             }
-            ResetOutcome::Cleared { after: t } => write!(
-                f,
-                "node {n}: fault cleared {:.1} ms after the reset and still clear; was {before}; now {after}",
-                t.as_secs_f64() * 1e3
-            ),
+            ResetOutcome::Cleared { after: t } => {
+                write!(
+                    f,
+                    "node {n}: fault cleared {:.1} ms after the reset and still clear; was {before}; now {after}",
+                    t.as_secs_f64() * 1e3
+                )?;
+                info(f)
+            }
             ResetOutcome::NotCleared => write!(
                 f,
                 "node {n}: fault NOT cleared: still {after} after the reset (was 0x603F = {}); its cause persists",
@@ -147,7 +169,8 @@ impl fmt::Display for ResetReport {
                     "node {n}: fault came back {:.1} ms after the reset{e}: now {after} (was 0x603F = {}); its cause persists",
                     t.as_secs_f64() * 1e3,
                     code(self.error_before)
-                )
+                )?;
+                info(f)
             }
         }
     }
@@ -202,6 +225,7 @@ pub async fn reset_node(
         statusword_after: sw,
         error_after: error_before,
         outcome: ResetOutcome::NotFaulted,
+        info_emcys: Vec::new(),
     };
     if !faulted(sw) {
         return Ok(report);
@@ -230,22 +254,31 @@ pub async fn reset_node(
         match cleared {
             None => ResetOutcome::NotCleared,
             Some(after) => {
-                // 5. And staying out, with no new EMCY.
+                // 5. And staying out: the fault bit decides, not an EMCY (a warning or a
+                // heartbeat loss without a fault is information).
                 let watch_end = Instant::now() + opts.observe;
                 let mut outcome = ResetOutcome::Cleared { after };
+                let mut seen = emcys_before;
+                let mut pending: Vec<u16> = Vec::new();
                 loop {
-                    let new_emcy =
-                        io.health().lock().unwrap().get(&node).and_then(|h| {
-                            h.emcys.get(emcys_before..).and_then(|e| e.first().copied())
-                        });
+                    pending.extend(io.health().lock().unwrap().get(&node).map_or(
+                        Vec::new(),
+                        |h| {
+                            let new = h.emcys.get(seen..).unwrap_or(&[]);
+                            seen = h.emcys.len();
+                            new.iter().map(|e| e.code).collect()
+                        },
+                    ));
                     sw = statusword(io, node).await?;
-                    if faulted(sw) || new_emcy.is_some() {
+                    if faulted(sw) {
                         outcome = ResetOutcome::CameBack {
                             after: edge.elapsed(),
-                            emcy: new_emcy.map(|e| e.code),
+                            emcy: pending.first().copied(),
                         };
                         break;
                     }
+                    // Read after the EMCY and without the fault bit: not a returned fault.
+                    report.info_emcys.extend(pending.drain(..).map(|c| (c, sw)));
                     if Instant::now() >= watch_end {
                         break;
                     }

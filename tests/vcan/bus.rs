@@ -446,5 +446,8 @@ fn vcan0_run_reports_the_sync_period_from_kernel_timestamps() {
         .parse()
         .unwrap();
     assert_eq!(periods, all - 2, "{sync}\n{cycles}");
-    assert!(cycles.contains(" overruns)"), "{cycles}");
+    assert!(
+        cycles.contains(" overruns)") || cycles.contains(" 1 overrun)"),
+        "{cycles}"
+    );
 }
