@@ -471,7 +471,7 @@ fn reset_reports_an_emcy_without_the_fault_bit_as_information() {
     let def = dict.sub(0x6007, 0).unwrap();
     assert_eq!(
         dict.default_for(def, 2),
-        canopen_rs::Value::Integer16(0),
+        Some(canopen_rs::Value::Integer16(0)),
         "0x6007's default"
     );
     let drives = m
