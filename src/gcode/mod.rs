@@ -66,8 +66,8 @@ pub use element::{
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interp::{
-    Interpreter, MAX_CALL_DEPTH, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM, MAX_STORED_BYTES,
-    MIN_ARC_RADIUS_MM, Setup,
+    Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM,
+    MAX_STORED_BYTES, MIN_ARC_RADIUS_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
 pub use tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
@@ -667,6 +667,47 @@ pub enum ErrorKind {
     InvalidSetup {
         /// What is wrong.
         what: &'static str,
+    },
+    /// A canned cycle whose retract plane R is below the bottom of its hole.
+    #[error(
+        "{code}: the retract plane R ({r_mm:.4} mm) is below the hole bottom {axis} ({bottom_mm:.4} mm)"
+    )]
+    CycleRetractBelowBottom {
+        /// The cycle, e.g. `G81`.
+        code: &'static str,
+        /// The drill axis of the plane (Z in G17, Y in G18, X in G19).
+        axis: char,
+        /// The R plane, program coordinate (mm).
+        r_mm: f64,
+        /// The hole bottom, program coordinate (mm).
+        bottom_mm: f64,
+    },
+    /// A canned cycle in inverse time feed mode (LinuxCNC refuses it too).
+    #[error("{code}: canned cycles cannot run in inverse time feed mode (G93): program G94 first")]
+    CycleInverseTime {
+        /// The cycle.
+        code: &'static str,
+    },
+    /// A canned cycle line that would make more moves and dwells than the interpreter holds
+    /// for one line ([`MAX_CYCLE_ITEMS`]).
+    #[error(
+        "{code} makes more than {max} moves and dwells on one line (pecks times repeats): use a larger Q or fewer repeats (L)"
+    )]
+    CycleTooLong {
+        /// The cycle.
+        code: &'static str,
+        /// The limit.
+        max: usize,
+    },
+    /// A tapping or boring cycle with the spindle not turning as it must (LinuxCNC's check).
+    #[error("{code} needs the spindle turning {needed}: program {fix} before it")]
+    CycleSpindle {
+        /// The cycle.
+        code: &'static str,
+        /// The direction it needs, e.g. `clockwise`.
+        needed: &'static str,
+        /// The code that starts it, e.g. `M3`.
+        fix: &'static str,
     },
 }
 
