@@ -557,3 +557,606 @@ fn expand(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Vector3;
+
+    use crate::gcode::{BlendMode, Error, ErrorKind, Item, parse_program};
+
+    /// One output item, reduced to what a cycle decides: a rapid or feed move to a point, or a
+    /// dwell.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    enum S {
+        R([f64; 3]),
+        F([f64; 3]),
+        D(f64),
+    }
+
+    fn items(text: &str) -> Vec<S> {
+        let p = parse_program(text, "t.ngc", Vector3::zeros()).unwrap_or_else(|e| panic!("{e}"));
+        let mut at = p.start_mm;
+        p.items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Motion(e) => {
+                    assert_eq!(e.start_mm, at, "elements chain");
+                    at = e.end_mm;
+                    let end = [e.end_mm.x, e.end_mm.y, e.end_mm.z];
+                    Some(if e.rapid {
+                        S::R(end)
+                    } else {
+                        let f = e.feed_mm_s.expect("a feed");
+                        assert!((f - 10.0).abs() < 1e-9, "F600 mm/min, not {f}");
+                        S::F(end)
+                    })
+                }
+                Item::Dwell(d) => Some(S::D(d.seconds)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    fn near(a: S, b: S) -> bool {
+        let close = |p: [f64; 3], q: [f64; 3]| (0..3).all(|i| (p[i] - q[i]).abs() <= 0.001);
+        match (a, b) {
+            (S::R(p), S::R(q)) | (S::F(p), S::F(q)) => close(p, q),
+            (S::D(s), S::D(t)) => (s - t).abs() <= 1e-9,
+            _ => false,
+        }
+    }
+
+    #[track_caller]
+    fn assert_path(text: &str, expected: &[S]) {
+        let got = items(text);
+        let same = got.len() == expected.len() && got.iter().zip(expected).all(|(g, e)| near(*g, *e));
+        assert!(
+            same,
+            "program:\n{text}\ngot:\n{}\nexpected:\n{}",
+            got.iter().map(|s| format!("{s:?}\n")).collect::<String>(),
+            expected.iter().map(|s| format!("{s:?}\n")).collect::<String>()
+        );
+    }
+
+    fn error(text: &str) -> Error {
+        parse_program(text, "t.ngc", Vector3::zeros()).expect_err("an error")
+    }
+
+    /// A plane and its letters: the two that place the hole, then the drill axis (LinuxCNC:
+    /// G17 X Y / Z, G18 Z X / Y, G19 Y Z / X), with their indices in machine (X, Y, Z) order.
+    struct PlaneCase {
+        code: &'static str,
+        letters: [char; 3],
+        index: [usize; 3],
+    }
+
+    const PLANES: [PlaneCase; 3] = [
+        PlaneCase {
+            code: "G17",
+            letters: ['X', 'Y', 'Z'],
+            index: [0, 1, 2],
+        },
+        PlaneCase {
+            code: "G18",
+            letters: ['Z', 'X', 'Y'],
+            index: [2, 0, 1],
+        },
+        PlaneCase {
+            code: "G19",
+            letters: ['Y', 'Z', 'X'],
+            index: [1, 2, 0],
+        },
+    ];
+
+    /// A step of a cycle at its hole: feed or rapid to a drill-axis level, to the clear level,
+    /// or a dwell.
+    #[derive(Clone, Copy)]
+    enum B {
+        F(f64),
+        R(f64),
+        FClear,
+        RClear,
+        D(f64),
+    }
+
+    /// Each cycle with its extra words and its moves at a hole, for R = 2, bottom = −3, Q = 2,
+    /// P = 0.5 (pecks at 0 and −2; δ = 0.254 mm), worked out by hand from LinuxCNC's
+    /// `interp_cycles.cc`.
+    fn cycles() -> Vec<(&'static str, &'static str, &'static str, Vec<B>)> {
+        use B::*;
+        vec![
+            ("G81", "", "M3", vec![F(-3.0), RClear]),
+            ("G82", "P0.5", "M3", vec![F(-3.0), D(0.5), RClear]),
+            (
+                "G83",
+                "Q2",
+                "M3",
+                vec![
+                    F(0.0),
+                    R(2.0),
+                    R(0.254),
+                    F(-2.0),
+                    R(2.0),
+                    R(-1.746),
+                    F(-3.0),
+                    RClear,
+                ],
+            ),
+            (
+                "G73",
+                "Q2",
+                "M3",
+                vec![F(0.0), R(0.254), F(-2.0), R(-1.746), F(-3.0), RClear],
+            ),
+            ("G84", "P0.5", "M3", vec![F(-3.0), D(0.5), FClear]),
+            ("G74", "P0.5", "M4", vec![F(-3.0), D(0.5), FClear]),
+            ("G85", "", "M3", vec![F(-3.0), F(2.0), RClear]),
+            ("G86", "P0.5", "M3", vec![F(-3.0), D(0.5), RClear]),
+            ("G89", "P0.5", "M3", vec![F(-3.0), D(0.5), FClear]),
+        ]
+    }
+
+    /// `holes`: for each hole, its in-plane point, the levels of the rapids that bring the
+    /// tool to it (the first at the hole), and its clear level; the program starts with a
+    /// rapid to (0, 0, 10) and ends with one to `end_level`.
+    fn expected(
+        plane: &PlaneCase,
+        body: &[B],
+        holes: &[((f64, f64), &[f64], f64)],
+        end_level: f64,
+    ) -> Vec<S> {
+        let point = |a: f64, b: f64, n: f64| {
+            let mut p = [0.0; 3];
+            p[plane.index[0]] = a;
+            p[plane.index[1]] = b;
+            p[plane.index[2]] = n;
+            p
+        };
+        let mut out = vec![S::R(point(0.0, 0.0, 10.0))];
+        let mut last = (0.0, 0.0);
+        for &((a, b), approach, clear) in holes {
+            for level in approach {
+                out.push(S::R(point(a, b, *level)));
+            }
+            for step in body {
+                out.push(match *step {
+                    B::F(n) => S::F(point(a, b, n)),
+                    B::R(n) => S::R(point(a, b, n)),
+                    B::FClear => S::F(point(a, b, clear)),
+                    B::RClear => S::R(point(a, b, clear)),
+                    B::D(s) => S::D(s),
+                });
+            }
+            last = (a, b);
+        }
+        out.push(S::R(point(last.0, last.1, end_level)));
+        // A move to where the tool already is makes no element (G85's rapid to a clear level
+        // equal to R).
+        let mut at = [0.0; 3];
+        out.retain(|s| match s {
+            S::R(p) | S::F(p) if *p == at => false,
+            S::R(p) | S::F(p) => {
+                at = *p;
+                true
+            }
+            S::D(_) => true,
+        });
+        out
+    }
+
+    fn program(plane: &PlaneCase, lines: &[&str]) -> String {
+        let [a, b, n] = plane.letters;
+        lines
+            .iter()
+            .map(|l| {
+                l.replace("{A}", &a.to_string())
+                    .replace("{B}", &b.to_string())
+                    .replace("{N}", &n.to_string())
+                    .replace("{plane}", plane.code)
+                    + "\n"
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_cycle_in_every_plane_in_absolute_mode() {
+        for plane in &PLANES {
+            for (code, words, spindle, body) in cycles() {
+                let first = format!("G98 {code} {{A}}5 {{B}}6 {{N}}-3 R2 {words}");
+                let text = program(
+                    plane,
+                    &[
+                        "G21 {plane} G90 G94",
+                        "G0 {A}0 {B}0 {N}10",
+                        &format!("F600 {spindle}"),
+                        &first,
+                        // Sticky: only the hole changes.
+                        "{A}8",
+                        // G99: back to R from now on.
+                        "G99 {B}9",
+                        // At R already: straight across at R.
+                        "{A}5",
+                        "G80",
+                        "G0 {N}10",
+                        "M2",
+                    ],
+                );
+                let holes: [((f64, f64), &[f64], f64); 4] = [
+                    ((5.0, 6.0), &[10.0, 2.0], 10.0),
+                    ((8.0, 6.0), &[10.0, 2.0], 10.0),
+                    ((8.0, 9.0), &[10.0, 2.0], 2.0),
+                    ((5.0, 9.0), &[2.0], 2.0),
+                ];
+                assert_path(&text, &expected(plane, &body, &holes, 10.0));
+            }
+        }
+    }
+
+    #[test]
+    fn every_cycle_in_every_plane_in_incremental_mode_with_repeats() {
+        for plane in &PLANES {
+            for (code, words, spindle, body) in cycles() {
+                // Initial level 10: R = 10 − 8 = 2, bottom = R − 5 = −3.
+                let first = format!("G91 G98 {code} {{A}}5 {{B}}6 {{N}}-5 R-8 L2 {words}");
+                let text = program(
+                    plane,
+                    &[
+                        "G21 {plane} G90 G94",
+                        "G0 {A}0 {B}0 {N}10",
+                        &format!("F600 {spindle}"),
+                        &first,
+                        // L is not sticky; the hole moves from the last one.
+                        "{A}1",
+                        "G99 {B}-2",
+                        "{A}-1",
+                        "G80",
+                        "G90 G0 {N}10",
+                        "M2",
+                    ],
+                );
+                let holes: [((f64, f64), &[f64], f64); 5] = [
+                    ((5.0, 6.0), &[10.0, 2.0], 10.0),
+                    ((10.0, 12.0), &[10.0, 2.0], 10.0),
+                    ((11.0, 12.0), &[10.0, 2.0], 10.0),
+                    ((11.0, 10.0), &[10.0, 2.0], 2.0),
+                    ((10.0, 10.0), &[2.0], 2.0),
+                ];
+                assert_path(&text, &expected(plane, &body, &holes, 10.0));
+            }
+        }
+    }
+
+    #[test]
+    fn a_g18_peck_in_incremental_inch_mode_written_out() {
+        use S::*;
+        // G20: every number in inches; the peck clearance is 0.010 in. G18: Z and X place the
+        // hole, Y is the drill axis. Initial Y = 1 in; R = 1 − 0.5 = 0.5 in; bottom 0.15 in.
+        let text = "G20 G18 G90 G94\nG0 X0 Y1 Z0\nF23.622047244094489\n\
+                    G91 G99 G83 Z1 X2 Y-0.35 R-0.5 Q0.1\nG80\nM2\n";
+        let p = |x: f64, y: f64, z: f64| [x * 25.4, y * 25.4, z * 25.4];
+        assert_path(
+            text,
+            &[
+                R(p(0.0, 1.0, 0.0)),
+                R(p(2.0, 1.0, 1.0)),
+                R(p(2.0, 0.5, 1.0)),
+                F(p(2.0, 0.4, 1.0)),
+                R(p(2.0, 0.5, 1.0)),
+                R(p(2.0, 0.41, 1.0)),
+                F(p(2.0, 0.3, 1.0)),
+                R(p(2.0, 0.5, 1.0)),
+                R(p(2.0, 0.31, 1.0)),
+                F(p(2.0, 0.2, 1.0)),
+                R(p(2.0, 0.5, 1.0)),
+                R(p(2.0, 0.21, 1.0)),
+                F(p(2.0, 0.15, 1.0)),
+                R(p(2.0, 0.5, 1.0)),
+            ],
+        );
+    }
+
+    #[test]
+    fn a_g19_chip_break_under_a_work_offset_written_out() {
+        use S::*;
+        // G55 at (100, 0, -50); G19: Y and Z place the hole, X is the drill axis. From X 30
+        // (program), R 20, bottom 12.5, Q 3: pecks at 17, 14 (then 11 is past the bottom).
+        let text = "G10 L2 P2 X100 Z-50\nG55 G21 G19 G90\nG0 X30 Y1 Z2\nF600\n\
+                    G98 G73 Y4 Z5 X12.5 R20 Q3\nM2\n";
+        let p = |x: f64, y: f64, z: f64| [x + 100.0, y, z - 50.0];
+        assert_path(
+            text,
+            &[
+                R(p(30.0, 1.0, 2.0)),
+                R(p(30.0, 4.0, 5.0)),
+                R(p(20.0, 4.0, 5.0)),
+                F(p(17.0, 4.0, 5.0)),
+                R(p(17.254, 4.0, 5.0)),
+                F(p(14.0, 4.0, 5.0)),
+                R(p(14.254, 4.0, 5.0)),
+                F(p(12.5, 4.0, 5.0)),
+                R(p(30.0, 4.0, 5.0)),
+            ],
+        );
+    }
+
+    #[test]
+    fn below_r_the_tool_first_rises_to_r_where_it_is() {
+        use S::*;
+        // From Z 0, R 3 is above: up to R at (1, 1), then across at R; G98 then returns to R,
+        // since the initial level is below it.
+        assert_path(
+            "G0 X1 Y1\nG98 G81 X5 Y5 Z-2 R3 F600\n",
+            &[
+                R([1.0, 1.0, 0.0]),
+                R([1.0, 1.0, 3.0]),
+                R([5.0, 5.0, 3.0]),
+                F([5.0, 5.0, -2.0]),
+                R([5.0, 5.0, 3.0]),
+            ],
+        );
+    }
+
+    #[test]
+    fn l_repeats_in_absolute_mode_drill_the_same_hole_again() {
+        use S::*;
+        assert_path(
+            "G0 Z5\nG98 G81 X1 Y1 Z-1 R1 L2 F600\n",
+            &[
+                R([0.0, 0.0, 5.0]),
+                R([1.0, 1.0, 5.0]),
+                R([1.0, 1.0, 1.0]),
+                F([1.0, 1.0, -1.0]),
+                R([1.0, 1.0, 5.0]),
+                R([1.0, 1.0, 1.0]),
+                F([1.0, 1.0, -1.0]),
+                R([1.0, 1.0, 5.0]),
+            ],
+        );
+    }
+
+    #[test]
+    fn the_initial_level_lasts_until_another_motion() {
+        use S::*;
+        // G99 first (back to R at 2), then G98 with another cycle: the initial level is still
+        // the Z before the first cycle (4), not where the second one starts.
+        assert_path(
+            "G0 Z4\nG99 G81 X1 Z-1 R2 F600\nG98 G82 X2 Z-1 R1 P1\n",
+            &[
+                R([0.0, 0.0, 4.0]),
+                R([1.0, 0.0, 4.0]),
+                R([1.0, 0.0, 2.0]),
+                F([1.0, 0.0, -1.0]),
+                R([1.0, 0.0, 2.0]),
+                R([2.0, 0.0, 2.0]),
+                R([2.0, 0.0, 1.0]),
+                F([2.0, 0.0, -1.0]),
+                D(1.0),
+                R([2.0, 0.0, 4.0]),
+            ],
+        );
+        // A G0 between ends the run: the second cycle's initial level is 6.
+        assert_path(
+            "G0 Z4\nG99 G81 X1 Z-1 R2 F600\nG0 Z6\nG98 G81 X2 Z-1 R2\n",
+            &[
+                R([0.0, 0.0, 4.0]),
+                R([1.0, 0.0, 4.0]),
+                R([1.0, 0.0, 2.0]),
+                F([1.0, 0.0, -1.0]),
+                R([1.0, 0.0, 2.0]),
+                R([1.0, 0.0, 6.0]),
+                R([2.0, 0.0, 6.0]),
+                R([2.0, 0.0, 2.0]),
+                F([2.0, 0.0, -1.0]),
+                R([2.0, 0.0, 6.0]),
+            ],
+        );
+    }
+
+    #[test]
+    fn cycle_moves_run_in_exact_path_mode_and_the_mode_comes_back() {
+        let p = parse_program(
+            "G64 P0.1\nG0 Z5\nG81 X1 Z-1 R1 F600\nG80\nG1 X3\n",
+            "t.ngc",
+            Vector3::zeros(),
+        )
+        .unwrap();
+        let blends: Vec<_> = p.elements().map(|e| (e.line, e.blend)).collect();
+        let blend = BlendMode::Blend {
+            p_mm: 0.1,
+            q_mm: 0.1,
+        };
+        assert_eq!(blends.first(), Some(&(2, blend)));
+        assert!(
+            blends
+                .iter()
+                .filter(|(line, _)| *line == 3)
+                .all(|(_, b)| *b == BlendMode::ExactPath)
+        );
+        assert_eq!(blends.last(), Some(&(5, blend)));
+    }
+
+    #[test]
+    fn errors_name_line_column_and_cause() {
+        let missing = |code: &'static str, letter: char| {
+            move |k: &ErrorKind| {
+                matches!(k, ErrorKind::MissingWord { code: c, letter: l, .. } if c == code && *l == letter)
+            }
+        };
+        type Check = Box<dyn Fn(&ErrorKind) -> bool>;
+        let cases: Vec<(&str, usize, usize, Check)> = vec![
+            ("G0 Z5\nG81 X1 Y1 Z-1 F600", 2, 1, Box::new(missing("G81", 'R'))),
+            ("G0 Z5\nG81 X1 Y1 R1 F600", 2, 1, Box::new(missing("G81", 'Z'))),
+            ("G18 G0 Y5\nG81 X1 Z1 R1 F600", 2, 1, Box::new(missing("G81", 'Y'))),
+            ("G19 G0 X5\nG81 Y1 Z1 R1 F600", 2, 1, Box::new(missing("G81", 'X'))),
+            ("G0 Z5\nG83 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G83", 'Q'))),
+            ("G0 Z5\nG73 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G73", 'Q'))),
+            ("G0 Z5\nG82 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G82", 'P'))),
+            ("G0 Z5\nG81 R1 F600", 2, 1, Box::new(missing("G81", 'X'))),
+            // A cycle after G80, or after another cycle, needs its R again.
+            (
+                "G0 Z5\nG81 X1 Z-1 R1 F600\nG80\nG81 X2",
+                4,
+                1,
+                Box::new(missing("G81", 'R')),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R1 F600\nG82 X2 P1",
+                3,
+                1,
+                Box::new(missing("G82", 'R')),
+            ),
+            (
+                "G0 Z5\nG83 X1 Z-1 R1 Q0 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::InvalidValue { word, .. } if word == "Q0")),
+            ),
+            (
+                "G0 Z5\nG83 X1 Z-1 R1 Q-1 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::InvalidValue { word, .. } if word == "Q-1")),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R1 L0 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::InvalidValue { word, .. } if word == "L0")),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R-2 F600",
+                2,
+                12,
+                Box::new(|k| {
+                    *k == ErrorKind::CycleRetractBelowBottom {
+                        code: "G81",
+                        axis: 'Z',
+                        r_mm: -2.0,
+                        bottom_mm: -1.0,
+                    }
+                }),
+            ),
+            (
+                // G91: R 1 above the initial 5 is 6, the bottom 2 above R is 8.
+                "G0 Z5\nG91 G81 X1 Z2 R1 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::CycleRetractBelowBottom { r_mm, bottom_mm, .. } if *r_mm == 6.0 && *bottom_mm == 8.0)),
+            ),
+            (
+                "G0 Z5\nG41.1 D2\nG0 X10\nG81 X20 Z-1 R1 F600",
+                4,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::CompensationActive { code } if code == "G81")),
+            ),
+            (
+                "G0 Z5\nG93 G81 X1 Z-1 R1 F600",
+                2,
+                5,
+                Box::new(|k| *k == ErrorKind::CycleInverseTime { code: "G81" }),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R1",
+                2,
+                1,
+                Box::new(|k| *k == ErrorKind::MissingFeed { code: "G81" }),
+            ),
+            (
+                "G0 Z5\nG84 X1 Z-1 R1 F600",
+                2,
+                1,
+                Box::new(|k| {
+                    *k == ErrorKind::CycleSpindle {
+                        code: "G84",
+                        needed: "clockwise",
+                        fix: "M3",
+                    }
+                }),
+            ),
+            (
+                "M3\nG74 X1 Z-1 R1 F600",
+                2,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::CycleSpindle { code: "G74", fix: "M4", .. })),
+            ),
+            (
+                "M3\nM5\nG86 X1 Z-1 R1 P1 F600",
+                3,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::CycleSpindle { code: "G86", .. })),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R1 P1 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::UnusedWord { letter: 'P', .. })),
+            ),
+            (
+                "G0 Z5\nG81 X1 Z-1 R1 Q1 F600",
+                2,
+                15,
+                Box::new(|k| matches!(k, ErrorKind::UnusedWord { letter: 'Q', .. })),
+            ),
+            (
+                "G0 Z5\nG83 X1 Z-1000 R0 Q0.001 F600",
+                2,
+                1,
+                Box::new(|k| {
+                    *k == ErrorKind::CycleTooLong {
+                        code: "G83",
+                        max: super::MAX_CYCLE_ITEMS,
+                    }
+                }),
+            ),
+            (
+                // Pecks too small to change the depth in floating point: still bounded.
+                "G0 Z5\nG73 X1 Z-100000000 R100000000 Q0.000000001 F600",
+                2,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::CycleTooLong { .. })),
+            ),
+            (
+                "G0 Z5\nG88 X1 Z-1 R1 P1 F600",
+                2,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::Unsupported { what, .. } if what == "G88")),
+            ),
+            (
+                "G0 Z5\nG87 X1 Z-1 R1 I1 J1 K1 F600",
+                2,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::Unsupported { what, .. } if what == "G87")),
+            ),
+            (
+                "G76 P1 Z-1 I1 J1 K1",
+                1,
+                1,
+                Box::new(|k| matches!(k, ErrorKind::Unsupported { what, .. } if what == "G76")),
+            ),
+        ];
+        for (text, line, col, check) in cases {
+            let e = error(text);
+            assert_eq!((e.line, e.col), (line, col), "{text:?}: {e}");
+            assert!(check(&e.kind), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn messages_say_what_to_do() {
+        let e = error("G0 Z5\nG81 X1 Z-1 F600");
+        assert_eq!(
+            e.to_string(),
+            "t.ngc:2:1: G81 needs R: the retract plane on the first line of a cycle"
+        );
+        let e = error("G0 Z5\nG81 X1 Z-1 R-2 F600");
+        assert_eq!(
+            e.to_string(),
+            "t.ngc:2:12: G81: the retract plane R (-2.0000 mm) is below the hole bottom Z (-1.0000 mm)"
+        );
+        let e = error("G84 X1 Z-1 R1 F600");
+        assert_eq!(
+            e.to_string(),
+            "t.ngc:1:1: G84 needs the spindle turning clockwise: program M3 before it"
+        );
+    }
+}
