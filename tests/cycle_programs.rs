@@ -59,7 +59,10 @@ fn check(program: &str, feed_mm_s: f64, expected: &[(u64, bool, [f64; 3])]) {
     let mut at = [0.0; 3];
     for (i, record) in path.iter().enumerate() {
         let (line, rapid, start, end, feed) = *record;
-        assert_eq!(start, at, "element {i} (line {line}) starts where the last ended");
+        assert_eq!(
+            start, at,
+            "element {i} (line {line}) starts where the last ended"
+        );
         at = end;
         if !rapid {
             assert_eq!(feed, Some(feed_mm_s), "element {i}: feed");

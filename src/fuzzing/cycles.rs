@@ -70,7 +70,10 @@ fn check(data: &[u8]) {
             position = e.end_mm;
             if e.line == line {
                 on_line += 1;
-                assert!(on_line <= MAX_CYCLE_ITEMS + 8, "line {line} queues too much");
+                assert!(
+                    on_line <= MAX_CYCLE_ITEMS + 8,
+                    "line {line} queues too much"
+                );
             } else {
                 (line, on_line) = (e.line, 1);
             }

@@ -260,7 +260,12 @@ impl Emitter<'_> {
     }
 }
 
-fn missing_word(col: usize, code: &'static str, letter: char, expected: &'static str) -> BlockError {
+fn missing_word(
+    col: usize,
+    code: &'static str,
+    letter: char,
+    expected: &'static str,
+) -> BlockError {
     err_at(
         col,
         ErrorKind::MissingWord {
@@ -435,7 +440,11 @@ impl State {
                 col,
                 ErrorKind::CycleSpindle {
                     code,
-                    needed: if fix.0.is_empty() { "either way" } else { fix.0 },
+                    needed: if fix.0.is_empty() {
+                        "either way"
+                    } else {
+                        fix.0
+                    },
                     fix: fix.1,
                 },
             ));
@@ -446,10 +455,7 @@ impl State {
         let (hole_mm, step_mm) = if self.incremental {
             ((here[a], here[c]), (wa.unwrap_or(0.0), wc.unwrap_or(0.0)))
         } else {
-            (
-                (wa.unwrap_or(here[a]), wc.unwrap_or(here[c])),
-                (0.0, 0.0),
-            )
+            ((wa.unwrap_or(here[a]), wc.unwrap_or(here[c])), (0.0, 0.0))
         };
 
         self.cycles.r = Some(Written {
@@ -609,12 +615,16 @@ mod tests {
     #[track_caller]
     fn assert_path(text: &str, expected: &[S]) {
         let got = items(text);
-        let same = got.len() == expected.len() && got.iter().zip(expected).all(|(g, e)| near(*g, *e));
+        let same =
+            got.len() == expected.len() && got.iter().zip(expected).all(|(g, e)| near(*g, *e));
         assert!(
             same,
             "program:\n{text}\ngot:\n{}\nexpected:\n{}",
             got.iter().map(|s| format!("{s:?}\n")).collect::<String>(),
-            expected.iter().map(|s| format!("{s:?}\n")).collect::<String>()
+            expected
+                .iter()
+                .map(|s| format!("{s:?}\n"))
+                .collect::<String>()
         );
     }
 
@@ -977,20 +987,51 @@ mod tests {
 
     #[test]
     fn errors_name_line_column_and_cause() {
-        let missing = |code: &'static str, letter: char| {
-            move |k: &ErrorKind| {
-                matches!(k, ErrorKind::MissingWord { code: c, letter: l, .. } if c == code && *l == letter)
-            }
-        };
+        let missing = |code: &'static str, letter: char| move |k: &ErrorKind| matches!(k, ErrorKind::MissingWord { code: c, letter: l, .. } if c == code && *l == letter);
         type Check = Box<dyn Fn(&ErrorKind) -> bool>;
         let cases: Vec<(&str, usize, usize, Check)> = vec![
-            ("G0 Z5\nG81 X1 Y1 Z-1 F600", 2, 1, Box::new(missing("G81", 'R'))),
-            ("G0 Z5\nG81 X1 Y1 R1 F600", 2, 1, Box::new(missing("G81", 'Z'))),
-            ("G18 G0 Y5\nG81 X1 Z1 R1 F600", 2, 1, Box::new(missing("G81", 'Y'))),
-            ("G19 G0 X5\nG81 Y1 Z1 R1 F600", 2, 1, Box::new(missing("G81", 'X'))),
-            ("G0 Z5\nG83 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G83", 'Q'))),
-            ("G0 Z5\nG73 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G73", 'Q'))),
-            ("G0 Z5\nG82 X1 Z-1 R1 F600", 2, 1, Box::new(missing("G82", 'P'))),
+            (
+                "G0 Z5\nG81 X1 Y1 Z-1 F600",
+                2,
+                1,
+                Box::new(missing("G81", 'R')),
+            ),
+            (
+                "G0 Z5\nG81 X1 Y1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G81", 'Z')),
+            ),
+            (
+                "G18 G0 Y5\nG81 X1 Z1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G81", 'Y')),
+            ),
+            (
+                "G19 G0 X5\nG81 Y1 Z1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G81", 'X')),
+            ),
+            (
+                "G0 Z5\nG83 X1 Z-1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G83", 'Q')),
+            ),
+            (
+                "G0 Z5\nG73 X1 Z-1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G73", 'Q')),
+            ),
+            (
+                "G0 Z5\nG82 X1 Z-1 R1 F600",
+                2,
+                1,
+                Box::new(missing("G82", 'P')),
+            ),
             ("G0 Z5\nG81 R1 F600", 2, 1, Box::new(missing("G81", 'X'))),
             // A cycle after G80, or after another cycle, needs its R again.
             (
@@ -1041,7 +1082,9 @@ mod tests {
                 "G0 Z5\nG91 G81 X1 Z2 R1 F600",
                 2,
                 15,
-                Box::new(|k| matches!(k, ErrorKind::CycleRetractBelowBottom { r_mm, bottom_mm, .. } if *r_mm == 6.0 && *bottom_mm == 8.0)),
+                Box::new(
+                    |k| matches!(k, ErrorKind::CycleRetractBelowBottom { r_mm, bottom_mm, .. } if *r_mm == 6.0 && *bottom_mm == 8.0),
+                ),
             ),
             (
                 "G0 Z5\nG41.1 D2\nG0 X10\nG81 X20 Z-1 R1 F600",
@@ -1077,7 +1120,16 @@ mod tests {
                 "M3\nG74 X1 Z-1 R1 F600",
                 2,
                 1,
-                Box::new(|k| matches!(k, ErrorKind::CycleSpindle { code: "G74", fix: "M4", .. })),
+                Box::new(|k| {
+                    matches!(
+                        k,
+                        ErrorKind::CycleSpindle {
+                            code: "G74",
+                            fix: "M4",
+                            ..
+                        }
+                    )
+                }),
             ),
             (
                 "M3\nM5\nG86 X1 Z-1 R1 P1 F600",

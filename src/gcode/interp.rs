@@ -41,8 +41,8 @@ use super::{Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
 // The canned cycles live in their own file; as a child of this module they extend `State`.
 #[path = "cycles.rs"]
 mod cycles;
-use cycles::{Cycle, CycleState, Spindle};
 pub use cycles::MAX_CYCLE_ITEMS;
+use cycles::{Cycle, CycleState, Spindle};
 
 /// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory.
 pub const MAX_LINE_BYTES: usize = 64 * 1024;
