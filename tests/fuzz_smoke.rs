@@ -38,6 +38,13 @@ fn gcode_programs() {
 }
 
 #[test]
+fn canned_cycle_programs() {
+    let s = seeds("tests/programs", &["cycles_g17.ngc", "cycles_g18_g19.ngc"]);
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 3000, 6, fuzzing::cycles::program);
+}
+
+#[test]
 fn control_lines() {
     let s = seeds("tests/control_lines", &[".txt"]);
     let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();

@@ -425,7 +425,6 @@ fn notes_record_what_has_no_motion_effect() {
             "2:7: M3: spindle control is out of scope",
             "2:10: M8: coolant control is out of scope",
             "3:5: G97: spindle RPM mode is the only mode: no effect",
-            "3:1: G98: canned-cycle return mode has no effect (canned cycles are not supported)",
             "4:1: message: Insert the part",
             "5:1: M5: spindle control is out of scope",
             "5:4: M9: coolant control is out of scope",
@@ -436,10 +435,34 @@ fn notes_record_what_has_no_motion_effect() {
 /// (program, line, col, message) for each unsupported feature and each program error.
 const ERRORS: &[(&str, usize, usize, &str)] = &[
     (
-        "G0 X1\nG81 X1 Y1 Z-1 R1",
+        "G0 X1 F100\nG81 X1 Y1 Z-1",
         2,
         1,
-        "unsupported: G81 (canned cycles are not supported)",
+        "G81 needs R: the retract plane on the first line of a cycle",
+    ),
+    (
+        "G0 X1 F100\nG81 X1 Y1 Z1 R0.5",
+        2,
+        14,
+        "G81: the retract plane R (0.5000 mm) is below the hole bottom Z (1.0000 mm)",
+    ),
+    (
+        "G0 X1 F100\nG83 X1 Y1 Z-1 R1 Q0",
+        2,
+        18,
+        "invalid Q0: expected a peck depth greater than 0",
+    ),
+    (
+        "G0 X1 F100 M3\nG88 X1 Y1 Z-1 R1 P1",
+        2,
+        1,
+        "unsupported: G88 (the G88 boring cycle stops for the operator to retract the spindle by hand: use G86 or G89)",
+    ),
+    (
+        "G0 X1 F100 M3\nG87 X1 Y1 Z-1 R1 I1 J1 K1",
+        2,
+        1,
+        "unsupported: G87 (the back boring cycle needs spindle orientation (M19), which is out of scope)",
     ),
     (
         "G33 Z-1 K1",

@@ -10,6 +10,7 @@
 
 pub mod candump;
 pub mod control;
+pub mod cycles;
 pub mod eds;
 pub mod gcode;
 pub mod machine;

@@ -103,6 +103,8 @@ fn classify_g(tenths: u32) -> Known {
     use Known::*;
     match tenths {
         0 | 10 | 20 | 30 | 800 => In(Group::Motion),
+        // Canned cycles (see `cycles.rs`).
+        730 | 740 | 810..=860 | 890 => In(Group::Motion),
         40 | 100 | 280 | 281 | 300 | 301 | 530 | 920..=923 => In(Group::NonModal),
         170 | 180 | 190 => In(Group::Plane),
         900 | 910 => In(Group::Distance),
@@ -124,7 +126,12 @@ fn classify_g(tenths: u32) -> Known {
             Unsupported("spindle-synchronised motion (threading, rigid tapping) is not supported")
         }
         380..=389 => Unsupported("probing is not supported"),
-        730 | 740 | 810..=890 => Unsupported("canned cycles are not supported"),
+        870 => Unsupported(
+            "the back boring cycle needs spindle orientation (M19), which is out of scope",
+        ),
+        880 => Unsupported(
+            "the G88 boring cycle stops for the operator to retract the spindle by hand: use G86 or G89",
+        ),
         950 => Unsupported("feed per revolution is spindle-synchronised: not supported"),
         960 => Unsupported("constant surface speed is spindle-synchronised: not supported"),
         500 | 510 | 520 | 680 | 690 => {
@@ -341,7 +348,7 @@ impl Block {
         self.axes().into_iter().flatten().min_by_key(|w| w.col)
     }
 
-    /// G0, G1, G2, G3 or G80.
+    /// G0, G1, G2, G3, G80 or a canned cycle (G73, G74, G81…G86, G89).
     pub fn motion(&self) -> Option<Code> {
         self.get(Group::Motion)
     }
@@ -385,7 +392,7 @@ impl Block {
     pub fn path(&self) -> Option<Code> {
         self.get(Group::Path)
     }
-    /// G98, G99 (accepted, noted: they only matter to canned cycles).
+    /// G98, G99 (the canned cycles' return level).
     pub fn retract(&self) -> Option<Code> {
         self.get(Group::Retract)
     }
@@ -479,9 +486,10 @@ mod tests {
             read("G1 F-1").unwrap_err().1.to_string(),
             "invalid F-1: expected a feed rate of 0 or more"
         );
+        assert_eq!(read("G81 X1").unwrap().motion().unwrap().to_string(), "G81");
         assert_eq!(
-            read("G81 X1").unwrap_err().1.to_string(),
-            "unsupported: G81 (canned cycles are not supported)"
+            read("G88 X1").unwrap_err().1.to_string(),
+            "unsupported: G88 (the G88 boring cycle stops for the operator to retract the spindle by hand: use G86 or G89)"
         );
         assert_eq!(
             read("G12.5").unwrap_err().1.to_string(),

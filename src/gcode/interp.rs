@@ -38,6 +38,12 @@ use super::lex::{Control, Keyword, Label, LineKind, Scanner, Word, peek_control}
 use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 use super::{Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
 
+// The canned cycles live in their own file; as a child of this module they extend `State`.
+#[path = "cycles.rs"]
+mod cycles;
+pub use cycles::MAX_CYCLE_ITEMS;
+use cycles::{Cycle, CycleState, Spindle};
+
 /// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory.
 pub const MAX_LINE_BYTES: usize = 64 * 1024;
 
@@ -140,6 +146,8 @@ enum Motion {
     Linear,
     Cw,
     Ccw,
+    /// A canned cycle (G73, G74, G81…G86, G89).
+    Cycle(Cycle),
 }
 
 /// Modal state and positions.
@@ -170,6 +178,12 @@ struct State {
     arc_tolerance_mm: f64,
     arc_tolerance_rel: f64,
     optional_stop: bool,
+    /// G99 (return to R) rather than G98 (to the initial level) in canned cycles.
+    retract_to_r: bool,
+    /// The spindle as M3/M4/M5/M19 left it (tapping and boring cycles check it).
+    spindle: Spindle,
+    /// Sticky values of the canned cycles.
+    cycles: CycleState,
     /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
     used: u16,
 }
@@ -240,6 +254,10 @@ impl State {
             arc_tolerance_mm: setup.arc_tolerance_mm,
             arc_tolerance_rel: setup.arc_tolerance_rel,
             optional_stop: setup.optional_stop,
+            // LinuxCNC's interpreter starts in G99 (its retract mode's zero value, R_PLANE).
+            retract_to_r: true,
+            spindle: Spindle::Stopped,
+            cycles: CycleState::default(),
             used: 0,
         }
     }
@@ -465,6 +483,9 @@ impl State {
                 );
             }
         }
+        if let Some(code) = b.spindle() {
+            self.spindle = Spindle::after(code.tenths);
+        }
         for (code, what) in [
             (b.spindle(), "spindle control is out of scope"),
             (b.coolant(), "coolant control is out of scope"),
@@ -476,10 +497,6 @@ impl State {
             (
                 b.spindle_mode(),
                 "spindle RPM mode is the only mode: no effect",
-            ),
-            (
-                b.retract(),
-                "canned-cycle return mode has no effect (canned cycles are not supported)",
             ),
         ] {
             if let Some(code) = code {
@@ -563,6 +580,9 @@ impl State {
         }
         if let Some(code) = b.arc_distance() {
             self.arc_absolute = code.tenths == 901;
+        }
+        if let Some(code) = b.retract() {
+            self.retract_to_r = code.tenths == 990;
         }
 
         // Codes that take the axis words for themselves.
@@ -921,19 +941,30 @@ impl State {
     ) -> Result<(), BlockError> {
         let code = b.motion();
         let first_axis = b.first_axis();
+        let previous = self.motion;
         if let Some(code) = code {
             self.motion = match code.tenths {
                 0 => Some(Motion::Rapid),
                 10 => Some(Motion::Linear),
                 20 => Some(Motion::Cw),
                 30 => Some(Motion::Ccw),
-                _ => {
-                    if let Some(w) = first_axis {
-                        return Err(err_at(w.col, ErrorKind::AxisWithG80));
+                t => match Cycle::from_tenths(t) {
+                    Some(cycle) => Some(Motion::Cycle(cycle)),
+                    None => {
+                        if let Some(w) = first_axis {
+                            return Err(err_at(w.col, ErrorKind::AxisWithG80));
+                        }
+                        None
                     }
-                    None
-                }
+                },
             };
+        }
+        // Any other motion (G80 included) ends a run of canned cycles: the next one takes its
+        // initial level afresh.
+        if (code.is_some() || first_axis.is_some())
+            && !matches!(self.motion, Some(Motion::Cycle(_)))
+        {
+            self.cycles.initial_mm = None;
         }
         let on_line = code.filter(|c| c.tenths != 800);
         if on_line.is_none() && first_axis.is_none() {
@@ -1007,6 +1038,9 @@ impl State {
                 let f = feed(self, (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
+            }
+            Motion::Cycle(cycle) => {
+                self.canned_cycle(b, line, col, cycle, previous != Some(mode), out)?;
             }
             Motion::Cw | Motion::Ccw => {
                 let element = self.arc(b, line, col, mode == Motion::Cw)?;
@@ -1183,12 +1217,14 @@ impl State {
                         letter,
                         users: match letter {
                             'I' | 'J' | 'K' => "an arc (G2/G3) in a plane that has this axis",
-                            'R' => "an R-format arc (G2/G3) or G10",
-                            'P' => "G4, G10, G64 or an arc (turns)",
-                            'Q' => "G64 or M61",
+                            'R' => "an R-format arc (G2/G3), G10 or a canned cycle",
+                            'P' => {
+                                "G4, G10, G64, an arc (turns) or a cycle with a dwell (G74, G82, G84, G86, G89)"
+                            }
+                            'Q' => "G64, M61 or a peck drilling cycle (G73, G83)",
                             'D' => "G41/G42 (tool number) or G41.1/G42.1 (diameter)",
                             'H' => "G43, G43.2 or G44",
-                            _ => "G10 or G41.1/G42.1",
+                            _ => "G10, G41.1/G42.1 or a canned cycle (repeats)",
                         },
                     },
                 };

@@ -22,7 +22,9 @@
 //! - Block delete `/` at the start of a line: skipped while [`Setup::block_delete`] is on.
 //! - Motion (modal, also for axis words on lines with no G word): G0, G1, G2/G3 (IJK centre or R
 //!   radius, negative R for more than 180°, full circles when the end equals the start, helices
-//!   with the third axis, `P` turns), G80 (motion off). G53 (non-modal: G0/G1 in machine
+//!   with the third axis, `P` turns), G80 (motion off), the canned cycles G73, G74, G81…G86,
+//!   G89 with R Q P L and G98/G99 (expanded into lines and dwells: `cycles.rs`). G53
+//!   (non-modal: G0/G1 in machine
 //!   coordinates), G28/G30 (rapid to the stored position, via the axis words' point if any),
 //!   G28.1/G30.1 (store the current position).
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
@@ -31,7 +33,7 @@
 //! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L2/L20 P X Y Z R (work offsets and
 //!   rotation), G92/G92.1/G92.2/G92.3.
 //! - M0/M1 (program stops), M2/M30 (end: nothing after them is read), M6 and M61 Q (set the
-//!   tool in the spindle), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97, G98/G99 accepted:
+//!   tool in the spindle), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97 accepted:
 //!   the ones without a motion effect leave a [`Note`].
 //!
 //! - Parameters `#1`…`#4999` and `#<name>` (local to a call, global when the name starts with
@@ -41,8 +43,8 @@
 //!   `break`, `continue`. Subroutine bodies, and a loop or `if` of the main program while it
 //!   runs, are kept in memory (at most [`MAX_STORED_BYTES`]); everything else streams.
 //!
-//! Everything else is an [`Error`] naming file, line and column, never a silent skip: canned
-//! cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
+//! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
+//! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
 //! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), subroutine files
 //! are [`ErrorKind::Unsupported`] (or [`ErrorKind::UndefinedSubroutine`]).
 //!
@@ -66,8 +68,8 @@ pub use element::{
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interp::{
-    Interpreter, MAX_CALL_DEPTH, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM, MAX_STORED_BYTES,
-    MIN_ARC_RADIUS_MM, Setup,
+    Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM,
+    MAX_STORED_BYTES, MIN_ARC_RADIUS_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
 pub use tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
@@ -742,6 +744,47 @@ pub enum ErrorKind {
     InvalidSetup {
         /// What is wrong.
         what: &'static str,
+    },
+    /// A canned cycle whose retract plane R is below the bottom of its hole.
+    #[error(
+        "{code}: the retract plane R ({r_mm:.4} mm) is below the hole bottom {axis} ({bottom_mm:.4} mm)"
+    )]
+    CycleRetractBelowBottom {
+        /// The cycle, e.g. `G81`.
+        code: &'static str,
+        /// The drill axis of the plane (Z in G17, Y in G18, X in G19).
+        axis: char,
+        /// The R plane, program coordinate (mm).
+        r_mm: f64,
+        /// The hole bottom, program coordinate (mm).
+        bottom_mm: f64,
+    },
+    /// A canned cycle in inverse time feed mode (LinuxCNC refuses it too).
+    #[error("{code}: canned cycles cannot run in inverse time feed mode (G93): program G94 first")]
+    CycleInverseTime {
+        /// The cycle.
+        code: &'static str,
+    },
+    /// A canned cycle line that would make more moves and dwells than the interpreter holds
+    /// for one line ([`MAX_CYCLE_ITEMS`]).
+    #[error(
+        "{code} makes more than {max} moves and dwells on one line (pecks times repeats): use a larger Q or fewer repeats (L)"
+    )]
+    CycleTooLong {
+        /// The cycle.
+        code: &'static str,
+        /// The limit.
+        max: usize,
+    },
+    /// A tapping or boring cycle with the spindle not turning as it must (LinuxCNC's check).
+    #[error("{code} needs the spindle turning {needed}: program {fix} before it")]
+    CycleSpindle {
+        /// The cycle.
+        code: &'static str,
+        /// The direction it needs, e.g. `clockwise`.
+        needed: &'static str,
+        /// The code that starts it, e.g. `M3`.
+        fix: &'static str,
     },
 }
 
