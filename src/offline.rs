@@ -207,6 +207,7 @@ pub fn plan_stream<R: BufRead>(
             plot,
             start_mm,
             name,
+            planner.smoothing(),
         )?)
     } else {
         None
@@ -426,15 +427,19 @@ impl Setpoints {
         plot: Option<PlotRecorder>,
         start_mm: Vector3<f64>,
         name: &str,
+        smoothing: Option<crate::planner::Smoothing>,
     ) -> Result<Setpoints, OfflineError> {
         let mut out = file.map(Out::create).transpose()?;
         let period_s = machine.cycle_s();
-        let interp = Interpolator::streaming(start_mm, period_s).map_err(|source| {
+        let mut interp = Interpolator::streaming(start_mm, period_s).map_err(|source| {
             OfflineError::Sampling {
                 file: name.to_string(),
                 source,
             }
         })?;
+        if let Some(spec) = smoothing {
+            interp = interp.with_smoothing(spec);
+        }
         let mut header = String::from("cycle,t_s");
         for a in &machine.axes {
             header.push_str(&format!(",{}_mm", a.name));

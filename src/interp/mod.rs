@@ -106,12 +106,14 @@
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
 pub mod filter;
+pub mod smooth;
 
 use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment, SegmentPath};
+use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment, SegmentPath, Smoothing};
+use smooth::Smoother;
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
 /// that rounding in `k · period_s` never adds one extra period of standing still.
@@ -543,7 +545,19 @@ fn quiet_of(seg: &Segment, period_s: f64, out: &mut VecDeque<Quiet>) {
 /// Samples planned segments at a fixed period. See the module documentation.
 #[derive(Debug, Clone)]
 pub struct Interpolator {
+    /// The segments not yet passed: by the raw cursor (from `raw` on) and, with smoothing, by
+    /// the filtered point (from `geo` on).
     queue: VecDeque<Segment>,
+    /// Path distance from the start to each queued segment's start.
+    starts_mm: VecDeque<f64>,
+    /// Path distance to the end of the queued motion.
+    queued_end_dist_mm: f64,
+    /// Index in `queue` of the segment of the raw cursor (plan time `τ`).
+    raw: usize,
+    /// Index in `queue` of the segment of the filtered point.
+    geo: usize,
+    /// The jerk-limited mode's filters ([`crate::planner::Smoothing`]), if the plan has them.
+    smoother: Option<Smoother>,
     period_s: f64,
     /// End point and end time of the last segment queued (the start before any).
     queued_end_mm: Vector3<f64>,
@@ -582,7 +596,14 @@ impl Interpolator {
     /// Prepares to sample a whole `plan` every `period_s` seconds, starting at its start.
     pub fn new(plan: Plan, period_s: f64) -> Result<Interpolator, InterpError> {
         let mut interp = Interpolator::streaming(plan.start_mm(), period_s)?;
-        interp.queue.extend(plan.segments().iter().copied());
+        if let Some(spec) = plan.smoothing() {
+            interp = interp.with_smoothing(spec);
+        }
+        for seg in plan.segments() {
+            interp.starts_mm.push_back(interp.queued_end_dist_mm);
+            interp.queued_end_dist_mm += seg.length_mm;
+            interp.queue.push_back(*seg);
+        }
         interp.queued_end_mm = plan.end_mm();
         interp.queued_end_s = plan.duration_s();
         interp.line = plan.segments().first().map(|s| s.line);
@@ -597,6 +618,11 @@ impl Interpolator {
         }
         Ok(Interpolator {
             queue: VecDeque::new(),
+            starts_mm: VecDeque::new(),
+            queued_end_dist_mm: 0.0,
+            raw: 0,
+            geo: 0,
+            smoother: None,
             period_s,
             queued_end_mm: start_mm,
             queued_end_s: 0.0,
@@ -623,6 +649,19 @@ impl Interpolator {
         })
     }
 
+    /// Applies the jerk-limited mode's filters to the samples (see [`smooth`]): the segments
+    /// must be planned for them ([`crate::planner::Planner::smoothing`]). Call before the
+    /// first [`update`](Self::update).
+    pub fn with_smoothing(mut self, spec: Smoothing) -> Interpolator {
+        self.smoother = Some(Smoother::new(spec, self.period_s, self.last_mm));
+        self
+    }
+
+    /// The filters applied to the samples, if any.
+    pub fn smoothing(&self) -> Option<Smoothing> {
+        self.smoother.as_ref().map(Smoother::spec)
+    }
+
     /// Allows [`set_override`](Self::set_override), [`hold`](Self::hold) and
     /// [`resume`](Self::resume), with `k` ramping within `ramp`.
     pub fn with_override_ramp(mut self, ramp: OverrideRamp) -> Interpolator {
@@ -635,7 +674,7 @@ impl Interpolator {
         } else {
             self.queue.len().saturating_sub(1)
         };
-        for i in 0..known {
+        for i in self.raw.min(known)..known {
             self.note_stretches(i);
         }
         self
@@ -707,7 +746,11 @@ impl Interpolator {
 
     /// Whether `k` has ramped down to 0 and stays there (a hold, or a 0 % override, done).
     pub fn is_standing_still(&self) -> bool {
-        self.last_k.done && self.last_k.k == 0.0
+        self.last_k.done && self.last_k.k == 0.0 && self.smoother_settled()
+    }
+
+    fn smoother_settled(&self) -> bool {
+        self.smoother.as_ref().is_none_or(Smoother::is_settled)
     }
 
     /// The override ramp, if any.
@@ -922,6 +965,8 @@ impl Interpolator {
         if self.line.is_none() {
             self.line = Some(segment.line);
         }
+        self.starts_mm.push_back(self.queued_end_dist_mm);
+        self.queued_end_dist_mm += segment.length_mm;
         self.queue.push_back(segment);
         if self.queue.len() >= 2 {
             self.note_stretches(self.queue.len() - 2);
@@ -975,27 +1020,52 @@ impl Interpolator {
         let k = self.k_at(n);
         let t_s = self.tau_at(n);
         let snap_s = END_SNAP_PERIODS * self.period_s;
-        while let Some(seg) = self.queue.front() {
+        while let Some(seg) = self.queue.get(self.raw) {
             // The last segment of an open queue is kept: it is what a starved call holds to.
             if t_s < seg.end_time_s() - snap_s {
                 self.samples = n;
                 self.last_k = k;
                 self.last_tau_s = t_s;
-                self.line = Some(seg.line);
-                self.last_mm = seg.position_at(t_s - seg.start_time_s);
+                let local_s = t_s - seg.start_time_s;
+                self.last_mm = if let Some(smoother) = self.smoother.as_mut() {
+                    if seg.length_mm > 0.0 && seg.time_law != smoother.time_law() {
+                        smoother.set_time_law(seg.time_law, self.starts_mm[self.raw]);
+                    }
+                    let raw_mm = self.starts_mm[self.raw] + seg.distance_at(local_s);
+                    self.smooth(raw_mm)
+                } else {
+                    self.line = Some(seg.line);
+                    seg.position_at(local_s)
+                };
+                self.trim();
                 *out_mm = self.last_mm;
-                if k.done && k.k == 0.0 {
-                    return Status::Held { line: seg.line };
+                let line = self.line.unwrap_or(0);
+                if k.done && k.k == 0.0 && self.smoother_settled() {
+                    return Status::Held { line };
                 }
-                return Status::Working { line: seg.line };
+                return Status::Working { line };
             }
-            self.line = Some(seg.line);
-            self.queue.pop_front();
+            if self.smoother.is_none() {
+                self.line = Some(seg.line);
+            }
+            self.raw += 1;
         }
         if self.closed {
             self.samples = n;
             self.last_k = k;
             self.last_tau_s = t_s.min(self.queued_end_s);
+            if self.smoother.is_some() {
+                // The end of the raw plan: the filters catch up (the planner keeps still for
+                // that long at the end, so this only happens for plans made otherwise).
+                self.last_mm = self.smooth(self.queued_end_dist_mm);
+                self.trim();
+                if !self.smoother_settled() {
+                    *out_mm = self.last_mm;
+                    return Status::Working {
+                        line: self.line.unwrap_or(0),
+                    };
+                }
+            }
             self.finished = true;
             self.last_mm = self.queued_end_mm;
             *out_mm = self.last_mm;
@@ -1003,6 +1073,48 @@ impl Interpolator {
         }
         *out_mm = self.last_mm;
         Status::Starved
+    }
+
+    /// The filtered sample for the raw path distance `raw_mm` (see [`smooth`]).
+    fn smooth(&mut self, raw_mm: f64) -> Vector3<f64> {
+        let Some(smoother) = self.smoother.as_mut() else {
+            return self.last_mm;
+        };
+        let s_mm = smoother.filter_distance(raw_mm);
+        let last = self.queue.len().saturating_sub(1);
+        while self.geo < last.min(self.raw)
+            && self.starts_mm[self.geo] + self.queue[self.geo].length_mm < s_mm
+        {
+            self.geo += 1;
+        }
+        let point = match self.queue.get(self.geo) {
+            Some(seg) => {
+                self.line = Some(seg.line);
+                let start_mm = self.starts_mm[self.geo];
+                if s_mm >= start_mm + seg.length_mm {
+                    seg.end_mm
+                } else {
+                    seg.point_at_distance(s_mm - start_mm)
+                }
+            }
+            None => self.queued_end_mm,
+        };
+        smoother.filter_point(point)
+    }
+
+    /// Drops the segments both cursors have passed.
+    fn trim(&mut self) {
+        let passed = if self.smoother.is_some() {
+            self.geo.min(self.raw)
+        } else {
+            self.raw
+        };
+        for _ in 0..passed {
+            self.queue.pop_front();
+            self.starts_mm.pop_front();
+        }
+        self.raw -= passed;
+        self.geo -= passed.min(self.geo);
     }
 
     /// Source line of the segment of the latest sample (the first segment's before any
@@ -1048,9 +1160,9 @@ impl Interpolator {
         self.queued_end_s
     }
 
-    /// Segments queued and not yet passed.
+    /// Segments queued and not yet passed by the plan time.
     pub fn queued(&self) -> usize {
-        self.queue.len()
+        self.queue.len() - self.raw.min(self.queue.len())
     }
 
     /// Number of calls to [`update`](Self::update) needed to reach [`Status::Finished`]

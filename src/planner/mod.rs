@@ -55,6 +55,47 @@
 //! arc within the tolerance (`shared/seeds` 001), where that is faster
 //! than the sharp corner. G64 without P, or P0, keeps the corner exact.
 //!
+//! # The jerk-limited mode (`profile = "s-curve"`)
+//!
+//! Planning jerk element by element (every element starting and ending at zero
+//! acceleration, every polyline vertex charged against the jerk budget within one period)
+//! made whole programs 2–14 times slower than their trapezoid plans. The `s-curve` mode
+//! instead keeps the trapezoid look-ahead, which carries speed and acceleration through
+//! junctions, and makes its output jerk-limited with filters the plan is made for
+//! ([`Smoothing`], applied by [`crate::interp`]); FIR interpolation in the sense of Tajima &
+//! Sencer and Biagiotti & Melchiorri, with the filter on the time law rather than on the axes
+//! for the long part:
+//!
+//! - **Time law.** The path parameter `s(t)` (distance along the whole path) passes through a
+//!   moving average of `T_f = min_i A_i/J_i`; the axes are `path(s_f(t))`, so this filter
+//!   costs no contour error. Its output's acceleration is an average of the plan's, and its
+//!   jerk is at most the range of the plan's acceleration over `T_f`, divided by `T_f`: a
+//!   trapezoid whose tangential acceleration stays within `J_t·T_f/2` comes out with its
+//!   tangential jerk within `J_t` (`J_t`: the element's jerk budget, as the S-curves had),
+//!   even where it brakes right after accelerating. Elements joined at speed plan with the
+//!   lower of their two accelerations, since the filter's window spans the junction.
+//! - **Dips.** The filtered speed rounds every dip of the plan: through a V-shaped dip to `c`
+//!   with the acceleration `A` on both sides it passes the dip's position at `c + A·T_f/4`. So a
+//!   junction whose cap is below either neighbour's speed is planned `A·T_f/4` lower, and one
+//!   where that leaves nothing becomes a stop (`Planner::junction_caps`).
+//! - **Stops.** Where the plan stops after a filtered move, it stands still for the filters'
+//!   settling time ([`Smoothing::settle_periods`]) before anything else: the filtered motion
+//!   then reaches the stop exactly, and exact stops, dwells, program stops and the program's
+//!   end are exact.
+//! - **Moves alone.** A move from rest to rest (a sharp corner before and after it) is planned
+//!   as an exact, time-optimal S-curve of its own and bypasses the time-law filter, which would
+//!   cost it `T_f` of standing still; the filter is switched only at rest.
+//! - **Geometry.** Each axis then passes through two moving averages of `T_k`
+//!   ([`AXIS_FILTER_S`]), which spread the velocity step of a polyline's vertex over `2·T_k`:
+//!   a vertex's step `Δv` reaches the drive as an acceleration of at most `Δv/T_k` and a jerk
+//!   of at most `Δv/T_k²`, so the junction rules use `T_k` where the trapezoid mode uses the
+//!   period (`Planner::smoothed_junction_limit_mm_s`). Their price is contour error,
+//!   `v·|Δu|·2·T_k/8` at a corner and `2·v²·T_k²/(24·r)` on an arc, which the junction and arc
+//!   speeds keep within the tolerance: half the G64 P tolerance (the corner blends take the
+//!   other half), else `chord_tol_mm`.
+//! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
+//!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
+//!
 //! # Look-ahead
 //!
 //! [`Planner`] keeps a window of up to [`PlannerConfig::lookahead`] elements. When it is full
@@ -124,6 +165,68 @@ pub enum ProfileKind {
     SCurve,
     /// Jerk-continuous S-curve (raised-cosine jerk pulses, 001 problem 4).
     Smooth,
+}
+
+/// Time of each of the two moving averages per axis of the jerk-limited mode (the geometry
+/// filter, see the module documentation), rounded up to whole periods (at least 2).
+pub const AXIS_FILTER_S: f64 = 0.004;
+
+/// Longest time-law filter: past it the tangential acceleration is lowered instead
+/// (`a ≤ J·T_f/2`).
+pub const MAX_TIME_LAW_FILTER_S: f64 = 1.0;
+
+/// The filters of the jerk-limited mode ([`ProfileKind::SCurve`]), which the planner plans
+/// for and the interpolator applies (see the module documentation): a moving average of the
+/// path parameter over `time_law_periods` periods, then two moving averages of each axis over
+/// `axis_periods` periods each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Smoothing {
+    /// Periods of the moving average of the path parameter `s(t)` (at least 1).
+    pub time_law_periods: usize,
+    /// Periods of each of the two moving averages of each axis (at least 1).
+    pub axis_periods: usize,
+}
+
+impl Smoothing {
+    /// The filters for `limits` and `cfg`: `None` unless the profile is
+    /// [`ProfileKind::SCurve`]. The time-law filter lasts `T_f = min_i A_i/J_i` (the time a
+    /// jerk-limited axis takes to build up its acceleration; at most
+    /// [`MAX_TIME_LAW_FILTER_S`]), rounded up to whole periods. A plan whose tangential
+    /// acceleration stays within `J·T_f/2` then comes out with its jerk within `J`, even where
+    /// the acceleration reverses within one filter time.
+    pub fn for_machine(limits: &Limits, cfg: &PlannerConfig) -> Option<Smoothing> {
+        if cfg.profile != ProfileKind::SCurve {
+            return None;
+        }
+        let mut t_f = MAX_TIME_LAW_FILTER_S;
+        for i in 0..3 {
+            let j = cfg.max_jerk_mm_s3[i];
+            if j.is_finite() && j > 0.0 {
+                t_f = t_f.min(limits.max_acc_mm_s2[i] / j);
+            }
+        }
+        let periods =
+            |t: f64, at_least: f64| (t / cfg.period_s - 1e-9).ceil().max(at_least) as usize;
+        Some(Smoothing {
+            time_law_periods: periods(t_f, 1.0),
+            axis_periods: periods(AXIS_FILTER_S, 2.0),
+        })
+    }
+
+    /// The time-law filter's length `T_f`.
+    pub fn time_law_s(&self, period_s: f64) -> f64 {
+        self.time_law_periods as f64 * period_s
+    }
+
+    /// The length `T_k` of each of the axis filters.
+    pub fn axis_s(&self, period_s: f64) -> f64 {
+        self.axis_periods as f64 * period_s
+    }
+
+    /// Samples after its input stops until the output stands exactly where the input does.
+    pub fn settle_periods(&self) -> usize {
+        (self.time_law_periods - 1) + 2 * (self.axis_periods - 1)
+    }
 }
 
 /// How the look-ahead joins elements and shapes their speed (the machine's `[planner]` table).
@@ -348,6 +451,10 @@ pub struct Segment {
     pub hold_s: f64,
     /// Time in the plan at which the segment starts.
     pub start_time_s: f64,
+    /// Whether the interpolator passes its path parameter through the time-law filter
+    /// ([`Smoothing`]); false for moves planned as exact jerk-limited profiles on their own, and
+    /// for every move of a plan without smoothing. Stills keep whatever came before.
+    pub time_law: bool,
 }
 
 impl Segment {
@@ -391,7 +498,20 @@ impl Segment {
         if t_s >= self.duration_s() {
             return self.end_mm;
         }
-        let d = self.distance_at(t_s);
+        self.point_at_distance(self.distance_at(t_s))
+    }
+
+    /// The point at `d_mm` along the path from the start: exactly `start_mm` at `d_mm <= 0`
+    /// and exactly `end_mm` at `d_mm >= length_mm`; on a line the second half is measured back
+    /// from the end (see [`position_at`](Self::position_at)).
+    pub fn point_at_distance(&self, d_mm: f64) -> Vector3<f64> {
+        if d_mm.is_nan() || d_mm <= 0.0 {
+            return self.start_mm;
+        }
+        if d_mm >= self.length_mm {
+            return self.end_mm;
+        }
+        let d = d_mm;
         match &self.path {
             SegmentPath::Line { direction } => {
                 if d <= 0.5 * self.length_mm {
@@ -476,6 +596,7 @@ pub struct Plan {
     start_mm: Vector3<f64>,
     segments: Vec<Segment>,
     duration_s: f64,
+    smoothing: Option<Smoothing>,
 }
 
 impl Plan {
@@ -485,7 +606,14 @@ impl Plan {
             start_mm,
             segments: Vec::new(),
             duration_s: 0.0,
+            smoothing: None,
         }
+    }
+
+    /// The filters the plan was made for (the jerk-limited mode's), which the interpolator
+    /// applies to its samples; `None` for a plan whose profiles are sampled as they are.
+    pub fn smoothing(&self) -> Option<Smoothing> {
+        self.smoothing
     }
 
     /// The segments in time order.
@@ -580,6 +708,7 @@ pub fn plan_items_with<'a>(
         start_mm,
         segments,
         duration_s: planner.time_s(),
+        smoothing: planner.smoothing(),
     })
 }
 
@@ -608,7 +737,7 @@ struct Blend {
     arc: Pending,
     /// Distance from the corner to where the arc touches each line.
     tangent_mm: f64,
-    /// Highest speeds where the arc begins and ends ([`Planner::junction_caps`]).
+    /// Highest speeds where the arc begins and ends (`Planner::junction_caps`).
     cap_in: (f64, f64),
     cap_out: (f64, f64),
 }
@@ -636,6 +765,12 @@ struct Pending {
     /// Largest acceleration and jerk of each axis the profile may use.
     acc_used_mm_s2: Vector3<f64>,
     jerk_used_mm_s3: Vector3<f64>,
+    /// With smoothing: the S-curve limits for a move from rest to rest, run on its own without
+    /// the time-law filter (exactly time-optimal for one element).
+    alone: Option<ProfileLimits>,
+    /// The discrete curvature `Δu/L̄` of the vertex at its start (zero where the motion stops
+    /// there or the path is tangent), `L̄` the mean length of the two elements.
+    kink_in: Vector3<f64>,
 }
 
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
@@ -660,6 +795,11 @@ pub struct Planner {
     /// Elements that could not be stretched to whole periods (see
     /// [`PlannerConfig::integer_periods`]).
     off_grid: usize,
+    /// The jerk-limited mode's filters, which the plan is made for.
+    smoothing: Option<Smoothing>,
+    /// A move planned alone (without the time-law filter) ended here, at rest, and the axis
+    /// filters have not been given time to settle: its line and end point.
+    axes_unsettled: Option<(usize, Vector3<f64>)>,
 }
 
 impl Planner {
@@ -690,6 +830,8 @@ impl Planner {
             ready: VecDeque::new(),
             finished: false,
             off_grid: 0,
+            smoothing: Smoothing::for_machine(limits, config),
+            axes_unsettled: None,
         })
     }
 
@@ -710,6 +852,14 @@ impl Planner {
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) = match self.window.back() {
                             Some(prev) => self.junction_caps(prev, &p),
                             None => (0.0, 0.0),
+                        };
+                        if let Some(prev) = self.window.back_mut()
+                            && p.cap_start_mm_s > 0.0
+                        {
+                            p.kink_in = discrete_curvature(prev, &p);
+                            if self.smoothing.is_some() {
+                                share_acceleration(prev, &mut p);
+                            }
                         }
                     }
                     Some(Blend {
@@ -725,6 +875,14 @@ impl Planner {
                         p.seg.start_mm = arc.seg.end_mm;
                         p.seg.length_mm -= tangent_mm;
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) = cap_out;
+                        if self.smoothing.is_some() {
+                            if arc.cap_start_mm_s > 0.0 {
+                                share_acceleration(prev, &mut arc);
+                            }
+                            if p.cap_start_mm_s > 0.0 {
+                                share_acceleration(&mut arc, &mut p);
+                            }
+                        }
                         self.window.push_back(arc);
                     }
                 }
@@ -746,6 +904,7 @@ impl Planner {
                     return Ok(());
                 }
                 self.replan(true)?;
+                self.settle_axes()?;
                 self.push_still(still(
                     d.line,
                     self.position_mm,
@@ -756,6 +915,7 @@ impl Planner {
             }
             Item::Stop(s) => {
                 self.replan(true)?;
+                self.settle_axes()?;
                 self.push_still(still(
                     s.line,
                     self.position_mm,
@@ -773,7 +933,28 @@ impl Planner {
     /// The program ended: everything pushed settles, the motion ending at rest.
     pub fn finish(&mut self) -> Result<(), PlanError> {
         self.finished = true;
-        self.replan(true)
+        self.replan(true)?;
+        self.settle_axes()
+    }
+
+    /// Before an exact stop (a dwell, a program stop, the end): the axis filters settle after a
+    /// move planned alone (after a filtered move [`settle`](Self::settle) already waited).
+    fn settle_axes(&mut self) -> Result<(), PlanError> {
+        let (Some(smoothing), Some((line, at_mm))) = (self.smoothing, self.axes_unsettled.take())
+        else {
+            return Ok(());
+        };
+        let periods = 2 * (smoothing.axis_periods - 1);
+        if periods == 0 {
+            return Ok(());
+        }
+        self.push_still(still(
+            line,
+            at_mm,
+            SegmentPath::Dwell,
+            periods as f64 * self.config.period_s,
+            self.time_s,
+        ))
     }
 
     /// The next settled segment, in time order.
@@ -805,6 +986,11 @@ impl Planner {
     /// number of periods (their boundary speeds left no slack).
     pub fn off_grid(&self) -> usize {
         self.off_grid
+    }
+
+    /// The filters the plan is made for (see [`Smoothing`]); the interpolator must apply them.
+    pub fn smoothing(&self) -> Option<Smoothing> {
+        self.smoothing
     }
 
     /// Elements in the look-ahead window (pushed, not settled).
@@ -887,7 +1073,10 @@ impl Planner {
             v_start_mm_s: v0,
             v_end_mm_s: v1,
         };
+        let alone = self.window[i].alone.filter(|_| v0 == 0.0 && v1 == 0.0);
+        let limits = alone.unwrap_or(limits);
         let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
+        seg.time_law = self.smoothing.is_some() && alone.is_none();
         if self.config.integer_periods {
             // Where the boundary speeds leave no slack (a pure acceleration that fills the
             // element), the element keeps its time-optimal duration and the next starts off the
@@ -910,6 +1099,23 @@ impl Planner {
         }
         self.time_s = end_s;
         self.ready.push_back(seg);
+        if alone.is_some() {
+            self.axes_unsettled = Some((line, seg.end_mm));
+        } else if let Some(smoothing) = self.smoothing
+            && v1 == 0.0
+        {
+            self.axes_unsettled = None;
+            // The filters catch up before anything else starts: the motion stands exactly at
+            // the element's end (an exact stop, a program stop or dwell, the program's end).
+            let settle = still(
+                line,
+                seg.end_mm,
+                SegmentPath::Dwell,
+                smoothing.settle_periods() as f64 * self.config.period_s,
+                self.time_s,
+            );
+            self.push_still(settle)?;
+        }
         Ok(())
     }
 
@@ -925,7 +1131,28 @@ impl Planner {
     fn junction_caps(&self, a: &Pending, b: &Pending) -> (f64, f64) {
         let v = self.junction_limit_mm_s(a, b);
         let fed = v.min(a.limits.v_max_mm_s()).min(b.limits.v_max_mm_s());
-        (fed, v.min(a.v_limit_mm_s).min(b.v_limit_mm_s))
+        let limit = v.min(a.v_limit_mm_s).min(b.v_limit_mm_s);
+        let Some(smoothing) = self.smoothing else {
+            return (fed, limit);
+        };
+        // The time-law filter rounds every dip of the speed: at a V-shaped dip to `c` with
+        // the acceleration `A` either side, the filtered speed passes the dip's position at
+        // `c + A·T_f/4`. So a cap below the speed of either neighbour is planned that much
+        // lower, and one that leaves nothing is a stop, where the filter settles.
+        let delta = 0.25
+            * a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2())
+            * smoothing.time_law_s(self.config.period_s);
+        let dip = |cap: f64, va: f64, vb: f64| {
+            if cap < va.max(vb) {
+                (cap - delta).max(0.0)
+            } else {
+                cap
+            }
+        };
+        (
+            dip(fed, a.limits.v_max_mm_s(), b.limits.v_max_mm_s()),
+            dip(limit, a.v_limit_mm_s, b.v_limit_mm_s),
+        )
     }
 
     /// The junction's own speed limit from its geometry and the axes' budgets (not the
@@ -936,6 +1163,9 @@ impl Planner {
             || matches!(a.blend, BlendMode::ExactStop | BlendMode::ExactPath)
         {
             return 0.0;
+        }
+        if let Some(smoothing) = self.smoothing {
+            return self.smoothed_junction_limit_mm_s(a, b, &smoothing);
         }
         let t = cfg.period_s;
         let mut v = f64::INFINITY;
@@ -985,6 +1215,78 @@ impl Planner {
         v.max(0.0)
     }
 
+    /// [`junction_limit_mm_s`](Self::junction_limit_mm_s) in the jerk-limited mode. The path
+    /// is followed exactly up to the axis filters (two moving averages of `T_k` each), which
+    /// turn a step `Δv` of an axis's velocity into a ramp: its acceleration reaches `Δv/T_k`
+    /// and its jerk `Δv/T_k²`. So at speed `v` through a turn `Δu` of the tangent:
+    ///
+    /// - acceleration: `v·|Δuᵢ| ≤ T_k·(A_i − used_i)`, shared like the one-period rule among
+    ///   the `1 + v·T_k/L` junctions of elements of length `L` within one filter time;
+    /// - jerk: `v·|Δuᵢ| ≤ T_k²·(J_i − used_i)/2`. Junctions closer than a filter time's
+    ///   travel add up: as the curve they approximate, whose own jerk
+    ///   `v³·|Δuᵢ|·|Δu|/L² ≤ (J_i − used_i)/2` is bounded as the curvature of an arc is, and
+    ///   through the change of the discrete curvature `Δu/L̄` from one vertex to the next,
+    ///   held like a step of an arc's curvature;
+    /// - a step of the curvature vector (an arc's end, or between vertices):
+    ///   `v²·|Δκᵢ| ≤ T_k·(J_i − used_i)/2`;
+    /// - contour: the filters cut the corner by at most `v·|Δu|·2·T_k/8`, held within the
+    ///   tolerance ([`Planner::filter_tolerance_mm`]).
+    fn smoothed_junction_limit_mm_s(&self, a: &Pending, b: &Pending, smoothing: &Smoothing) -> f64 {
+        let cfg = &self.config;
+        let tk = smoothing.axis_s(cfg.period_s);
+        let mut v = f64::INFINITY;
+        let du = b.tangent_start - a.tangent_end;
+        let du_norm = du.norm();
+        if du_norm > 0.0 {
+            v = v.min(tk * cfg.corner_acc_mm_s2 / du_norm);
+            let tol_mm = self.filter_tolerance_mm(a.blend);
+            if tol_mm > 0.0 {
+                v = v.min(4.0 * tol_mm / (du_norm * tk));
+            }
+        }
+        let dk = b.curvature_start - a.curvature_end;
+        // A polyline's curvature sits at its vertices: a change of it from one vertex to the
+        // next is a step of the acceleration, as at an arc's end.
+        let dk_vertex = discrete_curvature(a, b) - a.kink_in;
+        let l_mm = a.seg.length_mm.min(b.seg.length_mm);
+        // The largest v with v·d·(1 + v·T_k/L) ≤ c.
+        let shared = |c: f64, d: f64| {
+            let k = tk / l_mm;
+            let c = c.max(0.0) / d;
+            if k * c < 1e-12 {
+                c
+            } else {
+                (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
+            }
+        };
+        for i in 0..3 {
+            let acc_budget =
+                self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
+            let jerk_budget = 0.5
+                * (cfg.max_jerk_mm_s3[i] - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i])).max(0.0);
+            let d = du[i].abs();
+            if d > 0.0 {
+                v = v.min(shared(tk * acc_budget, d));
+                v = v.min(tk * tk * jerk_budget / d);
+                v = v.min((l_mm * l_mm * jerk_budget / (d * du_norm)).cbrt());
+            }
+            let k = dk[i].abs().max(dk_vertex[i].abs());
+            if k > 0.0 {
+                v = v.min((tk * jerk_budget / k).sqrt());
+            }
+        }
+        v.max(0.0)
+    }
+
+    /// The deviation from the path the axis filters may take under `blend`: half the G64 P
+    /// tolerance (the corner blends take the other half), else `chord_tol_mm` (0: no limit).
+    fn filter_tolerance_mm(&self, blend: BlendMode) -> f64 {
+        match blend {
+            BlendMode::Blend { p_mm, .. } if p_mm > 0.0 => 0.5 * p_mm,
+            _ => self.config.chord_tol_mm,
+        }
+    }
+
     /// The tangent arc that replaces the corner from line `a` into line `b` under G64 P
     /// (`shared/seeds` 001), or `None` where the corner stays sharp: no tolerance (P0), not two
     /// lines, no turn, or an arc no faster than the sharp corner's one-period junction speed.
@@ -1018,6 +1320,11 @@ impl Planner {
             return Ok(None);
         }
         let tan_h = sin_h / cos_h;
+        let tol_mm = if self.smoothing.is_some() {
+            0.5 * tol_mm
+        } else {
+            tol_mm
+        };
         let r_tol = tol_mm * cos_h / (1.0 - cos_h);
         let room_mm = 0.5 * a.full_length_mm.min(b.full_length_mm);
         // What is left of `a` after a blend at its start must keep some length.
@@ -1096,7 +1403,10 @@ impl Planner {
         if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
             return Err(PlanError::Overflow { line });
         }
-        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg);
+        let filter = self
+            .smoothing
+            .map(|sm| (sm, self.filter_tolerance_mm(blend)));
+        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg, filter);
         let curvature = |s: f64| {
             let at = arc.point_at(s);
             let rel = at - arc.center_mm;
@@ -1115,7 +1425,14 @@ impl Planner {
         };
         Ok(Pending {
             seg: moving(line, rapid, ends, SegmentPath::Arc(arc), length_mm),
-            limits: profile_limits(cfg, a.v_max_mm_s, a.acc_mm_s2, jerk_mm_s3, line)?,
+            limits: profile_limits(
+                cfg,
+                self.smoothing,
+                a.v_max_mm_s,
+                a.acc_mm_s2,
+                jerk_mm_s3,
+                line,
+            )?,
             blend,
             cap_start_mm_s: 0.0,
             cap_start_limit_mm_s: 0.0,
@@ -1131,6 +1448,8 @@ impl Planner {
             } else {
                 Vector3::zeros()
             },
+            alone: alone_limits(self.smoothing, a.v_max_mm_s, a.acc_mm_s2, jerk_mm_s3),
+            kink_in: Vector3::zeros(),
         })
     }
 
@@ -1205,7 +1524,14 @@ impl Planner {
                         SegmentPath::Line { direction },
                         length_mm,
                     ),
-                    limits: profile_limits(cfg, v_max_mm_s, acc_mm_s2, jerk_mm_s3, line)?,
+                    limits: profile_limits(
+                        cfg,
+                        self.smoothing,
+                        v_max_mm_s,
+                        acc_mm_s2,
+                        jerk_mm_s3,
+                        line,
+                    )?,
                     blend: e.blend,
                     cap_start_mm_s: 0.0,
                     cap_start_limit_mm_s: 0.0,
@@ -1221,6 +1547,8 @@ impl Planner {
                     } else {
                         Vector3::zeros()
                     },
+                    alone: alone_limits(self.smoothing, v_max_mm_s, acc_mm_s2, jerk_mm_s3),
+                    kink_in: Vector3::zeros(),
                 }
             }
             ElementKind::Arc { .. } => {
@@ -1346,6 +1674,7 @@ fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, cap_mm_s: f64, limits: &Pro
 /// The profile limits of an element, valid for [`profile`].
 fn profile_limits(
     cfg: &PlannerConfig,
+    smoothing: Option<Smoothing>,
     v_max_mm_s: f64,
     acc_mm_s2: f64,
     jerk_mm_s3: f64,
@@ -1357,12 +1686,62 @@ fn profile_limits(
     }
     let clamp = |x: f64| x.clamp(profile::MIN_LIMIT, MAX_LIMIT);
     let (v, a) = (clamp(v_max_mm_s), clamp(acc_mm_s2));
+    if let Some(smoothing) = smoothing {
+        // Trapezoids under the time-law filter: its jerk is at most the range of the
+        // acceleration over one filter time, `2·a/T_f`, held within the element's jerk.
+        let a = a.min(clamp(0.5 * jerk_mm_s3 * smoothing.time_law_s(cfg.period_s)));
+        return ProfileLimits::trapezoid(v, a).ok_or(PlanError::Overflow { line });
+    }
     let limits = match cfg.profile {
         ProfileKind::Trapezoid => ProfileLimits::trapezoid(v, a),
         ProfileKind::SCurve => ProfileLimits::new(v, a, clamp(jerk_mm_s3), JerkShape::Square),
         ProfileKind::Smooth => ProfileLimits::new(v, a, clamp(jerk_mm_s3), JerkShape::RaisedCosine),
     };
     limits.ok_or(PlanError::Overflow { line })
+}
+
+/// Under the time-law filter the acceleration of one element reaches the next through a
+/// junction taken at speed (the filter's window spans it), so both plan with the lower of
+/// their tangential accelerations.
+fn share_acceleration(a: &mut Pending, b: &mut Pending) {
+    let acc = a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2());
+    for p in [a, b] {
+        if p.limits.a_max_mm_s2() > acc
+            && let Some(lower) = ProfileLimits::trapezoid(p.limits.v_max_mm_s(), acc)
+        {
+            p.limits = lower;
+        }
+    }
+}
+
+/// The discrete curvature `Δu/L̄` of the vertex from `a` into `b`: the turn of the tangent
+/// over the mean length of the two elements.
+fn discrete_curvature(a: &Pending, b: &Pending) -> Vector3<f64> {
+    let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
+    let du = b.tangent_start - a.tangent_end;
+    if mean_mm > 0.0 && du.iter().all(|c| c.is_finite()) {
+        du / mean_mm
+    } else {
+        Vector3::zeros()
+    }
+}
+
+/// With smoothing, the S-curve limits of a move run alone from rest to rest (`None` where
+/// they are not valid; the move is then filtered like the others).
+fn alone_limits(
+    smoothing: Option<Smoothing>,
+    v_max_mm_s: f64,
+    acc_mm_s2: f64,
+    jerk_mm_s3: f64,
+) -> Option<ProfileLimits> {
+    smoothing?;
+    let clamp = |x: f64| x.clamp(profile::MIN_LIMIT, MAX_LIMIT);
+    ProfileLimits::new(
+        clamp(v_max_mm_s),
+        clamp(acc_mm_s2),
+        clamp(jerk_mm_s3),
+        JerkShape::Square,
+    )
 }
 
 /// A moving segment's geometry, speeds not yet planned.
@@ -1388,6 +1767,7 @@ fn moving(
         profile: None,
         hold_s: 0.0,
         start_time_s: 0.0,
+        time_law: false,
     }
 }
 
@@ -1414,6 +1794,7 @@ fn still(
         profile: None,
         hold_s: duration_s,
         start_time_s,
+        time_law: false,
     }
 }
 
@@ -1436,6 +1817,7 @@ fn arc_limits(
     feed_mm_s: f64,
     limits: &Limits,
     cfg: &PlannerConfig,
+    filter: Option<(Smoothing, f64)>,
 ) -> ArcLimits {
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
@@ -1489,6 +1871,14 @@ fn arc_limits(
         // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ J/4 below).
         v_max_mm_s =
             v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt() / cos_a);
+    }
+    if let Some((smoothing, tol_mm)) = filter
+        && tol_mm > 0.0
+    {
+        // The two axis filters of `T_k` pull the circle in by about `2·v²·T_k²/(24·κ⁻¹)`
+        // (`crate::interp::filter`), held within the tolerance.
+        let tk = smoothing.axis_s(cfg.period_s);
+        v_max_mm_s = v_max_mm_s.min((12.0 * tol_mm / curvature_per_mm).sqrt() / tk);
     }
     let v_limit_mm_s = v_max_mm_s;
     let v_max_mm_s = v_max_mm_s.min(feed_mm_s);

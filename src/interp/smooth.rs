@@ -1,0 +1,166 @@
+//! The jerk-limited mode's filters on the samples ([`crate::planner::Smoothing`]): a moving
+//! average of the path parameter (the time-law filter), then two moving averages of each axis
+//! (the geometry filter). See [`crate::planner`]'s documentation for why and how the plan is
+//! made for them.
+//!
+//! - **Time law.** The interpolator's raw cursor gives the distance `s` travelled along the
+//!   whole path at each sample; the filter keeps the last `N_f` of them and puts the point at
+//!   their mean, `path(mean)`. The path is untouched (no contour error): only the speed along
+//!   it is smoothed, and its jerk is bounded by the range of the plan's acceleration over
+//!   `T_f = N_f·T`, divided by `T_f`. When the last `N_f` values are equal, the mean is that
+//!   value itself, bit for bit.
+//! - **Geometry.** Each axis then passes through two linear [`AxisFilter`]s of `N_k` periods,
+//!   which spread a step of an axis's velocity (a corner, a chord's vertex) over `2·T_k` and
+//!   keep the end exact (their position-error accumulator).
+//!
+//! All memory is taken at construction; [`Smoother::sample`] never allocates.
+
+use nalgebra::Vector3;
+
+use super::filter::{AxisFilter, FilterKind, FilterSpec};
+use crate::planner::Smoothing;
+
+/// The state of the filters.
+#[derive(Debug, Clone)]
+pub struct Smoother {
+    spec: Smoothing,
+    /// The last `N_f` raw path distances, a ring; `next` is where the next one goes.
+    ring: Box<[f64]>,
+    next: usize,
+    /// How many of the latest raw distances in a row are equal (capped at `N_f`).
+    still: usize,
+    /// Whether the time-law filter is on (off for moves planned alone, see
+    /// [`crate::planner::Segment::time_law`]).
+    time_law: bool,
+    /// The two filters of each axis, in order.
+    axes: [[AxisFilter; 3]; 2],
+}
+
+impl Smoother {
+    /// At rest at path distance 0 and point `start_mm`.
+    pub fn new(spec: Smoothing, period_s: f64, start_mm: Vector3<f64>) -> Smoother {
+        let n_f = spec.time_law_periods.max(1);
+        let axis = || {
+            let mut f = AxisFilter::new(
+                FilterSpec {
+                    kind: FilterKind::Linear,
+                    time_s: spec.axis_periods.max(1) as f64 * period_s,
+                },
+                period_s,
+            )
+            .expect("a whole number of valid periods is a valid linear filter");
+            f.reset(0.0);
+            f
+        };
+        let mut axes = [[axis(), axis(), axis()], [axis(), axis(), axis()]];
+        for stage in &mut axes {
+            for (i, f) in stage.iter_mut().enumerate() {
+                f.reset(start_mm[i]);
+            }
+        }
+        Smoother {
+            spec,
+            ring: vec![0.0; n_f].into_boxed_slice(),
+            next: 0,
+            still: n_f,
+            time_law: true,
+            axes,
+        }
+    }
+
+    /// The filters this smoother applies.
+    pub fn spec(&self) -> Smoothing {
+        self.spec
+    }
+
+    /// Whether the time-law filter is on.
+    pub fn time_law(&self) -> bool {
+        self.time_law
+    }
+
+    /// Turns the time-law filter on or off, at rest at the raw path distance `rest_mm` (the
+    /// planner switches only where the motion stands still and the filter has settled, so the
+    /// output does not move).
+    pub fn set_time_law(&mut self, on: bool, rest_mm: f64) {
+        self.time_law = on;
+        self.ring.fill(rest_mm);
+        self.still = self.ring.len();
+    }
+
+    /// Takes the raw path distance of this sample and gives the filtered one.
+    pub fn filter_distance(&mut self, raw_mm: f64) -> f64 {
+        if !self.time_law {
+            return raw_mm;
+        }
+        let n = self.ring.len();
+        let last = self.ring[(self.next + n - 1) % n];
+        if raw_mm == last {
+            self.still = (self.still + 1).min(n);
+        } else {
+            self.still = 1;
+        }
+        self.ring[self.next] = raw_mm;
+        self.next = (self.next + 1) % n;
+        if self.still >= n {
+            return raw_mm;
+        }
+        // Relative to the newest value: the sum stays small and precise on a long path.
+        let sum: f64 = self.ring.iter().map(|s| s - raw_mm).sum();
+        (raw_mm + sum / n as f64).min(raw_mm)
+    }
+
+    /// Passes the point on the path through the axis filters.
+    pub fn filter_point(&mut self, point_mm: Vector3<f64>) -> Vector3<f64> {
+        let mut out = point_mm;
+        for stage in &mut self.axes {
+            for (i, f) in stage.iter_mut().enumerate() {
+                out[i] = f.update(out[i]);
+            }
+        }
+        out
+    }
+
+    /// Whether the output stands where the input does: the last `N_f` raw distances are
+    /// equal and the axis filters hold nothing.
+    pub fn is_settled(&self) -> bool {
+        self.still >= self.ring.len() && self.axes.iter().flatten().all(AxisFilter::is_settled)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(n_f: usize, n_k: usize) -> Smoothing {
+        Smoothing {
+            time_law_periods: n_f,
+            axis_periods: n_k,
+        }
+    }
+
+    #[test]
+    fn a_still_input_comes_out_exactly_after_the_filter_time() {
+        let mut s = Smoother::new(spec(4, 2), 0.001, Vector3::zeros());
+        let mut out = Vec::new();
+        for raw in [0.1, 0.30000000000000004, 0.7, 0.7, 0.7, 0.7, 0.7] {
+            out.push(s.filter_distance(raw));
+        }
+        // The mean of the last four, then exactly the still value once four are equal.
+        assert!((out[0] - 0.025).abs() < 1e-15);
+        assert!((out[3] - (0.1 + 0.30000000000000004 + 1.4) / 4.0).abs() < 1e-15);
+        assert_eq!(out[6], 0.7);
+        assert!(out.windows(2).all(|w| w[1] >= w[0]), "{out:?}");
+    }
+
+    #[test]
+    fn the_axis_filters_settle_on_the_point_bit_for_bit() {
+        let end = Vector3::new(1.0 / 3.0, -2.0 / 7.0, 5.0);
+        let mut s = Smoother::new(spec(1, 3), 0.001, Vector3::zeros());
+        let mut last = Vector3::zeros();
+        for _ in 0..(2 * 2 + 1) {
+            last = s.filter_point(end);
+        }
+        assert_eq!(last, end);
+        assert!(s.is_settled());
+    }
+}
