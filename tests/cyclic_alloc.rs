@@ -12,7 +12,8 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use canmotion::bus::Frame;
-use canmotion::cia402::{PowerStateMachine, controlword as cwb, index, statusword as swb};
+use canmotion::canopen::index;
+use canmotion::cia402::{PowerStateMachine, controlword as cwb, statusword as swb};
 use canmotion::config::Machine;
 use canmotion::gateway::alarm::Alarm;
 use canmotion::gateway::cyclic::{CyclicMaster, Phase};

@@ -27,6 +27,7 @@ use nalgebra::Vector3;
 
 use super::alarm::{Alarm, Failure, LateAxes, LateAxis, axis_letter};
 use crate::bus::Frame;
+use crate::canopen::index;
 use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
 use crate::config::machine::MAX_AXES;
 use crate::config::{AxisConfig, AxisMode, Machine};
@@ -88,11 +89,11 @@ impl AxisIo {
             mode: a.mode,
             rpdo_cob: a.setpoint_pdo.cob_id,
             rpdo_len: a.setpoint_pdo.len_bytes(),
-            cw_off: off(&a.setpoint_pdo, 0x6040, 0),
+            cw_off: off(&a.setpoint_pdo, index::CONTROLWORD, 0),
             sp_off: off(&a.setpoint_pdo, si, ss),
             tpdo_cob: a.feedback_pdo.cob_id,
-            sw_off: off(&a.feedback_pdo, 0x6041, 0),
-            pos_off: off(&a.feedback_pdo, 0x6064, 0),
+            sw_off: off(&a.feedback_pdo, index::STATUSWORD, 0),
+            pos_off: off(&a.feedback_pdo, index::POSITION_ACTUAL, 0),
             counts_per_mm: a.counts_per_mm,
             min_mm: a.min_mm,
             max_mm: a.max_mm,
