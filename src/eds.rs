@@ -66,6 +66,7 @@ use std::path::{Path, PathBuf};
 
 use canopen_rs::DataType;
 
+use crate::canopen::index;
 use crate::config::DriveDictionary;
 use crate::config::dictionary::type_name;
 
@@ -1207,7 +1208,7 @@ impl Cx<'_> {
         }
         let unlisted: Vec<String> = objects
             .keys()
-            .filter(|i| **i >= 0x1000 && !listed.contains(i))
+            .filter(|i| **i >= *index::COMMUNICATION_AREA.start() && !listed.contains(i))
             .map(|i| format!("0x{i:04X}"))
             .collect();
         if !unlisted.is_empty() {
@@ -1625,7 +1626,7 @@ impl Cx<'_> {
             .value("ParameterName")
             .map(|e| e.value.clone())
             .unwrap_or_else(|| format!("Object 0x{index:04X}"));
-        if index < 0x1000 || matches!(ot, 0x0 | 0x5 | 0x6) {
+        if index < *index::COMMUNICATION_AREA.start() || matches!(ot, 0x0 | 0x5 | 0x6) {
             self.skip(
                 sec.line,
                 format!(
@@ -1882,14 +1883,14 @@ impl Cx<'_> {
                 notes: Vec::new(),
             };
         // 0x1000.
-        let device_type = match out.get_mut(&0x1000) {
+        let device_type = match out.get_mut(&index::DEVICE_TYPE) {
             None => {
                 self.note(
                     None,
                     "the EDS has no object 0x1000: added (UNSIGNED32, ro, device type 0)",
                 );
                 out.insert(
-                    0x1000,
+                    index::DEVICE_TYPE,
                     OutObj {
                         name: "Device type".to_string(),
                         line: 0,
@@ -1934,7 +1935,7 @@ impl Cx<'_> {
             }
         };
         // 0x1018.
-        let o = match out.get_mut(&0x1018) {
+        let o = match out.get_mut(&index::IDENTITY) {
             Some(o) if o.var => {
                 return Err(self.err(o.line, "object 0x1018 (identity) must be a RECORD"));
             }
@@ -1945,7 +1946,7 @@ impl Cx<'_> {
                     "the EDS has no object 0x1018: added (sub 0 and 1..3, from [DeviceInfo])",
                 );
                 out.insert(
-                    0x1018,
+                    index::IDENTITY,
                     OutObj {
                         name: "Identity object".to_string(),
                         line: 0,
@@ -1962,7 +1963,7 @@ impl Cx<'_> {
                         )],
                     },
                 );
-                out.get_mut(&0x1018).expect("inserted")
+                out.get_mut(&index::IDENTITY).expect("inserted")
             }
         };
         let mut ids = [0u32; 3];
@@ -2288,13 +2289,13 @@ fn entry_keys(t: &mut String, index: u16, s: &OutSub, out: &BTreeMap<u16, OutObj
     // Hex for unsigned values that read as codes: the EDS wrote them so, or a 32-bit entry of
     // the communication area (COB-IDs, mapping entries, identity).
     let unsigned = matches!(s.ty.kind, Kind::Int { signed: false, .. });
-    let comm_code = (0x1000..=0x1FFF).contains(&index) && s.ty.code == 0x07;
+    let comm_code = index::COMMUNICATION_AREA.contains(&index) && s.ty.code == 0x07;
     let hex = unsigned && (s.default_hex || comm_code);
     let mut comment: Vec<String> = Vec::new();
     if let Val::Int(v) = s.default
         && v != 0
         && s.sub >= 1
-        && ((0x1600..=0x17FF).contains(&index) || (0x1A00..=0x1BFF).contains(&index))
+        && (index::RPDO_MAPPING_AREA.contains(&index) || index::TPDO_MAPPING_AREA.contains(&index))
         && s.ty.code == 0x07
     {
         let (mi, ms, bits) = ((v >> 16) as u16, ((v >> 8) & 0xFF) as u8, (v & 0xFF) as u8);

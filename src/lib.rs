@@ -29,9 +29,11 @@
 //!    `filter` in the machine file passes its samples through [`interp::filter::AxisFilter`]
 //!    (moving average or first-order lag after interpolation), which ends exactly there too.
 //! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
-//!    SCHED_FIFO where permitted), converts the sample to counts (50 mm → 50000), checks it
+//!    SCHED_FIFO where permitted; no allocation, even when it stops on a
+//!    [`gateway::alarm::Alarm`]), converts the sample to counts (50 mm → 50000), checks it
 //!    against the travel and the largest step a cycle allows, and packs it with the controlword
-//!    into the axis's RPDO as the machine file maps it (`0x60400010, 0x60C10120`):
+//!    into the axis's RPDO as the machine file maps it (`0x60400010, 0x60C10120`: the objects
+//!    [`canopen::index`] names):
 //!    [`bus::Frame`] `201#1F0050C30000`, then the SYNC frame `080#`.
 //! 6. [`bus`] sends both on the bus: SocketCAN (`vcan0`, `can0`) or the in-process bus. The
 //!    drive ([`sim`] in tests and the demo, a real servo otherwise) latches the setpoint at SYNC,

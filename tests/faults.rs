@@ -9,7 +9,9 @@ use std::path::PathBuf;
 
 use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
+use canmotion::cia402::State;
 use canmotion::config::Machine;
+use canmotion::gateway::alarm::{Alarm, LateAxis};
 use canmotion::gateway::{self, RunOptions};
 use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
@@ -64,12 +66,22 @@ fn a_following_error_fault_freezes_the_axis_and_stops_the_group() {
         LONG,
     );
     let f = failure(&o);
-    assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
     assert!(
-        f.message.contains("following error") || f.message.contains("0x8611"),
+        matches!(
+            f.alarm(),
+            Alarm::FollowingError {
+                axis: "Y",
+                node: 2,
+                ..
+            } | Alarm::Emcy {
+                axis: "Y",
+                node: 2,
+                code: 0x8611
+            }
+        ),
         "{f}"
     );
-    assert!(f.message.ends_with("(last program line 2)"), "{f}");
+    assert_eq!(f.failure.line, Some(2), "{f}");
     // The window is 2 mm at 100 mm/s: 20 ms, plus the 10 ms time-out, plus the PDO round trip.
     let d = detection_s(f, 0.4);
     assert!(d < 0.130, "detected {d} s after the jam");
@@ -85,9 +97,19 @@ fn a_silent_drive_is_detected_within_its_heartbeat_time_and_the_group_stops() {
         LONG,
     );
     let f = failure(&o);
-    assert!(f.message.starts_with("axis Z (node 3): "), "{f}");
     assert!(
-        f.message.contains("no process data") || f.message.contains("heartbeat lost"),
+        matches!(
+            f.alarm(),
+            Alarm::MissingProcessData {
+                axis: "Z",
+                node: 3,
+                ..
+            } | Alarm::HeartbeatLost {
+                axis: "Z",
+                node: 3,
+                ..
+            }
+        ),
         "{f}"
     );
     // Within the consumer time (300 ms) plus one cycle; the missing TPDOs give it away sooner.
@@ -107,8 +129,14 @@ fn a_drive_that_reboots_mid_motion_is_detected_by_its_boot_up() {
     );
     let f = failure(&o);
     assert!(
-        f.message
-            .starts_with("axis X (node 1): boot-up during the run"),
+        matches!(
+            f.alarm(),
+            Alarm::BootUp {
+                axis: "X",
+                node: 1,
+                ..
+            }
+        ),
         "{f}"
     );
     let d = detection_s(f, 0.3);
@@ -190,14 +218,20 @@ fn a_slow_drive_is_refused_after_the_default_enable_timeout() {
     let o = run(machine(|t| t), &[(1, SLOW_ENABLE)], PROGRAM);
     assert_eq!(o.machine.axes[0].enable_timeout_ms, 2000);
     let f = failure(&o);
-    assert!(
-        f.message.starts_with(
-            "drives did not reach Operation enabled: X (node 1) in Switched on after its enable_timeout_ms of 2000 ms"
-        ),
+    // Detected at the time-out, not before: no other axis named.
+    let Alarm::EnableTimeout { late } = f.alarm() else {
+        panic!("{f}")
+    };
+    assert_eq!(
+        late.iter().copied().collect::<Vec<_>>(),
+        [LateAxis {
+            axis: "X",
+            node: 1,
+            state: Some(State::SwitchedOn),
+            enable_timeout_ms: 2000
+        }],
         "{f}"
     );
-    // Detected at the time-out, not before: no other axis named.
-    assert!(!f.message.contains("node 2"), "{f}");
     let t = f.detected_cycle.unwrap() as f64 * f.period_s;
     assert!(t > 2.0, "detected {t} s into the run");
 }

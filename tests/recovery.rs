@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
 use canmotion::config::Machine;
+use canmotion::gateway::alarm::{Alarm, Failure};
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState, RunOutcome};
 use canmotion::gateway::{GatewayError, RunOptions};
 use canmotion::sim::{Inject, SimDrive, runner};
@@ -97,11 +98,17 @@ fn heartbeat_loss_alone_is_detected_within_the_consumer_time_plus_one_cycle() {
     let (o, _) = outcome(&m, &r, out, "hb.csv");
     let f = failure(&o);
     assert!(
-        f.message
-            .starts_with("axis Z (node 3): heartbeat lost (none for "),
+        matches!(
+            f.alarm(),
+            Alarm::HeartbeatLost {
+                axis: "Z",
+                node: 3,
+                consumer_ms: 500,
+                ..
+            }
+        ),
         "{f}"
     );
-    assert!(f.message.contains("consumer time 500 ms"), "{f}");
     // Its process data kept coming until the end: only the heartbeat tells.
     let detected = f.detected_ns.unwrap();
     let (_, last_beat) = last_before(&frames, 0x703, detected).expect("heartbeats of node 3");
@@ -131,8 +138,15 @@ fn reboot_stops_at_once(m: Machine) {
     let (o, state) = outcome(&m, &r, out, "reboot.csv");
     let f = failure(&o);
     assert_eq!(
-        f.message,
-        "axis X (node 1): boot-up during the run: the drive reset; no further setpoints to node 1; last completed program line 2 (last program line 3)"
+        f.failure,
+        Failure {
+            alarm: Alarm::BootUp {
+                axis: "X",
+                node: 1,
+                completed_line: Some(2)
+            },
+            line: Some(3)
+        }
     );
     let (boot_ns, late) = rpdos_after_boot_up(&frames, 1, 0x201, 0x80);
     assert_eq!(late, 0, "RPDOs to node 1 after its boot-up's cycle");
@@ -290,15 +304,15 @@ fn wait_emcy(port: &mut dyn canmotion::bus::Port, node: u8, code: u16, within: D
 /// Fault node 2 with `inject` in the middle of a run (checking the stop), then wait for the
 /// drives to notice the gateway is gone (EMCY 0x8130), so its heartbeat loss does not fault the
 /// drive again during the reset's observation.
-fn faulted(inject: Inject, causes: &[&str], bound_s: f64) -> Rig {
+fn faulted(inject: Inject, cause: fn(&Alarm) -> bool, bound_s: f64) -> Rig {
     let m = machine(|t| t);
     let r = rig(&m, &[(2, inject)], &[]);
     let mut watch = r.bus.open(&[canmotion::bus::Filter::exact(0x82)]).unwrap();
     let out = resume::run_program(&m, &r.bus, &opts(&r, LONG, "fault.csv"));
     let (o, _) = outcome(&m, &r, out, "fault.csv");
     let f = failure(&o);
-    assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
-    assert!(causes.iter().any(|c| f.message.contains(c)), "{f}");
+    assert_eq!(f.alarm().node(), Some(2), "{f}");
+    assert!(cause(f.alarm()), "{f}");
     let d = detection_s(f, 0.3);
     assert!(d < bound_s + MARGIN_S, "detected {d} s after the fault");
     frozen_after(&o, 1, f);
@@ -313,7 +327,12 @@ fn reset_clears_a_following_error_fault_and_verifies_it() {
     // The jam: the window (2 mm at 100 mm/s) plus 0x6066 (10 ms) and the PDO round trip.
     let r = faulted(
         Inject::FollowingError { after: ms(300) },
-        &["following error", "0x8611"],
+        |a| {
+            matches!(
+                a,
+                Alarm::FollowingError { axis: "Y", .. } | Alarm::Emcy { code: 0x8611, .. }
+            )
+        },
         0.090,
     );
     let reports = reset::reset(&r.bus, &[2, 3], &reset::ResetOptions::default()).unwrap();
@@ -343,7 +362,12 @@ fn reset_reports_a_fault_whose_cause_persists() {
     let m = machine(|t| t);
     let r = faulted(
         Inject::PersistentFault { after: ms(300) },
-        &["fault (statusword bit 3)", "EMCY 0x4310"],
+        |a| {
+            matches!(
+                a,
+                Alarm::DriveFault { axis: "Y", .. } | Alarm::Emcy { code: 0x4310, .. }
+            )
+        },
         2.0 * m.cycle_s(),
     );
     let reports = reset::reset(&r.bus, &[2], &reset::ResetOptions::default()).unwrap();
@@ -364,7 +388,12 @@ fn reset_reports_a_fault_that_comes_back() {
     let m = machine(|t| t);
     let r = faulted(
         Inject::RecurringFault { after: ms(300) },
-        &["fault (statusword bit 3)", "EMCY 0x2310"],
+        |a| {
+            matches!(
+                a,
+                Alarm::DriveFault { axis: "Y", .. } | Alarm::Emcy { code: 0x2310, .. }
+            )
+        },
         2.0 * m.cycle_s(),
     );
     let reports = reset::reset(&r.bus, &[2], &reset::ResetOptions::default()).unwrap();

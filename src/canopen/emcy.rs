@@ -15,6 +15,8 @@ pub mod code {
     pub const DC_OVER_VOLTAGE: u16 = 0x3210;
     /// DC-link under-voltage.
     pub const DC_UNDER_VOLTAGE: u16 = 0x3220;
+    /// Parameter error (a value the device cannot run with).
+    pub const PARAMETER: u16 = 0x6320;
     /// Excess temperature device.
     pub const TEMPERATURE: u16 = 0x4310;
     /// Communication: generic.

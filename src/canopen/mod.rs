@@ -7,6 +7,7 @@
 
 pub mod abort;
 pub mod emcy;
+pub mod index;
 pub mod od;
 pub mod sdo_client;
 pub mod sdo_server;

@@ -193,12 +193,14 @@ pub(super) fn block_end_frame(data: &[u8], crc: bool) -> [u8; 8] {
 
 /// CRC-16/XMODEM (polynomial 0x1021, start 0), the block transfer's CRC (CiA 301 §7.2.4.3.16).
 pub fn crc16(data: &[u8]) -> u16 {
+    /// The CRC-16-CCITT generator x^16 + x^12 + x^5 + 1.
+    const POLYNOMIAL: u16 = 0x1021; // not an object index: a CRC polynomial
     let mut crc: u16 = 0;
     for &b in data {
         crc ^= u16::from(b) << 8;
         for _ in 0..8 {
             crc = if crc & 0x8000 != 0 {
-                (crc << 1) ^ 0x1021
+                (crc << 1) ^ POLYNOMIAL
             } else {
                 crc << 1
             };

@@ -60,63 +60,7 @@ pub use enabler::{Action, Enabler, Target};
 
 use core::fmt;
 
-/// Object dictionary indices of the CiA 402 objects this project uses (CiA 402-2,
-/// IEC 61800-7-201). Data types in parentheses.
-pub mod index {
-    /// Abort connection option code (INT16): drive reaction to a lost heartbeat/guarding
-    /// (1 fault, 2 disable voltage, 3 quick stop).
-    pub const ABORT_CONNECTION_OPTION: u16 = 0x6007;
-    /// Error code (UNSIGNED16): the last error, same coding as EMCY.
-    pub const ERROR_CODE: u16 = 0x603F;
-    /// Controlword (UNSIGNED16).
-    pub const CONTROLWORD: u16 = 0x6040;
-    /// Statusword (UNSIGNED16).
-    pub const STATUSWORD: u16 = 0x6041;
-    /// Quick stop option code (INT16), 0..=8; see [`PowerStateMachine`](super::PowerStateMachine).
-    pub const QUICK_STOP_OPTION: u16 = 0x605A;
-    /// Modes of operation (INT8), see [`ModeOfOperation`](super::ModeOfOperation).
-    pub const MODES_OF_OPERATION: u16 = 0x6060;
-    /// Modes of operation display (INT8): the mode is active only once this echoes 0x6060.
-    pub const MODES_DISPLAY: u16 = 0x6061;
-    /// Position actual value (INT32), position units.
-    pub const POSITION_ACTUAL: u16 = 0x6064;
-    /// Following error window (UNSIGNED32), position units.
-    pub const FOLLOWING_ERROR_WINDOW: u16 = 0x6065;
-    /// Following error time out (UNSIGNED16), ms.
-    pub const FOLLOWING_ERROR_TIMEOUT: u16 = 0x6066;
-    /// Target position (INT32): the CSP setpoint, sent every SYNC.
-    pub const TARGET_POSITION: u16 = 0x607A;
-    /// Software position limit (ARRAY INT32): sub 1 minimum, sub 2 maximum.
-    pub const SOFTWARE_POSITION_LIMIT: u16 = 0x607D;
-    /// Max profile velocity (UNSIGNED32), velocity units.
-    pub const MAX_PROFILE_VELOCITY: u16 = 0x607F;
-    /// Profile acceleration (UNSIGNED32), acceleration units.
-    pub const PROFILE_ACCELERATION: u16 = 0x6083;
-    /// Profile deceleration (UNSIGNED32): the slow-down ramp of quick-stop codes 1 and 5.
-    pub const PROFILE_DECELERATION: u16 = 0x6084;
-    /// Quick stop deceleration (UNSIGNED32): the ramp of quick-stop codes 2 and 6.
-    pub const QUICK_STOP_DECELERATION: u16 = 0x6085;
-    /// Position encoder resolution (ARRAY UNSIGNED32), for scaling.
-    pub const POSITION_ENCODER_RESOLUTION: u16 = 0x608F;
-    /// Gear ratio (ARRAY UNSIGNED32), for scaling.
-    pub const GEAR_RATIO: u16 = 0x6091;
-    /// Feed constant (ARRAY UNSIGNED32), for scaling.
-    pub const FEED_CONSTANT: u16 = 0x6092;
-    /// Interpolation sub mode select (INT16): 0 linear, negative values vendor-specific.
-    pub const IP_SUBMODE: u16 = 0x60C0;
-    /// Interpolation data record (ARRAY): sub 1 is the INT32 position setpoint.
-    pub const IP_DATA_RECORD: u16 = 0x60C1;
-    /// Interpolation time period (RECORD): sub 1 value (UNSIGNED8), sub 2 index (INT8);
-    /// period = value × 10^index s, e.g. (1, −3) = 1 ms. Must equal 0x1006.
-    pub const IP_TIME_PERIOD: u16 = 0x60C2;
-    /// Interpolation data configuration (RECORD): sub 3 buffer organisation, sub 6 buffer clear.
-    pub const IP_DATA_CONFIG: u16 = 0x60C4;
-    /// Max acceleration (UNSIGNED32), acceleration units: a limit in every mode.
-    pub const MAX_ACCELERATION: u16 = 0x60C5;
-    /// Supported drive modes (UNSIGNED32), one bit per mode, see
-    /// [`ModeOfOperation::supported_bit`](super::ModeOfOperation::supported_bit).
-    pub const SUPPORTED_MODES: u16 = 0x6502;
-}
+// The CiA 402 objects' indices are named with CiA 301's in `crate::canopen::index`.
 
 /// Statusword (0x6041) bits, CiA 402-2.
 pub mod statusword {

@@ -37,6 +37,7 @@ use std::path::{Path, PathBuf};
 use canopen_rs::{DataType, Value};
 
 pub use crate::canopen::MAX_OBJECT_BYTES;
+use crate::canopen::index;
 use crate::canopen::value_bytes as encode;
 use serde::Deserialize;
 
@@ -554,9 +555,14 @@ impl DriveDictionary {
         };
         for (idx, sub, key, want) in [
             (0x1000u16, 0u8, "device_type", self.identity.device_type),
-            (0x1018, 1, "vendor_id", self.identity.vendor_id),
-            (0x1018, 2, "product_code", self.identity.product_code),
-            (0x1018, 3, "revision", self.identity.revision),
+            (index::IDENTITY, 1, "vendor_id", self.identity.vendor_id),
+            (
+                index::IDENTITY,
+                2,
+                "product_code",
+                self.identity.product_code,
+            ),
+            (index::IDENTITY, 3, "revision", self.identity.revision),
         ] {
             match fixed(idx, sub) {
                 Some(v) if v == i128::from(want) => {}

@@ -12,6 +12,7 @@ use serde::Deserialize;
 
 use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use super::{ConfigError, parse_toml};
+use crate::canopen::index;
 use crate::interp::filter::{AxisFilter, FilterKind, FilterSpec};
 use crate::planner::MAX_LIMIT;
 
@@ -220,77 +221,92 @@ pub const DRIVE_VELOCITY_HEADROOM: f64 = 1.5;
 /// index, what it is, why the gateway owns it).
 pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
     (
-        0x1005,
-        0x1007,
+        index::COB_ID_SYNC,
+        index::SYNC_WINDOW_LENGTH,
         "SYNC COB-ID, period and window",
         "written from [sync] and [bus] cycle_us",
     ),
     (
-        0x1014,
-        0x1015,
+        index::COB_ID_EMCY,
+        index::INHIBIT_TIME_EMCY,
         "EMCY COB-ID and inhibit time",
         "the gateway listens to EMCYs at 0x80 + node, undelayed",
     ),
     (
-        0x1016,
-        0x1016,
+        index::CONSUMER_HEARTBEAT_TIME,
+        index::CONSUMER_HEARTBEAT_TIME,
         "heartbeat consumer",
         "written from [heartbeat] gateway_node and drive_consumer_ms",
     ),
     (
-        0x1017,
-        0x1017,
+        index::PRODUCER_HEARTBEAT_TIME,
+        index::PRODUCER_HEARTBEAT_TIME,
         "heartbeat producer",
         "written from [heartbeat] drive_producer_ms",
     ),
     (
-        0x1019,
-        0x1019,
+        index::SYNC_COUNTER_OVERFLOW,
+        index::SYNC_COUNTER_OVERFLOW,
         "SYNC counter overflow",
         "the gateway's SYNC carries no counter",
     ),
     (
-        0x1029,
-        0x1029,
+        index::ERROR_BEHAVIOUR,
+        index::ERROR_BEHAVIOUR,
         "error behaviour",
         "decides the drive's reaction to a lost gateway",
     ),
     (
-        0x1400,
-        0x1BFF,
+        index::RPDO_COMMUNICATION,
+        index::PDO_PARAMETERS_LAST,
         "PDO communication and mapping",
         "written from setpoint_pdo and feedback_pdo",
     ),
     (
-        0x6007,
-        0x6007,
+        index::ABORT_CONNECTION_OPTION,
+        index::ABORT_CONNECTION_OPTION,
         "abort connection option",
         "decides the drive's reaction to a lost gateway",
     ),
-    (0x6040, 0x6040, "controlword", "written every cycle"),
-    (0x6060, 0x6060, "modes of operation", "written from mode"),
     (
-        0x6065,
-        0x6066,
+        index::CONTROLWORD,
+        index::CONTROLWORD,
+        "controlword",
+        "written every cycle",
+    ),
+    (
+        index::MODES_OF_OPERATION,
+        index::MODES_OF_OPERATION,
+        "modes of operation",
+        "written from mode",
+    ),
+    (
+        index::FOLLOWING_ERROR_WINDOW,
+        index::FOLLOWING_ERROR_TIMEOUT,
         "following error window and time-out",
         "written from following_error_mm and following_error_timeout_ms",
     ),
-    (0x607A, 0x607A, "target position", "written every cycle"),
     (
-        0x607D,
-        0x607D,
+        index::TARGET_POSITION,
+        index::TARGET_POSITION,
+        "target position",
+        "written every cycle",
+    ),
+    (
+        index::SOFTWARE_POSITION_LIMIT,
+        index::SOFTWARE_POSITION_LIMIT,
         "software position limits",
         "written from min_mm and max_mm",
     ),
     (
-        0x607F,
-        0x607F,
+        index::MAX_PROFILE_VELOCITY,
+        index::MAX_PROFILE_VELOCITY,
         "max profile velocity",
         "written from max_vel_mm_s",
     ),
     (
-        0x60C0,
-        0x60C2,
+        index::IP_SUBMODE,
+        index::IP_TIME_PERIOD,
         "interpolation sub-mode, data and period",
         "written from mode and [bus] cycle_us, and every cycle",
     ),
@@ -347,8 +363,8 @@ impl AxisMode {
     /// The object that carries the position setpoint in this mode.
     pub fn setpoint_object(self) -> (u16, u8) {
         match self {
-            AxisMode::Ip => (0x60C1, 1),
-            AxisMode::Csp => (0x607A, 0),
+            AxisMode::Ip => (index::IP_DATA_RECORD, 1),
+            AxisMode::Csp => (index::TARGET_POSITION, 0),
         }
     }
 }
@@ -964,7 +980,7 @@ impl Machine {
             };
             // The drive must support the mode (0x6502 bit mode−1).
             let supported = dict
-                .sub(0x6502, 0)
+                .sub(index::SUPPORTED_MODES, 0)
                 .and_then(|s| match &s.default {
                     super::dictionary::DefaultValue::Fixed(v) => value_as_i128(v),
                     _ => None,
@@ -1020,7 +1036,7 @@ impl Machine {
             }
             for (idx, what) in [
                 (0x6041u16, "statusword 0x6041"),
-                (0x6064, "position actual 0x6064"),
+                (index::POSITION_ACTUAL, "position actual 0x6064"),
             ] {
                 if feedback_pdo.offset_of(idx, 0).is_none() {
                     return Err(ctx.err(
@@ -1254,12 +1270,17 @@ fn pdo_objects(
 ) -> Result<(), ConfigError> {
     let mut need: Vec<(u16, u8, &str)> = Vec::new();
     for k in 0..4u16 {
-        need.push((0x1400 + k, 1, "dictionary"));
-        need.push((0x1800 + k, 1, "dictionary"));
+        need.push((index::RPDO_COMMUNICATION + k, 1, "dictionary"));
+        need.push((index::TPDO_COMMUNICATION + k, 1, "dictionary"));
     }
     for (p, comm, map, key) in [
         (setpoint, 0x1400u16, 0x1600u16, "setpoint_pdo.number"),
-        (feedback, 0x1800, 0x1A00, "feedback_pdo.number"),
+        (
+            feedback,
+            index::TPDO_COMMUNICATION,
+            index::TPDO_MAPPING,
+            "feedback_pdo.number",
+        ),
     ] {
         let k = u16::from(p.number - 1);
         need.push((comm + k, 2, key));

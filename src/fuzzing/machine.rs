@@ -7,6 +7,7 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
+use crate::canopen::index;
 use crate::config::machine::{
     DEMO_DRIVE, DRIVE_VELOCITY_HEADROOM, GATEWAY_OWNED, MAX_AXES, MIN_AXIS_LIMIT,
     MIN_FOLLOWING_ERROR_COUNTS, MIN_PATH_ACC_SHARE, MIN_TRAVEL_COUNTS, RESTRICTED_CAN_IDS,
@@ -83,10 +84,14 @@ fn invariants(m: &Machine) {
         assert_eq!(a.feedback_pdo.transmission, 1);
         assert_ne!(crate::canopen::cob::EMCY + u16::from(a.node), sync);
         // What the cyclic master reads from the process data is there.
-        assert!(a.feedback_pdo.offset_of(0x6041, 0).is_some());
-        assert!(a.feedback_pdo.offset_of(0x6064, 0).is_some());
+        assert!(a.feedback_pdo.offset_of(index::STATUSWORD, 0).is_some());
+        assert!(
+            a.feedback_pdo
+                .offset_of(index::POSITION_ACTUAL, 0)
+                .is_some()
+        );
         let (si, ss) = a.mode.setpoint_object();
-        assert!(a.setpoint_pdo.offset_of(0x6040, 0).is_some());
+        assert!(a.setpoint_pdo.offset_of(index::CONTROLWORD, 0).is_some());
         assert!(a.setpoint_pdo.offset_of(si, ss).is_some());
     }
     let p = &m.planner;

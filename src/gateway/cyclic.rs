@@ -25,7 +25,9 @@
 
 use nalgebra::Vector3;
 
+use super::alarm::{Alarm, Failure, LateAxes, LateAxis, axis_letter};
 use crate::bus::Frame;
+use crate::canopen::index;
 use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
 use crate::config::machine::MAX_AXES;
 use crate::config::{AxisConfig, AxisMode, Machine};
@@ -53,6 +55,8 @@ pub struct AxisIo {
     pub xyz: Option<usize>,
     /// Mode.
     pub mode: AxisMode,
+    /// The axis letter, for alarms (a `&'static str`: raising an alarm allocates nothing).
+    letter: &'static str,
     rpdo_cob: u16,
     rpdo_len: usize,
     cw_off: usize,
@@ -79,16 +83,17 @@ impl AxisIo {
         };
         AxisIo {
             name: a.name.clone(),
+            letter: axis_letter(&a.name),
             node: a.node,
             xyz: a.xyz(),
             mode: a.mode,
             rpdo_cob: a.setpoint_pdo.cob_id,
             rpdo_len: a.setpoint_pdo.len_bytes(),
-            cw_off: off(&a.setpoint_pdo, 0x6040, 0),
+            cw_off: off(&a.setpoint_pdo, index::CONTROLWORD, 0),
             sp_off: off(&a.setpoint_pdo, si, ss),
             tpdo_cob: a.feedback_pdo.cob_id,
-            sw_off: off(&a.feedback_pdo, 0x6041, 0),
-            pos_off: off(&a.feedback_pdo, 0x6064, 0),
+            sw_off: off(&a.feedback_pdo, index::STATUSWORD, 0),
+            pos_off: off(&a.feedback_pdo, index::POSITION_ACTUAL, 0),
             counts_per_mm: a.counts_per_mm,
             min_mm: a.min_mm,
             max_mm: a.max_mm,
@@ -193,7 +198,7 @@ pub struct CyclicMaster {
     reset: Vec<bool>,
     /// The last program line whose motion was completed.
     completed_line: Option<usize>,
-    failure: Option<String>,
+    failure: Option<Failure>,
     /// The cycle in which the failure was detected.
     pub failure_cycle: Option<u64>,
     /// First cycle in which every IP axis reported statusword bit 12.
@@ -209,7 +214,7 @@ pub struct CyclicMaster {
     /// The feed override and hold the operator wants (given to the motion once supplied).
     override_wanted: (f64, bool),
     /// A stop on the path was asked for ([`Self::stop_on_path`]): why, once the hold is done.
-    stop_asked: Option<String>,
+    stop_asked: Option<Alarm>,
     /// The run ended in a fault stop (see [`Self::fault_stop`]).
     fault_stop: bool,
 }
@@ -272,8 +277,8 @@ impl CyclicMaster {
         self.phase
     }
     /// Why the run failed, once it has.
-    pub fn failure(&self) -> Option<&str> {
-        self.failure.as_deref()
+    pub fn failure(&self) -> Option<&Failure> {
+        self.failure.as_ref()
     }
     /// Whether the run stopped on a fault: a drive fault or following error (statusword bits 3,
     /// 13, a fault EMCY), missing process data, a lost heartbeat, a boot-up, the bus, or a stop
@@ -347,15 +352,11 @@ impl CyclicMaster {
         self.frozen[i] = true;
         self.fault_stop = true;
         let a = &self.axes[i];
-        let completed = match self.completed_line {
-            Some(l) => format!("last completed program line {l}"),
-            None => "no program line completed".to_string(),
-        };
-        let msg = format!(
-            "axis {} (node {}): boot-up during the run: the drive reset; no further setpoints to node {}; {completed}",
-            a.name, a.node, a.node
-        );
-        self.fail(msg);
+        self.fail(Alarm::BootUp {
+            axis: a.letter,
+            node: a.node,
+            completed_line: self.completed_line,
+        });
     }
 
     /// Last position actual per axis (counts; 0 when none arrived).
@@ -438,33 +439,33 @@ impl CyclicMaster {
 
     /// Raise an alarm on an axis (by node id), from outside the cyclic data: an EMCY, a lost
     /// heartbeat, a boot-up. The axis is frozen and the group stops.
-    pub fn alarm(&mut self, node: u8, message: String) {
+    pub fn alarm(&mut self, node: u8, alarm: Alarm) {
         self.fault_stop = true;
         if let Some(i) = self.axes.iter().position(|a| a.node == node) {
             self.frozen[i] = true;
         }
-        self.fail(message);
+        self.fail(alarm);
     }
 
     /// Stop the run on the path (SIGINT, SIGTERM): while the motion streams, a feed hold with
     /// the motion's own override ramp (the path kept, every axis within its limits), then, at
     /// standstill, the drives are disabled as at the end of a program and the run fails with
-    /// `message`, so that its resume point is where the hold stopped. Before the motion
+    /// `alarm`, so that its resume point is where the hold stopped. Before the motion
     /// streams, or for a motion without an override ramp, it is the stop of [`Self::alarm`] (no
     /// axis frozen). While the axes settle at the program's end, or once stopping, nothing
     /// changes. A later [`Self::alarm`] escalates to the fault stop.
-    pub fn stop_on_path(&mut self, message: String) {
+    pub fn stop_on_path(&mut self, alarm: Alarm) {
         match self.phase {
             Phase::Streaming => {
                 let held = self.motion.as_mut().is_some_and(|m| m.hold().is_ok());
                 if held {
                     self.override_wanted.1 = true;
-                    self.stop_asked = Some(message);
+                    self.stop_asked = Some(alarm);
                 } else {
-                    self.fail(message);
+                    self.fail(alarm);
                 }
             }
-            Phase::Enabling | Phase::Arming | Phase::Armed => self.fail(message),
+            Phase::Enabling | Phase::Arming | Phase::Armed => self.fail(alarm),
             Phase::Settling | Phase::Stopping | Phase::Disabling | Phase::Done => {}
         }
     }
@@ -472,27 +473,26 @@ impl CyclicMaster {
     /// The bus is gone (bus-off, interface down): no frame reaches the drives any more, so no
     /// controlled stop is possible. Every setpoint is held where it is, and the run ends now
     /// ([`Phase::Done`]: no more frames).
-    pub fn bus_lost(&mut self, message: String) {
+    pub fn bus_lost(&mut self, alarm: Alarm) {
         self.fault_stop = true;
         self.frozen.iter_mut().for_each(|f| *f = true);
-        self.fail(message);
+        self.fail(alarm);
         self.set_phase(Phase::Done);
     }
 
     /// The run's failure, unless it has one already.
-    fn fail_message(&mut self, message: String) {
+    fn fail_message(&mut self, alarm: Alarm) {
         if self.failure.is_none() {
-            let at = match self.line {
-                Some(l) => format!(" (last program line {l})"),
-                None => String::new(),
-            };
-            self.failure = Some(format!("{message}{at}"));
+            self.failure = Some(Failure {
+                alarm,
+                line: self.line,
+            });
             self.failure_cycle = Some(self.cycle);
         }
     }
 
-    fn fail(&mut self, message: String) {
-        self.fail_message(message);
+    fn fail(&mut self, alarm: Alarm) {
+        self.fail_message(alarm);
         match self.phase {
             Phase::Streaming | Phase::Settling | Phase::Armed | Phase::Arming => {
                 // Stop along the current direction: every axis decelerates so that all reach
@@ -565,17 +565,21 @@ impl CyclicMaster {
                     }
                     self.frozen[i] = true;
                     self.fault_stop = true;
-                    let a = &self.axes[i];
-                    let what = if fb.statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
-                        "following error (statusword bit 13)"
+                    let (axis, node, statusword) =
+                        (self.axes[i].letter, self.axes[i].node, fb.statusword);
+                    self.fail(if statusword & swb::OP_MODE_SPECIFIC_13 != 0 {
+                        Alarm::FollowingError {
+                            axis,
+                            node,
+                            statusword,
+                        }
                     } else {
-                        "fault (statusword bit 3)"
-                    };
-                    let msg = format!(
-                        "axis {} (node {}): drive reports {what}, statusword 0x{:04X}",
-                        a.name, a.node, fb.statusword
-                    );
-                    self.fail(msg);
+                        Alarm::DriveFault {
+                            axis,
+                            node,
+                            statusword,
+                        }
+                    });
                 }
                 Some(fb)
                     if self.cycle - fb.cycle > STALE_CYCLES
@@ -585,14 +589,12 @@ impl CyclicMaster {
                     self.frozen[i] = true;
                     self.fault_stop = true;
                     let a = &self.axes[i];
-                    let msg = format!(
-                        "axis {} (node {}): no process data (TPDO 0x{:03X}) for {} cycles",
-                        a.name,
-                        a.node,
-                        a.tpdo_cob,
-                        self.cycle - fb.cycle
-                    );
-                    self.fail(msg);
+                    self.fail(Alarm::MissingProcessData {
+                        axis: a.letter,
+                        node: a.node,
+                        tpdo_cob: a.tpdo_cob,
+                        silent_cycles: Some(self.cycle - fb.cycle),
+                    });
                 }
                 None if self.cycle > STALE_CYCLES
                     && self.phase != Phase::Done
@@ -601,23 +603,23 @@ impl CyclicMaster {
                     self.frozen[i] = true;
                     self.fault_stop = true;
                     let a = &self.axes[i];
-                    let msg = format!(
-                        "axis {} (node {}): no process data (TPDO 0x{:03X}) since start",
-                        a.name, a.node, a.tpdo_cob
-                    );
-                    self.fail(msg);
+                    self.fail(Alarm::MissingProcessData {
+                        axis: a.letter,
+                        node: a.node,
+                        tpdo_cob: a.tpdo_cob,
+                        silent_cycles: None,
+                    });
                 }
                 _ => {}
             }
         }
-        let states: Vec<Option<State>> = self
-            .fb
-            .iter()
-            .map(|f| f.and_then(|f| State::from_statusword(f.statusword)))
-            .collect();
-        let actual_mm: Vec<Option<f64>> = (0..n)
-            .map(|i| self.fb[i].map(|f| self.axes[i].to_mm(f.position)))
-            .collect();
+        // Fixed arrays, not vectors: the cyclic path allocates nothing.
+        let mut states = [None::<State>; MAX_AXES];
+        let mut actual_mm = [None::<f64>; MAX_AXES];
+        for i in 0..n {
+            states[i] = self.fb[i].and_then(|f| State::from_statusword(f.statusword));
+            actual_mm[i] = self.fb[i].map(|f| self.axes[i].to_mm(f.position));
+        }
 
         // Shift the setpoint history.
         for h in &mut self.sp_mm {
@@ -639,11 +641,10 @@ impl CyclicMaster {
                             Action::Fault => {
                                 self.fault_stop = true;
                                 let a = &self.axes[i];
-                                let msg = format!(
-                                    "axis {} (node {}): fault reset did not clear the fault",
-                                    a.name, a.node
-                                );
-                                self.fail(msg);
+                                self.fail(Alarm::FaultResetFailed {
+                                    axis: a.letter,
+                                    node: a.node,
+                                });
                                 all = false;
                             }
                         },
@@ -660,26 +661,19 @@ impl CyclicMaster {
                         self.set_phase(Phase::Arming);
                     } else {
                         let t = self.phase_time_s();
-                        let late: Vec<String> = (0..n)
-                            .filter(|&i| {
-                                states[i] != Some(State::OperationEnabled)
-                                    && t > self.axes[i].enable_timeout_s()
-                            })
-                            .map(|i| {
-                                format!(
-                                    "{} (node {}) in {} after its enable_timeout_ms of {} ms",
-                                    self.axes[i].name,
-                                    self.axes[i].node,
-                                    states[i].map_or("no statusword", |s| s.name()),
-                                    self.axes[i].enable_timeout_ms
-                                )
-                            })
-                            .collect();
+                        let mut late = LateAxes::default();
+                        for (a, state) in self.axes.iter().zip(states) {
+                            if state != Some(State::OperationEnabled) && t > a.enable_timeout_s() {
+                                late.push(LateAxis {
+                                    axis: a.letter,
+                                    node: a.node,
+                                    state,
+                                    enable_timeout_ms: a.enable_timeout_ms,
+                                });
+                            }
+                        }
                         if !late.is_empty() {
-                            self.fail(format!(
-                                "drives did not reach Operation enabled: {}",
-                                late.join(", ")
-                            ));
+                            self.fail(Alarm::EnableTimeout { late });
                         }
                     }
                 }
@@ -707,26 +701,22 @@ impl CyclicMaster {
                     self.set_phase(Phase::Armed);
                 } else {
                     let t = self.phase_time_s();
-                    let late: Vec<String> = (0..n)
-                        .filter(|&i| {
-                            t > self.axes[i].enable_timeout_s()
-                                && self.fb[i]
-                                    .is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
-                        })
-                        .map(|i| {
-                            format!(
-                                "{} (node {}, enable_timeout_ms {} ms)",
-                                self.axes[i].name,
-                                self.axes[i].node,
-                                self.axes[i].enable_timeout_ms
-                            )
-                        })
-                        .collect();
+                    let mut late = LateAxes::default();
+                    for (i, a) in self.axes.iter().enumerate() {
+                        if t > a.enable_timeout_s()
+                            && self.fb[i]
+                                .is_none_or(|f| f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
+                        {
+                            late.push(LateAxis {
+                                axis: a.letter,
+                                node: a.node,
+                                state: states[i],
+                                enable_timeout_ms: a.enable_timeout_ms,
+                            });
+                        }
+                    }
                     if !late.is_empty() {
-                        self.fail(format!(
-                            "statusword bit 12 (IP active / following) not set within the enable time-out on {}; check 0x60C2 equals the SYNC period",
-                            late.join(", ")
-                        ));
+                        self.fail(Alarm::Bit12Timeout { late });
                     }
                 }
             }
@@ -766,7 +756,7 @@ impl CyclicMaster {
                 Some(Status::Starved) => {
                     // The gateway streams settled plans only; an underrun would hold every
                     // axis in place mid-path, which is a planning failure to stop on.
-                    self.fail("the motion queue ran dry (planner underrun): stopping".to_string());
+                    self.fail(Alarm::PlannerUnderrun);
                 }
                 None => {}
             }
@@ -784,19 +774,21 @@ impl CyclicMaster {
                 let step = (target - prev).abs();
                 // Last line of defence; the plan is checked against these before motion starts.
                 if !(a.min_mm..=a.max_mm).contains(&target) {
-                    let msg = format!(
-                        "axis {}: setpoint {target:.4} mm outside the travel limits [{}, {}] mm",
-                        a.name, a.min_mm, a.max_mm
-                    );
-                    self.fail(msg);
+                    let alarm = Alarm::OutsideTravel {
+                        axis: a.letter,
+                        setpoint_mm: target,
+                        min_mm: a.min_mm,
+                        max_mm: a.max_mm,
+                    };
+                    self.fail(alarm);
                     break;
                 }
                 if step > a.max_vel_mm_s * self.period_s * 1.01 + 1e-9 {
-                    let msg = format!(
-                        "axis {}: setpoint step {step:.4} mm exceeds max_vel × period",
-                        a.name
-                    );
-                    self.fail(msg);
+                    let alarm = Alarm::StepTooLarge {
+                        axis: a.letter,
+                        step_mm: step,
+                    };
+                    self.fail(alarm);
                     break;
                 }
                 self.sp_mm[i][0] = target;
@@ -817,9 +809,9 @@ impl CyclicMaster {
                     .motion
                     .as_ref()
                     .is_some_and(Interpolator::is_standing_still)
-                && let Some(message) = self.stop_asked.take()
+                && let Some(alarm) = self.stop_asked.take()
             {
-                self.fail_message(message);
+                self.fail_message(alarm);
                 self.set_phase(Phase::Settling);
             }
         } else if self.phase == Phase::Settling {
@@ -835,9 +827,9 @@ impl CyclicMaster {
                 }
                 self.start_disabling();
             } else if self.phase_time_s() > SETTLE_TIMEOUT_S {
-                self.fail(format!(
-                    "axes did not settle within one count of the end point in {SETTLE_TIMEOUT_S} s"
-                ));
+                self.fail(Alarm::SettleTimeout {
+                    timeout_s: SETTLE_TIMEOUT_S,
+                });
             }
         } else if self.phase == Phase::Stopping {
             let mut moving = false;
@@ -895,7 +887,7 @@ impl CyclicMaster {
             act_mm: [0.0; MAX_AXES],
             ferr_mm: [0.0; MAX_AXES],
         };
-        for (i, act) in actual_mm.iter().enumerate().take(MAX_AXES) {
+        for (i, act) in actual_mm.iter().enumerate().take(n) {
             rec.cmd_mm[i] = self.sp_mm[i][0];
             if let Some(p) = *act {
                 rec.act_mm[i] = p;
@@ -1194,18 +1186,14 @@ mod tests {
         }
         assert_eq!(r.master.phase(), Phase::Streaming);
         let stopped_at = r.records.len();
-        r.master.stop_on_path("stopped by signal SIGINT".into());
+        let sigint = Alarm::Signal {
+            signal: Some(crate::rt::signal::Signal::Int),
+        };
+        r.master.stop_on_path(sigint.clone());
         // An operator's resume does not lift it.
         r.master.set_override(1.0, false);
         r.run_until(Phase::Done, 3000);
-        assert!(
-            r.master
-                .failure()
-                .unwrap()
-                .starts_with("stopped by signal SIGINT"),
-            "{:?}",
-            r.master.failure()
-        );
+        assert_eq!(r.master.failure().unwrap().alarm, sigint);
         assert!(r.master.frozen_nodes().is_empty(), "no axis frozen");
         let interp = r.master.motion().unwrap();
         assert!(
@@ -1244,8 +1232,18 @@ mod tests {
         r.drives[2].fault = true; // Z faults
         r.run_until(Phase::Done, 2000);
         let f = r.master.failure().unwrap();
-        assert!(f.contains("axis Z (node 3)") && f.contains("fault"), "{f}");
-        assert!(f.contains("last program line 1"), "{f}");
+        assert!(
+            matches!(
+                f.alarm,
+                Alarm::DriveFault {
+                    axis: "Z",
+                    node: 3,
+                    statusword
+                } if statusword & swb::FAULT != 0
+            ),
+            "{f}"
+        );
+        assert_eq!(f.line, Some(1), "{f}");
         // The stop: no axis's velocity change per cycle beyond its acceleration limit.
         let m = Machine::demo();
         let t = m.cycle_s();
@@ -1326,10 +1324,17 @@ mod tests {
         // Node 1 resets: its boot-up arrives before the next cycle.
         r.master.on_frame(&Frame::new(0x701, &[0x00]).unwrap());
         assert_eq!(r.master.phase(), Phase::Stopping);
-        let f = r.master.failure().unwrap().to_string();
+        let f = r.master.failure().unwrap();
         assert_eq!(
-            f,
-            "axis X (node 1): boot-up during the run: the drive reset; no further setpoints to node 1; last completed program line 1 (last program line 2)"
+            *f,
+            Failure {
+                alarm: Alarm::BootUp {
+                    axis: "X",
+                    node: 1,
+                    completed_line: Some(1)
+                },
+                line: Some(2)
+            }
         );
         assert_eq!(r.master.reset_nodes(), vec![1]);
         let mut cycles = 0;
@@ -1359,6 +1364,17 @@ mod tests {
             r.step();
         }
         let f = r.master.failure().unwrap();
-        assert!(f.contains("axis Y (node 2): no process data"), "{f}");
+        assert!(
+            matches!(
+                f.alarm,
+                Alarm::MissingProcessData {
+                    axis: "Y",
+                    node: 2,
+                    tpdo_cob: 0x182,
+                    silent_cycles: Some(n)
+                } if n > STALE_CYCLES
+            ),
+            "{f}"
+        );
     }
 }

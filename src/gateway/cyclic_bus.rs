@@ -20,6 +20,7 @@
 //!   timestamps of the SYNC frames on a socket of their own ([`crate::bus::sync_tap`]), or from
 //!   the sending clock on the in-process bus.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use crate::bus::error::{self, Severity};
@@ -28,6 +29,7 @@ use crate::bus::{BusError, ErrorFrame, Frame, Port, Received, TrySend};
 use crate::config::Machine;
 use crate::rt::period_stats::{PeriodStats, PeriodSummary, TimestampSource};
 
+use super::alarm::{Alarm, BusLoss, SharedBusError};
 use super::cyclic::CyclicMaster;
 
 /// The longest run of lost cycles a fault is declared after, whatever the following-error
@@ -259,7 +261,7 @@ impl std::fmt::Display for BusReport {
 
 /// The cyclic thread's bus side: receive, send, watch, measure.
 pub struct CyclicBus {
-    iface: String,
+    iface: Arc<str>,
     sync_cob_id: u16,
     budget_ns: u64,
     sender: CycleSender,
@@ -291,7 +293,7 @@ impl CyclicBus {
             w => u64::from(w) * 1000,
         };
         Ok(CyclicBus {
-            iface: iface.to_string(),
+            iface: Arc::from(iface),
             sync_cob_id: machine.sync_cob_id,
             budget_ns,
             sender: CycleSender::new(tolerated_lost_cycles(machine)),
@@ -332,7 +334,7 @@ impl CyclicBus {
                 Ok(Some(Received::Error(e))) => self.on_error_frame(&e, master, cycle),
                 Ok(None) => return Ok(()),
                 Err(e) if e.is_bus_lost() => {
-                    self.bus_lost(&e.to_string(), master, cycle);
+                    self.bus_lost(BusLoss::Port(SharedBusError(Arc::new(e))), master, cycle);
                     return Ok(());
                 }
                 Err(e) => return Err(e),
@@ -343,13 +345,12 @@ impl CyclicBus {
     fn on_error_frame(&mut self, e: &ErrorFrame, master: &mut CyclicMaster, cycle: u64) {
         match e.severity() {
             Severity::BusOff => {
-                let detail = if e.class() == error::class::BUS_OFF {
-                    String::new()
-                } else {
-                    format!(" ({e})")
+                let frame = (e.class() != error::class::BUS_OFF).then_some(*e);
+                let cause = BusLoss::BusOff {
+                    iface: self.iface.clone(),
+                    frame,
                 };
-                let what = format!("CAN interface '{}': controller bus-off{detail}", self.iface);
-                self.bus_lost(&what, master, cycle);
+                self.bus_lost(cause, master, cycle);
             }
             Severity::Warning => {
                 let d = e.data();
@@ -381,22 +382,18 @@ impl CyclicBus {
     }
 
     /// End the run: nothing can be sent any more.
-    fn bus_lost(&mut self, what: &str, master: &mut CyclicMaster, cycle: u64) {
+    fn bus_lost(&mut self, cause: BusLoss, master: &mut CyclicMaster, cycle: u64) {
         if self.lost {
             return;
         }
         self.lost = true;
         let t_s = (crate::rt::now_ns() - self.start_ns) as f64 * 1e-9;
-        let completed = match self.completed_line {
-            Some(l) => format!("line {l}"),
-            None => "none".to_string(),
-        };
-        master.bus_lost(format!(
-            "{what}, detected in cycle {cycle}, {t_s:.3} s after the first; nothing more can be sent, so the \
-             gateway cannot stop the drives: each stops by its heartbeat consumer (0x1016) once \
-             the gateway's heartbeat is missing; setpoints held; last completed program line: \
-             {completed}"
-        ));
+        master.bus_lost(Alarm::BusLost {
+            cause,
+            cycle,
+            t_s,
+            completed_line: self.completed_line,
+        });
     }
 
     /// Send this cycle's `frames`; the cycle's deadline was `cycle_deadline_ns` (its start on
@@ -409,7 +406,7 @@ impl CyclicBus {
         cycle_deadline_ns: u64,
         master: &mut CyclicMaster,
         cycle: u64,
-    ) -> Option<BusError> {
+    ) -> Option<SharedBusError> {
         if self.lost {
             return None;
         }
@@ -449,21 +446,29 @@ impl CyclicBus {
                     let l = self.sender.loss();
                     master.alarm(
                         0,
-                        format!(
-                            "CAN interface '{}': transmit queue full (ENOBUFS): the setpoints of {run} consecutive cycles could not be sent (the drives tolerate {}: following-error window / (max velocity × cycle)); {} cycles lost in all",
-                            self.iface, l.tolerated_run, l.cycles
-                        ),
+                        Alarm::TxQueueFull {
+                            iface: self.iface.clone(),
+                            run,
+                            tolerated_run: l.tolerated_run,
+                            lost_cycles: l.cycles,
+                        },
                     );
                 }
                 None
             }
             CycleSent::Failed(e) if e.is_bus_lost() => {
-                self.bus_lost(&e.to_string(), master, cycle);
+                self.bus_lost(BusLoss::Port(SharedBusError(Arc::new(e))), master, cycle);
                 None
             }
             CycleSent::Failed(e) => {
-                master.alarm(0, format!("bus error: {e}"));
-                Some(e)
+                let error = SharedBusError(Arc::new(e));
+                master.alarm(
+                    0,
+                    Alarm::Bus {
+                        error: error.clone(),
+                    },
+                );
+                Some(error)
             }
         }
     }
@@ -490,7 +495,7 @@ impl CyclicBus {
     pub fn report(mut self) -> BusReport {
         self.read_tap();
         let source = match self.tap {
-            Some(_) => TimestampSource::KernelRx(self.iface.clone()),
+            Some(_) => TimestampSource::KernelRx(self.iface.to_string()),
             None => TimestampSource::SenderClock,
         };
         BusReport {
@@ -694,8 +699,14 @@ mod tests {
         }
         let f = master.failure().expect("a fault after 3 lost cycles");
         assert!(
-            f.starts_with(
-                "CAN interface 'vcan0': transmit queue full (ENOBUFS): the setpoints of 3 consecutive cycles could not be sent (the drives tolerate 2"
+            matches!(
+                &f.alarm,
+                Alarm::TxQueueFull {
+                    iface,
+                    run: 3,
+                    tolerated_run: 2,
+                    lost_cycles: 3
+                } if &**iface == "vcan0"
             ),
             "{f}"
         );
@@ -724,9 +735,22 @@ mod tests {
         assert_eq!(master.phase(), Phase::Done);
         let f = master.failure().unwrap();
         assert!(
-            f.starts_with("CAN interface 'can0': controller bus-off, detected in cycle 2, ")
-                && f.contains("heartbeat consumer (0x1016)")
-                && f.contains("last completed program line: none"),
+            matches!(
+                &f.alarm,
+                Alarm::BusLost {
+                    cause: BusLoss::BusOff { iface, frame: None },
+                    cycle: 2,
+                    completed_line: None,
+                    ..
+                } if &**iface == "can0"
+            ),
+            "{f}"
+        );
+        // The message says how the drives stop.
+        assert!(
+            f.to_string()
+                .starts_with("CAN interface 'can0': controller bus-off, detected in cycle 2, ")
+                && f.to_string().contains("heartbeat consumer (0x1016)"),
             "{f}"
         );
         let mut out = Vec::new();

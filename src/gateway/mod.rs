@@ -1,6 +1,7 @@
 //! The gateway: start the drives up over SDO, stream the program's setpoints on SYNC from the
 //! cyclic thread, watch the drives, and bring everything down in order.
 
+pub mod alarm;
 pub mod control;
 pub mod cyclic;
 pub mod cyclic_bus;
@@ -11,7 +12,7 @@ pub mod startup;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc;
+use std::sync::{Arc, mpsc};
 use std::time::Duration;
 
 use nalgebra::Vector3;
@@ -22,6 +23,7 @@ use crate::config::{ConfigError, Machine};
 use crate::interp::{Interpolator, OverrideRamp};
 use crate::planner::{Limits, Plan, PlanError};
 use crate::rt::{self, Ticker, Timing};
+use alarm::{Alarm, Failure, SharedBusError, axis_letter};
 use cyclic::{CycleRecord, CyclicMaster, Phase};
 use io::NodeIo;
 
@@ -256,8 +258,8 @@ pub enum GatewayError {
 /// Why and when the motion stopped.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MotionFailure {
-    /// What happened, to which axis, at which program line.
-    pub message: String,
+    /// What happened, to which axis, and the program line in execution.
+    pub failure: Failure,
     /// The cycle in which it was detected.
     pub detected_cycle: Option<u64>,
     /// The cycle in which every drive reported statusword bit 12.
@@ -280,9 +282,9 @@ pub struct MotionFailure {
 }
 
 impl MotionFailure {
-    fn plain(message: String, period_s: f64) -> Box<MotionFailure> {
+    fn plain(alarm: Alarm, period_s: f64) -> Box<MotionFailure> {
         Box::new(MotionFailure {
-            message,
+            failure: Failure { alarm, line: None },
             detected_cycle: None,
             bit12_cycle: None,
             first_motion_cycle: None,
@@ -340,9 +342,16 @@ impl StopPoint {
     }
 }
 
+impl MotionFailure {
+    /// The alarm that stopped the motion.
+    pub fn alarm(&self) -> &Alarm {
+        &self.failure.alarm
+    }
+}
+
 impl std::fmt::Display for MotionFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.message)
+        self.failure.fmt(f)
     }
 }
 
@@ -889,7 +898,10 @@ async fn run_async(
                         Err(_) => i,
                     })
                     .map_err(|e| {
-                        GatewayError::Motion(MotionFailure::plain(e.to_string(), machine.cycle_s()))
+                        GatewayError::Motion(MotionFailure::plain(
+                            Alarm::from(e),
+                            machine.cycle_s(),
+                        ))
                     })
             });
             match r {
@@ -941,7 +953,7 @@ async fn run_async(
             tracing::warn!("{e}");
         }
         return Err(GatewayError::Motion(Box::new(MotionFailure {
-            message: f.to_string(),
+            failure: f.clone(),
             detected_cycle: master.failure_cycle,
             bit12_cycle: master.bit12_cycle,
             first_motion_cycle: master.first_motion_cycle,
@@ -954,7 +966,17 @@ async fn run_async(
         })));
     }
     if let Some(e) = port_err {
-        return Err(GatewayError::Bus(e));
+        // Every port error raised an alarm, so a failure returned above; should one not have,
+        // the error is still the run's.
+        return Err(match Arc::try_unwrap(e.0) {
+            Ok(e) => GatewayError::Bus(e),
+            Err(e) => GatewayError::Motion(MotionFailure::plain(
+                Alarm::Bus {
+                    error: SharedBusError(e),
+                },
+                master.period_s(),
+            )),
+        });
     }
     disarmed?;
     let final_counts = master.final_counts();
@@ -1015,7 +1037,7 @@ struct CyclicEnd {
     timing: Timing,
     /// The real-time set-up achieved (scheduling class, memory lock).
     rt_setup: String,
-    port_err: Option<BusError>,
+    port_err: Option<SharedBusError>,
     /// Log records dropped because the log writer fell behind.
     dropped: u64,
     warnings: Vec<Warning>,
@@ -1075,27 +1097,23 @@ fn cyclic_thread(
         // escalates to the fault stop.
         let signals = rt::signal::STOP.count();
         if signals != signals_seen {
-            let first = rt::signal::STOP.first().map_or("?", |s| s.name());
+            let first = rt::signal::STOP.first();
             if signals_seen == 0 {
-                master.stop_on_path(format!("stopped by signal {first}"));
+                master.stop_on_path(Alarm::Signal { signal: first });
             }
             if signals >= 2 {
-                let latest = rt::signal::STOP.latest().map_or("?", |s| s.name());
-                master.alarm(
-                    0,
-                    format!(
-                        "stopped by signal {first}; a second signal ({latest}) during the stop escalated to the fault stop"
-                    ),
-                );
+                let latest = rt::signal::STOP.latest();
+                master.alarm(0, Alarm::SignalEscalated { first, latest });
             }
             signals_seen = signals;
         }
         // Feedback and error frames received since the last cycle.
         if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {
-            port_err.get_or_insert(e);
+            port_err.get_or_insert(SharedBusError(Arc::new(e)));
         }
         if let Some(e) = &port_err {
-            master.alarm(0, format!("bus error: {e}"));
+            // Cloning the shared error allocates nothing.
+            master.alarm(0, Alarm::Bus { error: e.clone() });
         }
         // Health from the non-cyclic side.
         if let Ok(g) = health.try_lock() {
@@ -1123,13 +1141,12 @@ fn cyclic_thread(
                 {
                     master.alarm(
                         a.node,
-                        format!(
-                            "axis {} (node {}): heartbeat lost (none for {} ms, consumer time {} ms)",
-                            a.name,
-                            a.node,
-                            at.elapsed().as_millis(),
-                            consumer.as_millis()
-                        ),
+                        Alarm::HeartbeatLost {
+                            axis: axis_letter(&a.name),
+                            node: a.node,
+                            silent_ms: at.elapsed().as_millis() as u64,
+                            consumer_ms: consumer.as_millis() as u64,
+                        },
                     );
                 }
             }
@@ -1143,13 +1160,11 @@ fn cyclic_thread(
             if fb.statusword & crate::cia402::statusword::FAULT != 0 {
                 master.alarm(
                     a.node,
-                    format!(
-                        "axis {} (node {}): EMCY 0x{:04X} {}",
-                        a.name,
-                        a.node,
-                        p.code,
-                        emcy::meaning(p.code)
-                    ),
+                    Alarm::Emcy {
+                        axis: axis_letter(&a.name),
+                        node: a.node,
+                        code: p.code,
+                    },
                 );
                 return false;
             }
@@ -1169,9 +1184,7 @@ fn cyclic_thread(
                 Ok(m) => master.supply_motion(m),
                 Err(mpsc::TryRecvError::Empty) => {}
                 // Planning failed on the other side (its error is reported there): disable.
-                Err(mpsc::TryRecvError::Disconnected) => {
-                    master.alarm(0, "no motion to run: planning failed".into())
-                }
+                Err(mpsc::TryRecvError::Disconnected) => master.alarm(0, Alarm::PlanningFailed),
             }
         }
         out.clear();
@@ -1229,7 +1242,7 @@ fn cyclic_thread(
         )
         .expect("NMT");
         if let Err(e) = port.send(&f) {
-            port_err.get_or_insert(e);
+            port_err.get_or_insert(SharedBusError(Arc::new(e)));
         }
     }
     drop(armed_tx);

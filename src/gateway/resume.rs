@@ -434,7 +434,7 @@ impl Motion {
             program_hash: fnv1a64(opts.program_text.as_bytes()),
             machine: machine.name.clone(),
             machine_hash: machine_fingerprint(machine),
-            reason: failure.message.clone(),
+            reason: failure.to_string(),
             nodes: stop.frozen_nodes.clone(),
             reset_nodes: stop.reset_nodes.clone(),
             program_start_mm: self.program_start_mm.into(),
@@ -951,7 +951,14 @@ mod tests {
 
     fn failure(stop: StopPoint) -> MotionFailure {
         MotionFailure {
-            message: "axis X (node 1): boot-up during the run".into(),
+            failure: crate::gateway::alarm::Failure {
+                alarm: crate::gateway::alarm::Alarm::BootUp {
+                    axis: "X",
+                    node: 1,
+                    completed_line: None,
+                },
+                line: None,
+            },
             detected_cycle: None,
             bit12_cycle: None,
             first_motion_cycle: None,

@@ -14,6 +14,7 @@ use canopen_rs::{DataType, Value};
 use super::GatewayError;
 use super::io::NodeIo;
 use crate::bus::Bus;
+use crate::canopen::index;
 use crate::canopen::nmt;
 use crate::config::machine::ip_time_period;
 use crate::config::{AxisConfig, Machine, PdoConfig};
@@ -107,9 +108,9 @@ async fn check_identity(io: &NodeIo, a: &AxisConfig) -> Result<(), GatewayError>
     let id = a.dictionary.identity;
     for (index, sub, object, expected) in [
         (0x1000u16, 0u8, "device type 0x1000", id.device_type),
-        (0x1018, 1, "vendor-ID 0x1018:1", id.vendor_id),
-        (0x1018, 2, "product code 0x1018:2", id.product_code),
-        (0x1018, 3, "revision 0x1018:3", id.revision),
+        (index::IDENTITY, 1, "vendor-ID 0x1018:1", id.vendor_id),
+        (index::IDENTITY, 2, "product code 0x1018:2", id.product_code),
+        (index::IDENTITY, 3, "revision 0x1018:3", id.revision),
     ] {
         let found = io.read_u32(a.node, index, sub).await?;
         if found != expected {
@@ -130,14 +131,21 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     let n = a.node;
     // Heartbeats: the drive produces, and consumes the gateway's.
     let hb = &m.heartbeat;
-    write_checked(io, n, 0x1017, 0, Value::Unsigned16(hb.drive_producer_ms)).await?;
+    write_checked(
+        io,
+        n,
+        index::PRODUCER_HEARTBEAT_TIME,
+        0,
+        Value::Unsigned16(hb.drive_producer_ms),
+    )
+    .await?;
     // Written at every start-up, before NMT start: the orderly end of the last run switched it
     // off ([`stop_consuming_heartbeat`]), and a drive must watch the gateway before it moves.
     let consumer = (u32::from(hb.gateway_node) << 16) | u32::from(hb.drive_consumer_ms);
     write_checked(
         io,
         n,
-        0x1016,
+        index::CONSUMER_HEARTBEAT_TIME,
         HEARTBEAT_CONSUMER_SUB,
         Value::Unsigned32(consumer),
     )
@@ -151,7 +159,7 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     write_checked(
         io,
         n,
-        0x6065,
+        index::FOLLOWING_ERROR_WINDOW,
         0,
         Value::Unsigned32(counts(a.following_error_mm).unsigned_abs()),
     )
@@ -159,42 +167,63 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     write_checked(
         io,
         n,
-        0x6066,
+        index::FOLLOWING_ERROR_TIMEOUT,
         0,
         Value::Unsigned16(a.following_error_timeout_ms),
     )
     .await?;
-    write_checked(io, n, 0x607D, 1, Value::Integer32(counts(a.min_mm))).await?;
-    write_checked(io, n, 0x607D, 2, Value::Integer32(counts(a.max_mm))).await?;
+    write_checked(
+        io,
+        n,
+        index::SOFTWARE_POSITION_LIMIT,
+        1,
+        Value::Integer32(counts(a.min_mm)),
+    )
+    .await?;
+    write_checked(
+        io,
+        n,
+        index::SOFTWARE_POSITION_LIMIT,
+        2,
+        Value::Integer32(counts(a.max_mm)),
+    )
+    .await?;
     // The drive's own velocity limit, with head-room for its position loop to catch up.
     // (The machine file's validation keeps it within UNSIGNED32.)
     let vmax = (a.max_vel_mm_s * a.counts_per_mm * crate::config::machine::DRIVE_VELOCITY_HEADROOM)
         .ceil() as u32;
-    write_checked(io, n, 0x607F, 0, Value::Unsigned32(vmax)).await?;
+    write_checked(
+        io,
+        n,
+        index::MAX_PROFILE_VELOCITY,
+        0,
+        Value::Unsigned32(vmax),
+    )
+    .await?;
     // Process data: our two PDOs, every other one off.
     let rx = a.setpoint_pdo.number;
     let tx = a.feedback_pdo.number;
     for k in 1..=4u8 {
         if k != rx {
-            disable_pdo(io, n, 0x1400 + u16::from(k - 1)).await?;
+            disable_pdo(io, n, index::RPDO_COMMUNICATION + u16::from(k - 1)).await?;
         }
         if k != tx {
-            disable_pdo(io, n, 0x1800 + u16::from(k - 1)).await?;
+            disable_pdo(io, n, index::TPDO_COMMUNICATION + u16::from(k - 1)).await?;
         }
     }
     remap(
         io,
         n,
-        0x1400 + u16::from(rx - 1),
-        0x1600 + u16::from(rx - 1),
+        index::RPDO_COMMUNICATION + u16::from(rx - 1),
+        index::RPDO_MAPPING + u16::from(rx - 1),
         &a.setpoint_pdo,
     )
     .await?;
     remap(
         io,
         n,
-        0x1800 + u16::from(tx - 1),
-        0x1A00 + u16::from(tx - 1),
+        index::TPDO_COMMUNICATION + u16::from(tx - 1),
+        index::TPDO_MAPPING + u16::from(tx - 1),
         &a.feedback_pdo,
     )
     .await?;
@@ -202,24 +231,41 @@ async fn configure_axis(io: &NodeIo, m: &Machine, a: &AxisConfig) -> Result<(), 
     write_checked(
         io,
         n,
-        0x1005,
+        index::COB_ID_SYNC,
         0,
         Value::Unsigned32(u32::from(m.sync_cob_id)),
     )
     .await?;
-    write_checked(io, n, 0x1006, 0, Value::Unsigned32(m.cycle_us)).await?;
-    write_checked(io, n, 0x1007, 0, Value::Unsigned32(m.sync_window_us)).await?;
+    write_checked(
+        io,
+        n,
+        index::COMMUNICATION_CYCLE_PERIOD,
+        0,
+        Value::Unsigned32(m.cycle_us),
+    )
+    .await?;
+    write_checked(
+        io,
+        n,
+        index::SYNC_WINDOW_LENGTH,
+        0,
+        Value::Unsigned32(m.sync_window_us),
+    )
+    .await?;
     // Interpolation: linear sub-mode, period = SYNC period.
     let (v, idx) = ip_time_period(m.cycle_us).expect("validated");
-    write_checked(io, n, 0x60C0, 0, Value::Integer16(0)).await?;
-    write_checked(io, n, 0x60C2, 1, Value::Unsigned8(v)).await?;
-    write_checked(io, n, 0x60C2, 2, Value::Integer8(idx)).await?;
+    write_checked(io, n, index::IP_SUBMODE, 0, Value::Integer16(0)).await?;
+    write_checked(io, n, index::IP_TIME_PERIOD, 1, Value::Unsigned8(v)).await?;
+    write_checked(io, n, index::IP_TIME_PERIOD, 2, Value::Integer8(idx)).await?;
     // Mode, confirmed by 0x6061.
     let mode = a.mode.number();
-    write(io, n, 0x6060, 0, Value::Integer8(mode)).await?;
+    write(io, n, index::MODES_OF_OPERATION, 0, Value::Integer8(mode)).await?;
     let deadline = tokio::time::Instant::now() + Duration::from_secs(1);
     loop {
-        let found = match io.read(n, 0x6061, 0, DataType::Integer8).await? {
+        let found = match io
+            .read(n, index::MODES_DISPLAY, 0, DataType::Integer8)
+            .await?
+        {
             Value::Integer8(v) => v,
             _ => -1,
         };
@@ -297,7 +343,10 @@ pub async fn start(
     for a in &m.axes {
         check_identity(io, a).await?;
         pos.push(
-            match io.read(a.node, 0x6064, 0, DataType::Integer32).await? {
+            match io
+                .read(a.node, index::POSITION_ACTUAL, 0, DataType::Integer32)
+                .await?
+            {
                 Value::Integer32(v) => v,
                 _ => 0,
             },
@@ -329,7 +378,7 @@ pub async fn stop_consuming_heartbeat(m: &Machine, io: &NodeIo) -> Result<(), Ga
         write_checked(
             io,
             a.node,
-            0x1016,
+            index::CONSUMER_HEARTBEAT_TIME,
             HEARTBEAT_CONSUMER_SUB,
             Value::Unsigned32(0),
         )

@@ -22,12 +22,11 @@ use canopen_rs::Value;
 
 use crate::bus::Frame;
 use crate::canopen::emcy::{Emcy, code as emcy_code};
+use crate::canopen::index;
 use crate::canopen::od::Od;
 use crate::canopen::sdo_server::{SdoServer, SdoTarget};
 use crate::canopen::{AbortCode, NmtState, cob, nmt};
-use crate::cia402::{
-    PowerStateMachine, State, controlword as cw_bits, index as obj, statusword as sw,
-};
+use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
 use crate::config::DriveDictionary;
 use crate::config::machine::MapEntry;
 pub use inject::{Inject, Targeted};
@@ -42,7 +41,12 @@ const MOTOR_ACC_COUNTS_S2: f64 = 30_000_000.0;
 /// Physics integration step.
 const STEP: Duration = Duration::from_micros(250);
 /// EMCY code for a parameter the drive cannot run with (CiA 301: 0x6320 "parameter error").
-pub const EMCY_PARAMETER: u16 = 0x6320;
+pub const EMCY_PARAMETER: u16 = crate::canopen::emcy::code::PARAMETER;
+/// The last communication and mapping parameter of this drive's four RPDOs and TPDOs.
+const RPDO_COMMUNICATION_LAST: u16 = index::RPDO_COMMUNICATION + 3;
+const RPDO_MAPPING_LAST: u16 = index::RPDO_MAPPING + 3;
+const TPDO_COMMUNICATION_LAST: u16 = index::TPDO_COMMUNICATION + 3;
+const TPDO_MAPPING_LAST: u16 = index::TPDO_MAPPING + 3;
 
 /// Why the drive went to Fault (what 0x603F and the EMCY say).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -127,16 +131,16 @@ pub struct SimDrive {
 }
 
 fn rpdo_base(n: usize) -> u16 {
-    0x1400 + n as u16
+    index::RPDO_COMMUNICATION + n as u16
 }
 fn rpdo_map(n: usize) -> u16 {
-    0x1600 + n as u16
+    index::RPDO_MAPPING + n as u16
 }
 fn tpdo_base(n: usize) -> u16 {
-    0x1800 + n as u16
+    index::TPDO_COMMUNICATION + n as u16
 }
 fn tpdo_map(n: usize) -> u16 {
-    0x1A00 + n as u16
+    index::TPDO_MAPPING + n as u16
 }
 
 impl SimDrive {
@@ -307,7 +311,7 @@ impl SimDrive {
     }
     /// Statusword (0x6041).
     pub fn statusword(&self) -> u16 {
-        self.od.int(0x6041, 0) as u16
+        self.od.int(index::STATUSWORD, 0) as u16
     }
     /// Synchronous RPDOs discarded because they came outside the synchronous window (0x1007).
     pub fn rpdos_outside_window(&self) -> u64 {
@@ -343,19 +347,19 @@ impl SimDrive {
     }
 
     fn schedule_heartbeat(&mut self, now: Duration) {
-        let ms = self.od.int(0x1017, 0) as u64;
+        let ms = self.od.int(index::PRODUCER_HEARTBEAT_TIME, 0) as u64;
         self.next_heartbeat = (ms > 0).then(|| now + Duration::from_millis(ms));
     }
 
     fn sync_period(&self) -> Option<Duration> {
-        let us = self.od.int(0x1006, 0) as u64;
+        let us = self.od.int(index::COMMUNICATION_CYCLE_PERIOD, 0) as u64;
         (us > 0).then(|| Duration::from_micros(us))
     }
 
     /// The IP time period from 0x60C2 (value × 10^index s).
     fn ip_period(&self) -> Option<Duration> {
-        let v = self.od.int(0x60C2, 1) as f64;
-        let idx = self.od.int(0x60C2, 2) as i32;
+        let v = self.od.int(index::IP_TIME_PERIOD, 1) as f64;
+        let idx = self.od.int(index::IP_TIME_PERIOD, 2) as i32;
         let s = v * 10f64.powi(idx);
         (s > 0.0).then(|| Duration::from_secs_f64(s))
     }
@@ -367,7 +371,7 @@ impl SimDrive {
         use crate::bus::Filter;
         let mut f = vec![
             Filter::exact(cob::NMT),
-            Filter::exact((self.od.int(0x1005, 0) as u32 & 0x7FF) as u16),
+            Filter::exact((self.od.int(index::COB_ID_SYNC, 0) as u32 & 0x7FF) as u16),
             Filter::exact(cob::SDO_RX + u16::from(self.node)),
             Filter {
                 id: cob::HEARTBEAT,
@@ -398,7 +402,7 @@ impl SimDrive {
             t = t.min(last + p * 3 / 2 + Duration::from_micros(1));
         }
         for (i, (seen, lost)) in self.consumer.iter().enumerate() {
-            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            let e = self.od.int(index::CONSUMER_HEARTBEAT_TIME, i as u8 + 1) as u32;
             let ms = u64::from(e & 0xFFFF);
             if let (Some(seen), false, true) = (seen, lost, ms > 0) {
                 t = t.min(*seen + Duration::from_millis(ms) + Duration::from_micros(1));
@@ -442,7 +446,7 @@ impl SimDrive {
             out.push(
                 Frame::new(cob::HEARTBEAT + u16::from(self.node), &[self.nmt.byte()]).expect("id"),
             );
-            let ms = self.od.int(0x1017, 0) as u64;
+            let ms = self.od.int(index::PRODUCER_HEARTBEAT_TIME, 0) as u64;
             // Keep the beat on its grid; if we fell far behind, restart from now.
             let mut next = h + Duration::from_millis(ms.max(1));
             if next <= now {
@@ -460,7 +464,7 @@ impl SimDrive {
             self.emcy(emcy_code::COMMUNICATION, 0x10, out);
         }
         for i in 0..4 {
-            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            let e = self.od.int(index::CONSUMER_HEARTBEAT_TIME, i as u8 + 1) as u32;
             let ms = u64::from(e & 0xFFFF);
             let (seen, lost) = self.consumer[i];
             if let (Some(seen), false, true) = (seen, lost, ms > 0)
@@ -476,7 +480,7 @@ impl SimDrive {
     fn heartbeat_lost(&mut self, now: Duration, out: &mut Vec<Frame>) {
         self.emcy(emcy_code::HEARTBEAT, 0x10, out);
         // 0x6007 abort connection option: 1 fault, 2 disable voltage, 3 quick stop.
-        match self.od.int(0x6007, 0) {
+        match self.od.int(index::ABORT_CONNECTION_OPTION, 0) {
             1 => self.raise_fault(FaultCause::HeartbeatLost, now, out, false),
             2 => {
                 self.power.on_controlword(cw_bits::DISABLE_VOLTAGE);
@@ -487,7 +491,7 @@ impl SimDrive {
             _ => {}
         }
         // 0x1029:1 communication error behaviour: 0 pre-operational, 1 no change, 2 stopped.
-        match self.od.int(0x1029, 1) {
+        match self.od.int(index::ERROR_BEHAVIOUR, 1) {
             0 if self.nmt == NmtState::Operational => self.nmt = NmtState::PreOperational,
             2 => self.nmt = NmtState::Stopped,
             _ => {}
@@ -509,7 +513,7 @@ impl SimDrive {
                 FaultCause::HeartbeatLost => emcy_code::HEARTBEAT,
                 FaultCause::Injected { code } => code,
             };
-            self.od.set_int(0x603F, 0, i64::from(code));
+            self.od.set_int(index::ERROR_CODE, 0, i64::from(code));
             self.ip_active = false;
             self.interp = None;
             if send_emcy {
@@ -523,19 +527,20 @@ impl SimDrive {
         let reg = if code == 0 {
             0
         } else {
-            (self.od.int(0x1001, 0) as u8) | 0x01 | register_bits
+            (self.od.int(index::ERROR_REGISTER, 0) as u8) | 0x01 | register_bits
         };
-        self.od.set_int(0x1001, 0, i64::from(reg));
+        self.od.set_int(index::ERROR_REGISTER, 0, i64::from(reg));
         if code != 0 {
             for s in (2..=8u8).rev() {
-                let prev = self.od.int(0x1003, s - 1);
-                self.od.set_int(0x1003, s, prev);
+                let prev = self.od.int(index::PREDEFINED_ERROR_FIELD, s - 1);
+                self.od.set_int(index::PREDEFINED_ERROR_FIELD, s, prev);
             }
-            self.od.set_int(0x1003, 1, i64::from(code));
-            let n = (self.od.int(0x1003, 0) + 1).min(8);
-            self.od.set_int(0x1003, 0, n);
+            self.od
+                .set_int(index::PREDEFINED_ERROR_FIELD, 1, i64::from(code));
+            let n = (self.od.int(index::PREDEFINED_ERROR_FIELD, 0) + 1).min(8);
+            self.od.set_int(index::PREDEFINED_ERROR_FIELD, 0, n);
         }
-        let cob_id = self.od.int(0x1014, 0) as u32;
+        let cob_id = self.od.int(index::COB_ID_EMCY, 0) as u32;
         if cob_id & 0x8000_0000 != 0 || self.nmt == NmtState::Stopped {
             return;
         }
@@ -563,7 +568,7 @@ impl SimDrive {
             }
             return;
         }
-        let sync_id = (self.od.int(0x1005, 0) as u32 & 0x7FF) as u16;
+        let sync_id = (self.od.int(index::COB_ID_SYNC, 0) as u32 & 0x7FF) as u16;
         let rpdo = (0..4).find(|&n| {
             let c = self.od.int(rpdo_base(n), 1) as u32;
             c & 0x8000_0000 == 0 && (c & 0x7FF) as u16 == id
@@ -613,7 +618,7 @@ impl SimDrive {
     fn on_heartbeat(&mut self, id: u16, now: Duration) {
         let producer = u32::from(id - cob::HEARTBEAT);
         for i in 0..4 {
-            let e = self.od.int(0x1016, i as u8 + 1) as u32;
+            let e = self.od.int(index::CONSUMER_HEARTBEAT_TIME, i as u8 + 1) as u32;
             if e & 0xFFFF != 0 && (e >> 16) & 0x7F == producer {
                 self.consumer[i] = (Some(now), false);
             }
@@ -639,7 +644,7 @@ impl SimDrive {
                 self.boot(now, out);
             }
             nmt::RESET_COMMUNICATION => {
-                self.od.reset_range(0x1000..=0x1FFF);
+                self.od.reset_range(index::COMMUNICATION_AREA);
                 self.boot(now, out);
             }
             _ => {}
@@ -673,7 +678,7 @@ impl SimDrive {
         let tt = self.od.int(rpdo_base(n), 2);
         if tt <= 240 {
             // CiA 301: synchronous PDOs outside the synchronous window (0x1007) are discarded.
-            let window = Duration::from_micros(self.od.int(0x1007, 0) as u64);
+            let window = Duration::from_micros(self.od.int(index::SYNC_WINDOW_LENGTH, 0) as u64);
             if let Some(sync) = self.last_sync
                 && !window.is_zero()
                 && now > sync + window
@@ -710,7 +715,11 @@ impl SimDrive {
     }
 
     fn on_sync(&mut self, now: Duration, data: &[u8], out: &mut Vec<Frame>) {
-        let expect = if self.od.int(0x1019, 0) == 0 { 0 } else { 1 };
+        let expect = if self.od.int(index::SYNC_COUNTER_OVERFLOW, 0) == 0 {
+            0
+        } else {
+            1
+        };
         if data.len() != expect {
             self.emcy(emcy_code::SYNC_LENGTH, 0x10, out);
         }
@@ -789,14 +798,14 @@ impl SimDrive {
 
     /// The mode in force (0x6061).
     fn mode(&self) -> i8 {
-        self.od.int(0x6061, 0) as i8
+        self.od.int(index::MODES_DISPLAY, 0) as i8
     }
 
     /// The setpoint object of the active mode becomes the interpolation target.
     fn latch_setpoint(&mut self, now: Duration) {
         let target = match self.mode() {
-            7 if self.ip_active => self.od.int(0x60C1, 1),
-            8 if self.power.is_operation_enabled() => self.od.int(0x607A, 0),
+            7 if self.ip_active => self.od.int(index::IP_DATA_RECORD, 1),
+            8 if self.power.is_operation_enabled() => self.od.int(index::TARGET_POSITION, 0),
             _ => {
                 self.interp = None;
                 return;
@@ -804,8 +813,8 @@ impl SimDrive {
         } as f64;
         // Software position limits (0x607D) bound the target itself, so neither the demand nor
         // the velocity feed-forward derived from it can carry the motor past them.
-        let lo = self.od.int(0x607D, 1) as f64;
-        let hi = self.od.int(0x607D, 2) as f64;
+        let lo = self.od.int(index::SOFTWARE_POSITION_LIMIT, 1) as f64;
+        let hi = self.od.int(index::SOFTWARE_POSITION_LIMIT, 2) as f64;
         let (lo, hi) = (lo.min(hi), hi.max(lo));
         self.limit_flag = !(lo..=hi).contains(&target);
         self.interp = Some(Interp {
@@ -818,31 +827,33 @@ impl SimDrive {
     /// Side effects of a write (by SDO or RPDO).
     fn on_written(&mut self, index: u16, sub: u8, out: &mut Vec<Frame>) {
         match (index, sub) {
-            (0x6040, 0) => self.on_controlword(self.od.int(0x6040, 0) as u16, out),
-            (0x6060, 0) => {
+            (index::CONTROLWORD, 0) => {
+                self.on_controlword(self.od.int(index::CONTROLWORD, 0) as u16, out)
+            }
+            (index::MODES_OF_OPERATION, 0) => {
                 // Only a different value is a mode change: masters that carry 0x6060 in their
                 // cyclic RPDO (python-canopen's BaseNode402 does) rewrite the same mode every SYNC.
-                let m = self.od.int(0x6060, 0);
-                if m != self.od.int(0x6061, 0) {
-                    self.od.set_int(0x6061, 0, m);
+                let m = self.od.int(index::MODES_OF_OPERATION, 0);
+                if m != self.od.int(index::MODES_DISPLAY, 0) {
+                    self.od.set_int(index::MODES_DISPLAY, 0, m);
                     self.ip_active = false;
                     self.interp = None;
                 }
             }
-            (0x605A, 0) => {
+            (index::QUICK_STOP_OPTION, 0) => {
                 let _ = self
                     .power
-                    .set_quick_stop_option(self.od.int(0x605A, 0) as i16);
+                    .set_quick_stop_option(self.od.int(index::QUICK_STOP_OPTION, 0) as i16);
             }
-            (0x1017, 0) => {
+            (index::PRODUCER_HEARTBEAT_TIME, 0) => {
                 let now = self.last_physics.unwrap_or_default();
                 self.schedule_heartbeat(now);
             }
-            (0x1016, _) => self.consumer = [(None, false); 4],
-            (0x60C4, 6) => {
+            (index::CONSUMER_HEARTBEAT_TIME, _) => self.consumer = [(None, false); 4],
+            (index::IP_DATA_CONFIG, 6) => {
                 // Buffer clear: the one-deep buffer holds the actual position.
                 let p = self.pos.round() as i64;
-                self.od.set_int(0x60C1, 1, p);
+                self.od.set_int(index::IP_DATA_RECORD, 1, p);
             }
             _ => {}
         }
@@ -878,9 +889,9 @@ impl SimDrive {
         if was_fault && self.power.state() != State::Fault {
             self.ferr_flag = false;
             self.fault_cause = None;
-            self.od.set_int(0x603F, 0, 0);
+            self.od.set_int(index::ERROR_CODE, 0, 0);
             self.emcy(emcy_code::RESET, 0, out);
-            self.od.set_int(0x1001, 0, 0);
+            self.od.set_int(index::ERROR_REGISTER, 0, 0);
             if self.recurring_fault.is_some() {
                 let now = self.last_physics.unwrap_or_default();
                 self.refault_at = Some(now + inject::RECURRING_FAULT_DELAY);
@@ -948,11 +959,11 @@ impl SimDrive {
     }
 
     fn step(&mut self, t: Duration, dt: f64, out: &mut Vec<Frame>) {
-        let vmax = self.od.int(0x607F, 0).max(1) as f64;
+        let vmax = self.od.int(index::MAX_PROFILE_VELOCITY, 0).max(1) as f64;
         // 0x60C5 limits the acceleration in every mode (0x6083 is the profile modes' ramp); a
         // dictionary without it gets the motor's own limit.
-        let amax = match self.od.get(obj::MAX_ACCELERATION, 0) {
-            Some(_) => self.od.int(obj::MAX_ACCELERATION, 0).max(1) as f64,
+        let amax = match self.od.get(index::MAX_ACCELERATION, 0) {
+            Some(_) => self.od.int(index::MAX_ACCELERATION, 0).max(1) as f64,
             None => MOTOR_ACC_COUNTS_S2,
         };
         match self.power.state() {
@@ -972,8 +983,8 @@ impl SimDrive {
                 }
                 // Software position limits (0x607D) bound the demand (the target was clamped
                 // when latched; a limit written since applies here).
-                let lo = self.od.int(0x607D, 1) as f64;
-                let hi = self.od.int(0x607D, 2) as f64;
+                let lo = self.od.int(index::SOFTWARE_POSITION_LIMIT, 1) as f64;
+                let hi = self.od.int(index::SOFTWARE_POSITION_LIMIT, 2) as f64;
                 if !(lo.min(hi)..=hi.max(lo)).contains(&self.demand) {
                     self.limit_flag = true;
                     self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
@@ -990,11 +1001,15 @@ impl SimDrive {
                 self.vel += dv;
                 self.pos += self.vel * dt;
                 // Following error: beyond 0x6065 for longer than 0x6066 ms.
-                let window = self.od.int(0x6065, 0) as f64;
+                let window = self.od.int(index::FOLLOWING_ERROR_WINDOW, 0) as f64;
                 let err = (self.demand - self.pos).abs();
                 if err > window {
                     let since = *self.ferr_since.get_or_insert(t);
-                    if t - since > Duration::from_millis(self.od.int(0x6066, 0) as u64) {
+                    if t - since
+                        > Duration::from_millis(
+                            self.od.int(index::FOLLOWING_ERROR_TIMEOUT, 0) as u64
+                        )
+                    {
                         self.ferr_flag = true;
                         self.raise_fault(FaultCause::FollowingError, t, out, true);
                     }
@@ -1003,7 +1018,7 @@ impl SimDrive {
                 }
             }
             State::QuickStopActive | State::FaultReactionActive => {
-                let dec = self.od.int(0x6085, 0).max(1) as f64;
+                let dec = self.od.int(index::QUICK_STOP_DECELERATION, 0).max(1) as f64;
                 let dv = self.vel.abs().min(dec * dt);
                 self.vel -= dv * self.vel.signum();
                 self.pos += self.vel * dt;
@@ -1047,25 +1062,39 @@ impl SimDrive {
         if s & sw::OP_MODE_SPECIFIC_12 != 0 && self.motion_since.is_none() {
             self.motion_since = self.last_physics;
         }
-        let window = self.od.int(0x6067, 0) as f64;
+        let window = self.od.int(index::POSITION_WINDOW, 0) as f64;
         if (self.demand - self.pos).abs() <= window && self.vel.abs() < 1.0 {
             s |= sw::TARGET_REACHED;
         }
-        self.od.set_int(0x6041, 0, i64::from(s));
-        self.od.set_int(0x6064, 0, self.pos.round() as i64);
-        self.od.set_int(0x6062, 0, self.demand.round() as i64);
-        self.od.set_int(0x606C, 0, self.vel.round() as i64);
+        self.od.set_int(index::STATUSWORD, 0, i64::from(s));
         self.od
-            .set_int(0x60F4, 0, (self.demand - self.pos).round() as i64);
+            .set_int(index::POSITION_ACTUAL, 0, self.pos.round() as i64);
+        self.od
+            .set_int(index::POSITION_DEMAND, 0, self.demand.round() as i64);
+        self.od
+            .set_int(index::VELOCITY_ACTUAL, 0, self.vel.round() as i64);
+        self.od.set_int(
+            index::FOLLOWING_ERROR_ACTUAL,
+            0,
+            (self.demand - self.pos).round() as i64,
+        );
     }
 
     /// The PDO number (0-based) and whether it is receive, for a communication or mapping index.
     fn pdo_of(index: u16) -> Option<(usize, bool, bool)> {
         match index {
-            0x1400..=0x1403 => Some(((index - 0x1400) as usize, true, false)),
-            0x1600..=0x1603 => Some(((index - 0x1600) as usize, true, true)),
-            0x1800..=0x1803 => Some(((index - 0x1800) as usize, false, false)),
-            0x1A00..=0x1A03 => Some(((index - 0x1A00) as usize, false, true)),
+            index::RPDO_COMMUNICATION..=RPDO_COMMUNICATION_LAST => {
+                Some(((index - index::RPDO_COMMUNICATION) as usize, true, false))
+            }
+            index::RPDO_MAPPING..=RPDO_MAPPING_LAST => {
+                Some(((index - index::RPDO_MAPPING) as usize, true, true))
+            }
+            index::TPDO_COMMUNICATION..=TPDO_COMMUNICATION_LAST => {
+                Some(((index - index::TPDO_COMMUNICATION) as usize, false, false))
+            }
+            index::TPDO_MAPPING..=TPDO_MAPPING_LAST => {
+                Some(((index - index::TPDO_MAPPING) as usize, false, true))
+            }
             _ => None,
         }
     }
@@ -1157,11 +1186,15 @@ impl SimDrive {
             return Ok(());
         }
         match (index, sub) {
-            (0x1019, 0) if self.od.int(0x1006, 0) != 0 => Err(AbortCode::DEVICE_STATE),
-            (0x1019, 0) if x == 1 => Err(AbortCode::INVALID_VALUE),
-            (0x1003, 0) if x != 0 => Err(AbortCode::INVALID_VALUE),
-            (0x6060, 0) => {
-                let supported = self.od.int(0x6502, 0);
+            (index::SYNC_COUNTER_OVERFLOW, 0)
+                if self.od.int(index::COMMUNICATION_CYCLE_PERIOD, 0) != 0 =>
+            {
+                Err(AbortCode::DEVICE_STATE)
+            }
+            (index::SYNC_COUNTER_OVERFLOW, 0) if x == 1 => Err(AbortCode::INVALID_VALUE),
+            (index::PREDEFINED_ERROR_FIELD, 0) if x != 0 => Err(AbortCode::INVALID_VALUE),
+            (index::MODES_OF_OPERATION, 0) => {
+                let supported = self.od.int(index::SUPPORTED_MODES, 0);
                 if x != 0 && (!(1..=32).contains(&x) || supported & (1 << (x - 1)) == 0) {
                     return Err(AbortCode::INVALID_VALUE);
                 }
@@ -1173,7 +1206,7 @@ impl SimDrive {
                 }
                 Ok(())
             }
-            (0x60C2, _) if self.ip_active => Err(AbortCode::DEVICE_STATE),
+            (index::IP_TIME_PERIOD, _) if self.ip_active => Err(AbortCode::DEVICE_STATE),
             _ => Ok(()),
         }
     }
@@ -1199,9 +1232,9 @@ impl SdoTarget for SimDrive {
             self.check_device_rules(index, sub, v)?;
         }
         self.od.set_entry(index, sub, e);
-        if index == 0x1003 {
+        if index == index::PREDEFINED_ERROR_FIELD {
             for s in 1..=8 {
-                self.od.set_int(0x1003, s, 0);
+                self.od.set_int(index::PREDEFINED_ERROR_FIELD, s, 0);
             }
         }
         let mut out = Vec::new();

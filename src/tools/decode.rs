@@ -26,6 +26,7 @@ use canopen_rs::Value;
 use super::args::{NmtCommand, format_raw, format_value};
 use super::hex_bytes;
 use crate::bus::Frame;
+use crate::canopen::index;
 use crate::canopen::{AbortCode, Emcy, NmtState, cob};
 use crate::cia402::{Command, State, statusword as sw};
 use crate::config::machine::MapEntry;
@@ -632,12 +633,12 @@ fn decode_sdo(node: u8, request: bool, p: &[u8; 8], ctx: &DecodeContext) -> SdoM
 
 fn position_label(index: u16, sub: u8) -> Option<&'static str> {
     Some(match (index, sub) {
-        (0x6064, 0) => "position actual",
-        (0x60C1, 1) => "IP setpoint",
-        (0x607A, 0) => "target position",
-        (0x6062, 0) => "position demand",
-        (0x60FC, 0) => "position demand (internal)",
-        (0x60F4, 0) => "following error actual",
+        (index::POSITION_ACTUAL, 0) => "position actual",
+        (index::IP_DATA_RECORD, 1) => "IP setpoint",
+        (index::TARGET_POSITION, 0) => "target position",
+        (index::POSITION_DEMAND, 0) => "position demand",
+        (index::POSITION_DEMAND_INTERNAL, 0) => "position demand (internal)",
+        (index::FOLLOWING_ERROR_ACTUAL, 0) => "following error actual",
         _ => return None,
     })
 }
@@ -653,11 +654,11 @@ fn decode_mapped(layout: &PdoLayout, data: &[u8], ctx: &DecodeContext) -> PdoCon
         };
         off += n;
         let field = match (e.index, e.sub, bytes) {
-            (0x6040, 0, [a, b]) => PdoField::Controlword {
+            (index::CONTROLWORD, 0, [a, b]) => PdoField::Controlword {
                 value: u16::from_le_bytes([*a, *b]),
                 mode: layout.mode,
             },
-            (0x6041, 0, [a, b]) => PdoField::Statusword {
+            (index::STATUSWORD, 0, [a, b]) => PdoField::Statusword {
                 value: u16::from_le_bytes([*a, *b]),
                 mode: layout.mode,
             },

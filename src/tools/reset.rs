@@ -28,6 +28,7 @@ use canopen_rs::{DataType, Value};
 use super::{ToolError, runtime};
 use crate::bus::Bus;
 use crate::canopen::emcy;
+use crate::canopen::index;
 use crate::cia402::{State, statusword as swb};
 use crate::gateway::GatewayError;
 use crate::gateway::io::NodeIo;
@@ -177,22 +178,28 @@ impl fmt::Display for ResetReport {
 }
 
 async fn statusword(io: &NodeIo, node: u8) -> Result<u16, GatewayError> {
-    match io.read(node, 0x6041, 0, DataType::Unsigned16).await? {
+    match io
+        .read(node, index::STATUSWORD, 0, DataType::Unsigned16)
+        .await?
+    {
         Value::Unsigned16(v) => Ok(v),
         _ => Err(GatewayError::SdoProtocol {
             node,
-            index: 0x6041,
+            index: index::STATUSWORD,
             sub: 0,
         }),
     }
 }
 
 async fn error_code(io: &NodeIo, node: u8) -> Result<u16, GatewayError> {
-    match io.read(node, 0x603F, 0, DataType::Unsigned16).await? {
+    match io
+        .read(node, index::ERROR_CODE, 0, DataType::Unsigned16)
+        .await?
+    {
         Value::Unsigned16(v) => Ok(v),
         _ => Err(GatewayError::SdoProtocol {
             node,
-            index: 0x603F,
+            index: index::ERROR_CODE,
             sub: 0,
         }),
     }
@@ -236,8 +243,10 @@ pub async fn reset_node(
         .unwrap()
         .get(&node)
         .map_or(0, |h| h.emcys.len());
-    io.write(node, 0x6040, 0, Value::Unsigned16(0x0000)).await?;
-    io.write(node, 0x6040, 0, Value::Unsigned16(0x0080)).await?;
+    io.write(node, index::CONTROLWORD, 0, Value::Unsigned16(0x0000))
+        .await?;
+    io.write(node, index::CONTROLWORD, 0, Value::Unsigned16(0x0080))
+        .await?;
     let edge = Instant::now();
     // 4. Out of Fault within the deadline.
     let cleared = loop {
@@ -288,7 +297,8 @@ pub async fn reset_node(
             }
         };
     // 6. Bit 7 low again: the next reset is an edge too.
-    io.write(node, 0x6040, 0, Value::Unsigned16(0x0000)).await?;
+    io.write(node, index::CONTROLWORD, 0, Value::Unsigned16(0x0000))
+        .await?;
     report.statusword_after = statusword(io, node).await?;
     report.error_after = error_code(io, node).await?;
     Ok(report)

@@ -22,6 +22,7 @@ use super::sdo::upload_bytes;
 use super::{ToolError, runtime};
 use crate::bus::Bus;
 use crate::canopen::NmtState;
+use crate::canopen::index;
 use crate::gateway::GatewayError;
 use crate::gateway::io::NodeIo;
 
@@ -123,17 +124,20 @@ async fn details(io: &NodeIo, node: u8, timeout: Duration) -> Result<NodeInfo, G
             Some(_) => Ok(r.ok()),
         }
     };
-    info.device_type = get(0x1000, 0).await?.as_deref().and_then(u32_of);
-    info.vendor_id = get(0x1018, 1).await?.as_deref().and_then(u32_of);
-    info.product_code = get(0x1018, 2).await?.as_deref().and_then(u32_of);
-    info.revision = get(0x1018, 3).await?.as_deref().and_then(u32_of);
-    info.serial = get(0x1018, 4).await?.as_deref().and_then(u32_of);
-    info.name = get(0x1008, 0).await?.map(|b| {
+    info.device_type = get(index::DEVICE_TYPE, 0)
+        .await?
+        .as_deref()
+        .and_then(u32_of);
+    info.vendor_id = get(index::IDENTITY, 1).await?.as_deref().and_then(u32_of);
+    info.product_code = get(index::IDENTITY, 2).await?.as_deref().and_then(u32_of);
+    info.revision = get(index::IDENTITY, 3).await?.as_deref().and_then(u32_of);
+    info.serial = get(index::IDENTITY, 4).await?.as_deref().and_then(u32_of);
+    info.name = get(index::DEVICE_NAME, 0).await?.map(|b| {
         String::from_utf8_lossy(&b)
             .trim_end_matches('\0')
             .to_string()
     });
-    info.heartbeat_ms = get(0x1017, 0).await?.and_then(|b| {
+    info.heartbeat_ms = get(index::PRODUCER_HEARTBEAT_TIME, 0).await?.and_then(|b| {
         <[u8; 2]>::try_from(b.as_slice())
             .ok()
             .map(u16::from_le_bytes)
@@ -172,7 +176,7 @@ async fn scan_async(bus: &Bus, opts: &ScanOptions) -> Result<Vec<NodeInfo>, Tool
         let (io, permits, t) = (io.clone(), permits.clone(), opts.timeout);
         probes.spawn(async move {
             let _p = permits.acquire_owned().await.expect("never closed");
-            (n, read_with(&io, n, 0x1000, 0, t).await)
+            (n, read_with(&io, n, index::DEVICE_TYPE, 0, t).await)
         });
     }
     let mut present = Vec::new();

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use canmotion::bus::{Bus, Filter, Port};
 use canmotion::config::Machine;
 use canmotion::gateway::RunOptions;
+use canmotion::gateway::alarm::{Alarm, Failure};
 use canmotion::gateway::resume::{self, ResumeState};
 
 use super::{BIN, IFACE, ROOT, SimDrives, UML_MARGIN_S, lock, simdrive_with};
@@ -70,9 +71,15 @@ fn heartbeat_loss_alone(m: Machine) {
     let (_d, o, frames) = run_recorded(&m, "3:no-heartbeat@300ms", common::LONG);
     let f = common::failure(&o);
     assert!(
-        f.message
-            .starts_with("axis Z (node 3): heartbeat lost (none for ")
-            && f.message.contains("consumer time 500 ms"),
+        matches!(
+            f.alarm(),
+            Alarm::HeartbeatLost {
+                axis: "Z",
+                node: 3,
+                consumer_ms: 500,
+                ..
+            }
+        ),
         "{f}"
     );
     let detected = f.detected_ns.unwrap();
@@ -102,8 +109,15 @@ fn reboot_stops_at_once(m: Machine) {
     let (_d, o, frames) = run_recorded(&m, "1:reboot@600ms", LINES);
     let f = common::failure(&o);
     assert_eq!(
-        f.message,
-        "axis X (node 1): boot-up during the run: the drive reset; no further setpoints to node 1; last completed program line 2 (last program line 3)"
+        f.failure,
+        Failure {
+            alarm: Alarm::BootUp {
+                axis: "X",
+                node: 1,
+                completed_line: Some(2)
+            },
+            line: Some(3)
+        }
     );
     // The stop is in the cycle that reads the boot-up: after the next SYNC, no RPDO to node 1.
     let (boot_ns, late) = common::rpdos_after_boot_up(&frames, 1, 0x201, 0x80);
@@ -287,15 +301,15 @@ fn wait_emcy(port: &mut dyn Port, node: u8, code: u16, within: Duration) {
 
 /// Fault node 2 mid-motion with `inject` (checking the stop), then wait until the drives have
 /// noticed the gateway is gone (EMCY 0x8130), and run `canmotion reset vcan0 TARGET`.
-fn fault_then_reset(inject: &str, causes: &[&str], bound_s: f64, target: &str) -> Output {
+fn fault_then_reset(inject: &str, cause: fn(&Alarm) -> bool, bound_s: f64, target: &str) -> Output {
     let _g = lock();
     let m = common::machine(|t| t);
     // Only node 2's EMCYs: a port that buffered the whole run would overflow.
     let mut watch = bus().open(&[Filter::exact(0x82)]).unwrap();
     let (_drives, o, _) = run_recorded(&m, inject, common::LONG);
     let f = common::failure(&o);
-    assert!(f.message.starts_with("axis Y (node 2): "), "{f}");
-    assert!(causes.iter().any(|c| f.message.contains(c)), "{f}");
+    assert_eq!(f.alarm().node(), Some(2), "{f}");
+    assert!(cause(f.alarm()), "{f}");
     let d = common::detection_s(f, 0.3);
     assert!(d < bound_s + UML_MARGIN_S, "detected {d} s after the fault");
     common::frozen_after(&o, 1, f);
@@ -320,7 +334,12 @@ fn vcan0_reset_clears_a_following_error_fault_and_verifies_it() {
     // The jam: the window (2 mm at 100 mm/s) plus 0x6066 (10 ms) and a PDO round trip.
     let out = fault_then_reset(
         "2:following-error@300ms",
-        &["following error", "0x8611"],
+        |a| {
+            matches!(
+                a,
+                Alarm::FollowingError { axis: "Y", .. } | Alarm::Emcy { code: 0x8611, .. }
+            )
+        },
         0.080,
         "all",
     );
@@ -355,7 +374,12 @@ fn vcan0_reset_reports_a_fault_whose_cause_persists() {
     let m = common::machine(|t| t);
     let out = fault_then_reset(
         "2:persistent-fault@300ms",
-        &["fault (statusword bit 3)", "EMCY 0x4310"],
+        |a| {
+            matches!(
+                a,
+                Alarm::DriveFault { axis: "Y", .. } | Alarm::Emcy { code: 0x4310, .. }
+            )
+        },
         2.0 * m.cycle_s(),
         "2",
     );
@@ -373,7 +397,12 @@ fn vcan0_reset_reports_a_fault_that_comes_back() {
     let m = common::machine(|t| t);
     let out = fault_then_reset(
         "2:recurring-fault@300ms",
-        &["fault (statusword bit 3)", "EMCY 0x2310"],
+        |a| {
+            matches!(
+                a,
+                Alarm::DriveFault { axis: "Y", .. } | Alarm::Emcy { code: 0x2310, .. }
+            )
+        },
         2.0 * m.cycle_s(),
         "2",
     );
