@@ -47,6 +47,12 @@ impl ChordedCurve {
         (self.perimeter_mm() / self.chord_mm).ceil() as usize
     }
 
+    /// Length of the first chord (exact vertices), as long as the last one.
+    pub fn first_chord_mm(&self) -> f64 {
+        let theta = std::f64::consts::TAU / self.chords_per_lap() as f64;
+        (self.a_mm * (theta.cos() - 1.0)).hypot(self.b_mm * theta.sin())
+    }
+
     /// Perimeter (Ramanujan's second approximation; exact for a circle).
     pub fn perimeter_mm(&self) -> f64 {
         let (a, b) = (self.a_mm, self.b_mm);
