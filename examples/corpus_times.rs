@@ -144,7 +144,7 @@ fn run() -> Result<(), String> {
     );
     println!(
         "trap_s, jerk_s: program time (cycles × period) with profile \"trapezoid\" and \"s-curve\"; \
-         T_ref_s = max(T_lb_s, trap_s + A/J × stops); ! = ratio > {RATIO_TARGET} and jerk_s > {REF_SLACK} × T_ref_s"
+         T_ref_s = max(T_lb_s, trap_s + up to A/J per stop); ! = ratio > {RATIO_TARGET} and jerk_s > {REF_SLACK} × T_ref_s"
     );
     header();
     let mut rows = Vec::new();

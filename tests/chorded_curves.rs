@@ -128,7 +128,9 @@ fn curvature_bound_has_its_closed_form() {
         };
         // The straight half-chords at the ends, at (a, 0) where κ = a/b².
         let kappa = a_mm / (b_mm * b_mm);
-        let v = 200f64.min((acc / kappa).sqrt()).min((jerk / (kappa * kappa)).cbrt());
+        let v = 200f64
+            .min((acc / kappa).sqrt())
+            .min((jerk / (kappa * kappa)).cbrt());
         let c = curve.first_chord_mm();
         let expected = expected - c / v + c / 200.0;
         let chords = curve_bound_s(&curve, &limits, &config);

@@ -34,12 +34,18 @@
 //!
 //! # Exact stops and `T_ref`
 //!
-//! A jerk-limited start from rest to a cruise speed takes `A/J` longer than the trapezoid's
-//! (its acceleration ramps up and down in `A/J` each), and so does the stop: a run from rest to
-//! rest costs `A/J` over its trapezoid plan, half at each end. [`exact_stops`] counts the runs:
-//! the moving segments of the trapezoid plan that start at rest (the first one, and one after
-//! each G61/G61.1 stop, M0/M1, dwell or reversal), and adds `A/J` for each along its starting
-//! direction. `T_ref = max(T_lb, T_trapezoid + Σ A/J)` ([`reference_time_s`]).
+//! A jerk-limited start from rest to a cruise speed `v` takes `A/J` longer than the
+//! trapezoid's (its acceleration ramps up and down in `A/J` each), and so does the stop: a run
+//! from rest to rest costs `A/J` over its trapezoid plan, half at each end. Over the distance
+//! the S-curve takes to reach `v` (in `t_s`, covering `v·t_s/2` by symmetry) the trapezoid
+//! reaches `v` in `v/A` and cruises, so the end costs `(t_s − v/A)/2`: `A/(2J)` when
+//! `v ≥ A²/J` (`t_s = v/A + A/J`), and `√(v/J) − v/(2A)` below, where the acceleration never
+//! reaches `A` (`t_s = 2√(v/J)`). [`exact_stops`] counts the runs: the moving segments of the
+//! trapezoid plan that start at rest (the first one, and one after each G61/G61.1 stop,
+//! M0/M1, dwell or reversal), and adds for each [`run_cost_s`] at the highest speed of the run,
+//! `A` and `J` along its starting direction. `T_ref = max(T_lb, T_trapezoid + Σ cost)`
+//! ([`reference_time_s`]): `A/J` per exact stop, as issue 11 states it, for every run that
+//! reaches `A²/J` (80 mm/s on the demo machine), less for the slower ones.
 
 use nalgebra::Vector3;
 
@@ -108,19 +114,36 @@ pub fn curvature_bound_s<'a>(
 pub struct ExactStops {
     /// Moving segments that start at rest (the first one included).
     pub count: usize,
-    /// `Σ A/J` over them, along each one's starting direction.
+    /// [`run_cost_s`] summed over the runs they start.
     pub cost_s: f64,
+}
+
+/// What a jerk-limited run from rest to rest with the highest speed `v_mm_s` costs over the
+/// trapezoid's with the acceleration `acc` (the module documentation derives it): `A/J` from
+/// `v = A²/J` on, `2√(v/J) − v/A` below (which rises to `A/J` there); 0 without a jerk limit.
+pub fn run_cost_s(v_mm_s: f64, acc_mm_s2: f64, jerk_mm_s3: f64) -> f64 {
+    if !(jerk_mm_s3.is_finite() && v_mm_s > 0.0) {
+        return 0.0;
+    }
+    if v_mm_s >= acc_mm_s2 * acc_mm_s2 / jerk_mm_s3 {
+        acc_mm_s2 / jerk_mm_s3
+    } else {
+        (2.0 * (v_mm_s / jerk_mm_s3).sqrt() - v_mm_s / acc_mm_s2).max(0.0)
+    }
 }
 
 /// The moving segments of `plan` that start at rest, i.e. at a speed of at most one period's
 /// acceleration (`A·T`, with `A` along the segment's direction and `T` = `config.period_s`):
-/// a trapezoid plan passes a reversal at such a speed rather than at exactly 0. See the module
-/// documentation.
+/// a trapezoid plan passes a reversal at such a speed rather than at exactly 0. Each starts a
+/// run that ends where the next one starts (or at the plan's end); see the module
+/// documentation for its cost.
 pub fn exact_stops(plan: &Plan, limits: &Limits, config: &PlannerConfig) -> ExactStops {
     let mut stops = ExactStops {
         count: 0,
         cost_s: 0.0,
     };
+    // The run under way: its highest speed, and A and J at its start.
+    let mut run: Option<(f64, f64, f64)> = None;
     for seg in plan.segments() {
         let u = match &seg.path {
             SegmentPath::Line { direction } => *direction,
@@ -131,18 +154,24 @@ pub fn exact_stops(plan: &Plan, limits: &Limits, config: &PlannerConfig) -> Exac
             continue;
         }
         let acc_mm_s2 = along(&u, &limits.max_acc_mm_s2).min(config.path_acc_mm_s2);
-        let jerk_mm_s3 = along(&u, &config.max_jerk_mm_s3);
         if seg.v_start_mm_s <= acc_mm_s2 * config.period_s {
-            stops.count += 1;
-            if jerk_mm_s3.is_finite() {
-                stops.cost_s += acc_mm_s2 / jerk_mm_s3;
+            if let Some((v, acc, jerk)) = run.take() {
+                stops.cost_s += run_cost_s(v, acc, jerk);
             }
+            stops.count += 1;
+            run = Some((0.0, acc_mm_s2, along(&u, &config.max_jerk_mm_s3)));
         }
+        if let Some(r) = run.as_mut() {
+            r.0 = r.0.max(seg.v_peak_mm_s);
+        }
+    }
+    if let Some((v, acc, jerk)) = run {
+        stops.cost_s += run_cost_s(v, acc, jerk);
     }
     stops
 }
 
-/// `T_ref = max(T_lb, T_trapezoid + Σ A/J)`: the time a jerk-limited plan of a program should
+/// `T_ref = max(T_lb, T_trapezoid + Σ run cost)`: the time a jerk-limited plan of a program should
 /// take at most, from its curvature bound `t_lb_s` ([`curvature_bound_s`]), its trapezoid
 /// plan's time and that plan's exact stops ([`exact_stops`]).
 pub fn reference_time_s(t_lb_s: f64, trapezoid_s: f64, stops: &ExactStops) -> f64 {
@@ -323,6 +352,63 @@ mod tests {
             comp: CompState::Off,
             plane: Plane::Xy,
         })
+    }
+
+    #[test]
+    fn a_run_costs_a_over_j_once_it_reaches_full_acceleration_and_less_below() {
+        let (a, j) = (2000.0, 50_000.0);
+        // A²/J = 80 mm/s.
+        assert!((run_cost_s(80.0, a, j) - a / j).abs() < 1e-15);
+        assert_eq!(run_cost_s(150.0, a, j), a / j);
+        // 20 mm/s: 2·√(20/50000) − 20/2000 = 0.03.
+        assert!((run_cost_s(20.0, a, j) - 0.03).abs() < 1e-15);
+        assert_eq!(run_cost_s(20.0, a, f64::INFINITY), 0.0);
+    }
+
+    /// Runs start at the start, after a reversal, a dwell and an M0, not at a straight
+    /// junction; each costs what its highest speed (10 mm/s, below A²/J) makes it.
+    #[test]
+    fn exact_stops_count_the_runs_from_rest_of_a_trapezoid_plan() {
+        let x = |v: f64| Vector3::new(v, 0.0, 0.0);
+        let blend = |item: Item| match item {
+            Item::Motion(mut e) => {
+                e.blend = BlendMode::Blend {
+                    p_mm: 0.0,
+                    q_mm: 0.0,
+                };
+                Item::Motion(e)
+            }
+            other => other,
+        };
+        let items = [
+            blend(line(x(0.0), x(10.0), 10.0)),
+            blend(line(x(10.0), x(0.0), 10.0)),
+            Item::Dwell(crate::gcode::Dwell {
+                line: 3,
+                col: 1,
+                seconds: 0.5,
+            }),
+            blend(line(x(0.0), x(5.0), 10.0)),
+            blend(line(x(5.0), x(10.0), 10.0)),
+            Item::Stop(crate::gcode::Stop {
+                line: 6,
+                col: 1,
+                optional: false,
+            }),
+            blend(line(x(10.0), x(20.0), 10.0)),
+        ];
+        let config = PlannerConfig {
+            period_s: 0.001,
+            corner_acc_mm_s2: 2000.0,
+            path_acc_share: 0.75,
+            ..config()
+        };
+        let plan = super::super::plan_items_with(Vector3::zeros(), &items, &limits(), &config)
+            .expect("plans");
+        let stops = exact_stops(&plan, &limits(), &config);
+        assert_eq!(stops.count, 4);
+        let run = run_cost_s(10.0, 2000.0, 50_000.0);
+        assert!((stops.cost_s - 4.0 * run).abs() < 1e-12, "{stops:?}");
     }
 
     #[test]
