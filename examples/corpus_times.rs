@@ -133,13 +133,13 @@ fn run() -> Result<(), String> {
     let trapezoid = variant(&args.machine, "trapezoid", dir.path())?;
     let jerk = variant(&args.machine, "s-curve", dir.path())?;
     let mut files = Vec::new();
-    ngc_files(&args.corpus, &mut files);
+    ngc_files(&corpus, &mut files);
     files.sort();
     println!(
         "machine {} at a {} ms cycle, travel ±1000 mm; corpus {} ({} programs)",
         args.machine.display(),
         trapezoid.planner.period_s * 1e3,
-        args.corpus.display(),
+        corpus.display(),
         files.len()
     );
     println!(
@@ -150,7 +150,7 @@ fn run() -> Result<(), String> {
     let mut rows = Vec::new();
     for (k, path) in files.iter().enumerate() {
         let name = path
-            .strip_prefix(&args.corpus)
+            .strip_prefix(&corpus)
             .unwrap_or(path)
             .display()
             .to_string();
