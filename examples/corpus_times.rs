@@ -129,6 +129,7 @@ fn run() -> Result<(), String> {
         );
         return Ok(());
     }
+    let corpus = args.corpus.canonicalize().unwrap_or(args.corpus);
     let dir = tempfile::tempdir().map_err(|e| format!("temporary directory: {e}"))?;
     let trapezoid = variant(&args.machine, "trapezoid", dir.path())?;
     let jerk = variant(&args.machine, "s-curve", dir.path())?;
@@ -223,7 +224,7 @@ fn time_program(
     let stops = exact_stops(&trap_plan, &jerk_limits, &jerk.planner);
     let trapezoid_s = streamed_s(trap_plan, trapezoid.planner.period_s)?;
     let jerk_s = streamed_s(jerk_plan, jerk.planner.period_s)?;
-    if !(trapezoid_s > 0.0) {
+    if trapezoid_s <= 0.0 {
         return Err("no motion".into());
     }
     Ok(Row {

@@ -150,7 +150,7 @@ pub fn exact_stops(plan: &Plan, limits: &Limits, config: &PlannerConfig) -> Exac
             SegmentPath::Arc(arc) => arc.tangent_at(0.0),
             SegmentPath::Dwell | SegmentPath::Stop { .. } => continue,
         };
-        if seg.profile.is_none() || !(seg.length_mm > 0.0) {
+        if seg.profile.is_none() || seg.length_mm.is_nan() || seg.length_mm <= 0.0 {
             continue;
         }
         let acc_mm_s2 = along(&u, &limits.max_acc_mm_s2).min(config.path_acc_mm_s2);
@@ -230,7 +230,7 @@ impl Vertex {
         limits: &Limits,
         config: &PlannerConfig,
     ) -> f64 {
-        if !(self.kappa_per_mm > STRAIGHT_PER_MM) {
+        if self.kappa_per_mm.is_nan() || self.kappa_per_mm <= STRAIGHT_PER_MM {
             return feed_cap_mm_s;
         }
         let share = match self.binormal {
