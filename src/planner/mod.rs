@@ -117,6 +117,7 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 use crate::gcode::{ArcGeometry, BlendMode, Element, ElementKind, Item, Program};
+pub mod bounds;
 pub mod profile;
 
 use profile::{JerkShape, ProfileLimits, SpeedProfile};

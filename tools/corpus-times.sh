@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Corpus time benchmark (issue 11): every program of LinuxCNC's trajectory-planner corpus
+# (../shared/corpus/linuxcnc-tp/, relative to the repository) that plans, timed in trapezoid
+# and in jerk-limited ("s-curve") mode on MACHINE at a 1 ms cycle with the travel widened,
+# with the ratio, the reference time T_ref and T_lb; then the geometric mean of the ratio,
+# the 10 worst programs and those above 1.5x not within 1.1x of T_ref.
+#
+#   tools/corpus-times.sh [MACHINE]     # default dictionaries/machines/demo-xyz.toml
+#
+# The table goes to stdout, progress to stderr. The work is examples/corpus_times.rs (release
+# build); the bounds are canmotion::planner::bounds. Says so and exits 0 without the corpus.
+set -euo pipefail
+root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+machine=${1:-$root/dictionaries/machines/demo-xyz.toml}
+[[ -f "$machine" ]] || {
+    echo "corpus-times: no machine file '$machine'" >&2
+    exit 2
+}
+machine=$(cd "$(dirname "$machine")" && pwd)/$(basename "$machine")
+cd "$root"
+exec cargo run --quiet --release --example corpus_times -- "$machine"
