@@ -170,7 +170,7 @@ pub enum ProfileKind {
 
 /// Time of each of the two moving averages per axis of the jerk-limited mode (the geometry
 /// filter, see the module documentation), rounded up to whole periods (at least 2).
-pub const AXIS_FILTER_S: f64 = 0.004;
+pub const AXIS_FILTER_S: f64 = 0.008;
 
 /// Longest time-law filter: past it the tangential acceleration is lowered instead
 /// (`a ≤ J·T_f/2`).
@@ -1249,6 +1249,7 @@ impl Planner {
         // A polyline's curvature sits at its vertices: a change of it from one vertex to the
         // next is a step of the acceleration, as at an arc's end.
         let dk_vertex = discrete_curvature(a, b) - a.kink_in;
+        let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
         // The largest v with v·d·(1 + v·T_k/L) ≤ c.
         let shared = |c: f64, d: f64| {
@@ -1265,14 +1266,25 @@ impl Planner {
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
             let jerk_budget = 0.5
                 * (cfg.max_jerk_mm_s3[i] - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i])).max(0.0);
+            // A vertex moves the polyline off the smooth curve through its neighbours by about
+            // `ε = |Δκ|·L̄²/8`; whatever the speed, the filtered setpoints then carry at most
+            // `8ε/(T·T_k²)` of jerk from it (a third difference of two moving averages of a
+            // deviation within ε), so a vertex within that bound charges nothing more.
+            let noise_mm_s3 = |k: f64| k * mean_mm * mean_mm / (cfg.period_s * tk * tk);
             let d = du[i].abs();
             if d > 0.0 {
                 v = v.min(shared(tk * acc_budget, d));
-                v = v.min(tk * tk * jerk_budget / d);
+                if noise_mm_s3(d / mean_mm) > jerk_budget {
+                    v = v.min(tk * tk * jerk_budget / d);
+                }
                 v = v.min((l_mm * l_mm * jerk_budget / (d * du_norm)).cbrt());
             }
-            let k = dk[i].abs().max(dk_vertex[i].abs());
+            let k = dk[i].abs();
             if k > 0.0 {
+                v = v.min((tk * jerk_budget / k).sqrt());
+            }
+            let k = dk_vertex[i].abs();
+            if k > 0.0 && noise_mm_s3(k) > jerk_budget {
                 v = v.min((tk * jerk_budget / k).sqrt());
             }
         }
