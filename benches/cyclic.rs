@@ -141,12 +141,23 @@ fn bench_override(c: &mut Criterion) {
     let start = Vector3::zeros();
     let limits = canmotion::gateway::limits(&m);
     let ramp = OverrideRamp::for_machine(&limits, &m.planner).unwrap();
-    for (name, text) in [
-        ("pocket", PROGRAM.to_string()),
-        ("tiny circle", tiny_circle()),
+    // The jerk-limited mode: the time-law filter and the two axis filters run in `update`.
+    let s_curve = canmotion::planner::PlannerConfig {
+        profile: canmotion::planner::ProfileKind::SCurve,
+        ..m.planner
+    };
+    for (name, text, config) in [
+        ("pocket", PROGRAM.to_string(), m.planner),
+        ("tiny circle", tiny_circle(), m.planner),
+        ("pocket, s-curve filters", PROGRAM.to_string(), s_curve),
+        ("tiny circle, s-curve filters", tiny_circle(), s_curve),
     ] {
         let program = canmotion::gcode::parse_program(&text, "bench.ngc", start).unwrap();
-        let plan = canmotion::planner::plan_with(&program, &limits, &m.planner).unwrap();
+        let plan = canmotion::planner::plan_with(&program, &limits, &config).unwrap();
+        assert_eq!(
+            plan.smoothing().is_some(),
+            config.profile == canmotion::planner::ProfileKind::SCurve
+        );
         let mut fresh = Interpolator::new(plan, period_s)
             .unwrap()
             .with_override_ramp(ramp);
