@@ -144,7 +144,7 @@ fn classify_g(tenths: u32) -> Known {
 fn classify_m(number: u32) -> Known {
     use Known::*;
     match number {
-        0 | 1 | 2 | 30 => In(Group::Stop),
+        0 | 1 | 2 | 30 | 98 | 99 => In(Group::Stop),
         6 | 61 => In(Group::ToolChange),
         3..=5 | 19 => In(Group::Spindle),
         7..=9 => In(Group::Coolant),
@@ -400,7 +400,7 @@ impl Block {
     pub fn spindle_mode(&self) -> Option<Code> {
         self.get(Group::SpindleMode)
     }
-    /// M0, M1, M2, M30.
+    /// M0, M1, M2, M30, M98, M99.
     pub fn stop(&self) -> Option<Code> {
         self.get(Group::Stop)
     }

@@ -27,6 +27,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::f64::consts::FRAC_PI_2;
 use std::io::BufRead;
+use std::path::PathBuf;
 use std::rc::Rc;
 
 use nalgebra::Vector3;
@@ -34,9 +35,11 @@ use nalgebra::Vector3;
 use super::block::{Block, BlockError, Code, as_index};
 use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
 use super::expr::{ParamRef, Params};
-use super::lex::{Control, Keyword, Label, LineKind, Scanner, Word, peek_control};
+use super::lex::{
+    Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
+};
 use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
-use super::{Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
+use super::{CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
 
 // The canned cycles live in their own file; as a child of this module they extend `State`.
 #[path = "cycles.rs"]
@@ -82,6 +85,15 @@ pub struct Setup {
     /// Optional stop switch: M1 stops like M0 (LinuxCNC's default: on); off, M1 is noted
     /// and skipped.
     pub optional_stop: bool,
+    /// Folders searched in order for `name.ngc` when `o<name> call` (or `123.ngc` for
+    /// `o123 call`) names a subroutine the program has not defined: LinuxCNC's
+    /// SUBROUTINE_PATH. Empty (the default): no file is searched.
+    pub subroutine_path: Vec<PathBuf>,
+    /// How many times M99 in the main program restarts it from its first line (on a
+    /// controller, an endless program); after that, M99 ends it ([`ProgramEnd::M99`]).
+    /// Above 0, the main program's text is kept in memory, within [`MAX_STORED_BYTES`].
+    /// Default 0: M99 in the main program ends it.
+    pub m99_restarts: u32,
 }
 
 impl Setup {
@@ -103,6 +115,8 @@ impl Setup {
             arc_tolerance_rel: 0.001,
             block_delete: true,
             optional_stop: true,
+            subroutine_path: Vec::new(),
+            m99_restarts: 0,
         }
     }
 
@@ -137,6 +151,19 @@ impl Setup {
         }
         Ok(())
     }
+}
+
+/// What a line asks of the program flow besides its items.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Flow {
+    /// Go on with the next line.
+    Next,
+    /// The program ends.
+    End(ProgramEnd),
+    /// M98 P L: call numbered subprogram `number`, `count` times.
+    Call { number: u32, count: u32, col: usize },
+    /// M99: return from a numbered subprogram (or restart the main program).
+    Return { col: usize },
 }
 
 /// The motion mode (modal group 1).
@@ -388,13 +415,14 @@ impl State {
         }
     }
 
-    /// Executes one checked line; items go to `out`. Returns how the program ended, if it did.
+    /// Executes one checked line; items go to `out`. Returns what the line asks of the flow
+    /// (the end, an M98 call, an M99 return).
     fn execute(
         &mut self,
         b: &Block,
         line: usize,
         out: &mut VecDeque<Item>,
-    ) -> Result<Option<ProgramEnd>, BlockError> {
+    ) -> Result<Flow, BlockError> {
         self.used = 0;
         let note = |out: &mut VecDeque<Item>, col: usize, text: String| {
             out.push_back(Item::Note(Note { line, col, text }));
@@ -651,8 +679,31 @@ impl State {
             )?;
         }
 
+        let call = match b.stop() {
+            Some(code) if code.tenths == 980 => {
+                let p = self.take(b, 'P').ok_or_else(|| {
+                    missing(code.col, code, 'P', "the number of the subprogram to call")
+                })?;
+                let number = as_index(p.value)
+                    .ok_or_else(|| invalid(p, "a program number (a non-negative integer)"))?;
+                // The domain check made L a non-negative integer.
+                let count = self
+                    .take(b, 'L')
+                    .map_or(1, |l| as_index(l.value).unwrap_or(0));
+                Some(Flow::Call {
+                    number,
+                    count,
+                    col: code.col,
+                })
+            }
+            _ => None,
+        };
+
         self.check_unused(b)?;
 
+        if let Some(call) = call {
+            return Ok(call);
+        }
         Ok(match b.stop() {
             Some(code) if code.tenths == 0 || code.tenths == 10 => {
                 let optional = code.tenths == 10;
@@ -669,11 +720,12 @@ impl State {
                         optional,
                     }));
                 }
-                None
+                Flow::Next
             }
-            Some(code) if code.tenths == 20 => Some(ProgramEnd::M2 { line }),
-            Some(_) => Some(ProgramEnd::M30 { line }),
-            None => None,
+            Some(code) if code.tenths == 20 => Flow::End(ProgramEnd::M2 { line }),
+            Some(code) if code.tenths == 990 => Flow::Return { col: code.col },
+            Some(_) => Flow::End(ProgramEnd::M30 { line }),
+            None => Flow::Next,
         })
     }
 
@@ -1235,6 +1287,32 @@ impl State {
     }
 }
 
+/// Gives the items of a subroutine file's line the line and column of its call.
+fn relabel(item: &mut Item, line: usize, col: usize) {
+    let place = match item {
+        Item::Motion(e) => (&mut e.line, &mut e.col),
+        Item::Dwell(d) => (&mut d.line, &mut d.col),
+        Item::Stop(s) => (&mut s.line, &mut s.col),
+        Item::Note(n) => (&mut n.line, &mut n.col),
+        Item::End(end) => {
+            relabel_end(end, line);
+            return;
+        }
+    };
+    *place.0 = line;
+    *place.1 = col;
+}
+
+fn relabel_end(end: &mut ProgramEnd, to: usize) {
+    match end {
+        ProgramEnd::EndOfText => {}
+        ProgramEnd::M2 { line }
+        | ProgramEnd::M30 { line }
+        | ProgramEnd::Percent { line }
+        | ProgramEnd::M99 { line } => *line = to,
+    }
+}
+
 /// Deepest subroutine call nesting.
 pub const MAX_CALL_DEPTH: usize = 64;
 
@@ -1252,12 +1330,18 @@ pub const MAX_IDLE_LINES: usize = 1_000_000;
 struct Body {
     lines: Vec<(usize, String)>,
     controls: Vec<Option<(Label, Keyword)>>,
+    /// The file the lines are from (the program, or a subroutine file).
+    file: Rc<str>,
 }
 
 impl Body {
-    fn new(lines: Vec<(usize, String)>) -> Lines {
+    fn new(lines: Vec<(usize, String)>, file: Rc<str>) -> Lines {
         let controls = lines.iter().map(|(_, t)| peek_control(t)).collect();
-        Rc::new(Body { lines, controls })
+        Rc::new(Body {
+            lines,
+            controls,
+            file,
+        })
     }
 
     /// What the body counts against [`MAX_STORED_BYTES`]: its text and a fixed overhead per
@@ -1278,10 +1362,41 @@ struct Frame {
     lines: Lines,
     /// Index of the next line to run.
     pc: usize,
-    /// A subroutine call (it has its own parameter scope).
+    /// A subroutine call (an o-word call has its own parameter scope).
     sub: bool,
+    /// An M98 call: the passes left, this one included (M98 L). M98 subprograms share the
+    /// caller's parameters, as in LinuxCNC.
+    m98_passes: Option<u32>,
+    /// Where a subroutine was called from.
+    call: Option<CallAt>,
     /// Remaining passes of each running `repeat`, by the index of its line.
     repeats: HashMap<usize, u64>,
+}
+
+impl Frame {
+    fn new(lines: Lines, sub: bool) -> Frame {
+        Frame {
+            lines,
+            pc: 0,
+            sub,
+            m98_passes: None,
+            call: None,
+            repeats: HashMap::new(),
+        }
+    }
+
+    /// An o-word subroutine call, with its own parameter scope.
+    fn scoped(&self) -> bool {
+        self.sub && self.m98_passes.is_none()
+    }
+}
+
+/// The line that called a subroutine.
+#[derive(Debug, Clone)]
+struct CallAt {
+    file: Rc<str>,
+    line: usize,
+    col: usize,
 }
 
 /// The streaming interpreter of [`crate::gcode`]: lines in, [`Item`]s out, one line read per
@@ -1307,6 +1422,21 @@ pub struct Interpreter<R> {
     at: usize,
     frames: Vec<Frame>,
     subs: HashMap<Label, Lines>,
+    /// Numbered subprograms (`O100` ... `M99`), called by M98 only.
+    m98_subs: HashMap<u32, Lines>,
+    /// The program's name, shared by the bodies stored from it.
+    main_file: Rc<str>,
+    subroutine_path: Vec<PathBuf>,
+    /// Lines read from the source but not run yet: an M98 call read ahead to find its
+    /// subprogram. (Source line, text.)
+    ahead: VecDeque<(usize, Vec<u8>)>,
+    /// Every line read from the source, kept while M99 may restart the main program.
+    record: Option<Vec<Vec<u8>>>,
+    /// Index in `record` of the next line to read again after a restart.
+    replay_at: usize,
+    restarts_left: u32,
+    /// A program number (`O1`) was seen: later ones begin M98 subprograms.
+    program_number_seen: bool,
     stored_bytes: usize,
     /// The next control line was jumped to as the next branch of an `if`.
     branch_pending: bool,
@@ -1330,7 +1460,11 @@ impl<R: BufRead> Interpreter<R> {
             line: 0,
             col: 0,
             kind,
+            called_from: Vec::new(),
         });
+        let main_file: Rc<str> = Rc::from(file.as_str());
+        let subroutine_path = setup.subroutine_path.clone();
+        let restarts_left = setup.m99_restarts;
         Interpreter {
             reader,
             file,
@@ -1346,6 +1480,14 @@ impl<R: BufRead> Interpreter<R> {
             at: 0,
             frames: Vec::new(),
             subs: HashMap::new(),
+            m98_subs: HashMap::new(),
+            main_file,
+            subroutine_path,
+            ahead: VecDeque::new(),
+            record: (restarts_left > 0).then(Vec::new),
+            replay_at: 0,
+            restarts_left,
+            program_number_seen: false,
             stored_bytes: 0,
             branch_pending: false,
             idle_lines: 0,
@@ -1393,13 +1535,44 @@ impl<R: BufRead> Interpreter<R> {
         &self.state.tools
     }
 
+    /// An error at column `col` of the line being run, in the file it is from; inside a
+    /// subroutine file, with the calls that led there.
     fn error(&self, col: usize, kind: ErrorKind) -> Error {
+        let file = self
+            .frames
+            .last()
+            .map_or(&self.main_file, |f| &f.lines.file);
+        let called_from = if **file == *self.main_file {
+            Vec::new()
+        } else {
+            self.frames
+                .iter()
+                .rev()
+                .filter_map(|f| f.call.as_ref())
+                .map(|c| CallSite {
+                    file: c.file.to_string(),
+                    line: c.line,
+                })
+                .collect()
+        };
         Error {
-            file: self.file.clone(),
+            file: file.to_string(),
             line: self.at,
             col,
             kind,
+            called_from,
         }
+    }
+
+    /// The call, in the program itself, of the outermost subroutine file being run: the items
+    /// of a subroutine file's lines carry that call's line and column, so that everything
+    /// downstream (planner messages, the feed optimiser, the resume point) refers to lines of
+    /// the program.
+    fn file_call(&self) -> Option<&CallAt> {
+        self.frames
+            .iter()
+            .find(|f| *f.lines.file != *self.main_file)
+            .and_then(|f| f.call.as_ref())
     }
 
     /// Reads one line into `buf` (terminator stripped); `false` at the end of the input.
@@ -1408,7 +1581,7 @@ impl<R: BufRead> Interpreter<R> {
     /// endings must not merge its lines into one (a retract and a traverse would become one
     /// diagonal move through the part). The `\n` of a `\r\n` may come in a later read than its
     /// `\r`; `cr_pending` carries that over, so each ending counts once.
-    fn read_line(&mut self) -> Result<bool, Error> {
+    fn read_raw_line(&mut self) -> Result<bool, Error> {
         self.buf.clear();
         let mut read_any = false;
         loop {
@@ -1424,6 +1597,7 @@ impl<R: BufRead> Interpreter<R> {
                             lines_read: self.line,
                             message: e.to_string(),
                         },
+                        called_from: Vec::new(),
                     });
                 }
             };
@@ -1472,6 +1646,50 @@ impl<R: BufRead> Interpreter<R> {
         Ok(true)
     }
 
+    /// Reads the next line of the main program into `buf`: one read ahead before, else the
+    /// next line of the source. `at` is its line.
+    fn read_line(&mut self) -> Result<bool, Error> {
+        if let Some((line, bytes)) = self.ahead.pop_front() {
+            self.stored_bytes = self.stored_bytes.saturating_sub(bytes.len() + 16);
+            self.buf = bytes;
+            self.at = line;
+            return Ok(true);
+        }
+        self.pull_line()
+    }
+
+    /// The next line of the source into `buf`: again from the record after an M99 restart,
+    /// else from the reader (recorded while a restart may come).
+    fn pull_line(&mut self) -> Result<bool, Error> {
+        if let Some(bytes) = self.record.as_ref().and_then(|r| r.get(self.replay_at)) {
+            self.buf.clear();
+            self.buf.extend_from_slice(bytes);
+            self.replay_at += 1;
+            self.line += 1;
+            self.at = self.line;
+            return Ok(true);
+        }
+        if !self.read_raw_line()? {
+            return Ok(false);
+        }
+        if self.record.is_some() {
+            self.stored_bytes += self.buf.len() + 16;
+            if self.stored_bytes > MAX_STORED_BYTES {
+                return Err(self.error(
+                    1,
+                    ErrorKind::StoredTooLarge {
+                        max_bytes: MAX_STORED_BYTES,
+                    },
+                ));
+            }
+        }
+        if let Some(record) = &mut self.record {
+            record.push(self.buf.clone());
+            self.replay_at = record.len();
+        }
+        Ok(true)
+    }
+
     /// The text of the line in `buf`.
     fn buf_text(&self) -> String {
         String::from_utf8_lossy(&self.buf).into_owned()
@@ -1496,10 +1714,18 @@ impl<R: BufRead> Interpreter<R> {
             }
             // The end of a body: a subroutine returns, a loop of the main stream is done (and
             // its lines are let go).
+            if let Some(frame) = self.frames.last_mut()
+                && let Some(passes) = frame.m98_passes
+                && passes > 1
+            {
+                frame.m98_passes = Some(passes - 1);
+                frame.pc = 0;
+                return Ok(());
+            }
             if let Some(f) = self.frames.pop() {
-                if f.sub {
+                if f.scoped() {
                     self.params.pop_scope();
-                } else {
+                } else if !f.sub {
                     self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
                 }
             }
@@ -1511,7 +1737,7 @@ impl<R: BufRead> Interpreter<R> {
             return Ok(());
         }
         let text = self.buf_text();
-        self.run_line(self.line, &text, false)
+        self.run_line(self.at, &text, false)
     }
 
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
@@ -1529,7 +1755,18 @@ impl<R: BufRead> Interpreter<R> {
         }
         let pending = std::mem::take(&mut self.branch_pending);
         match kind {
-            LineKind::Blank | LineKind::Skipped | LineKind::ProgramNumber => {}
+            LineKind::Blank | LineKind::Skipped => {}
+            LineKind::ProgramNumber => {
+                let label = self.scanner.program.take();
+                match label {
+                    // The program's own number comes first; a later one begins a numbered
+                    // subprogram, which runs only when M98 calls it.
+                    Some(Label::Number(number)) if self.code_seen || self.program_number_seen => {
+                        self.define_m98(number, in_frame)?;
+                    }
+                    _ => self.program_number_seen = true,
+                }
+            }
             LineKind::Percent => {
                 if in_frame {
                     return Err(self.error(1, ErrorKind::MisplacedPercent));
@@ -1544,21 +1781,37 @@ impl<R: BufRead> Interpreter<R> {
             }
             LineKind::Words => {
                 self.code_seen = true;
+                let mut flow = Flow::Next;
                 if !self.scanner.words.is_empty() {
                     let block =
                         Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
-                    let end = self
+                    let first_item = self.queue.len();
+                    flow = self
                         .state
                         .execute(&block, line, &mut self.queue)
                         .map_err(|(col, k)| self.error(col, k))?;
-                    if let Some(end) = end {
-                        self.queue.push_back(Item::End(end));
-                        self.done = true;
+                    if let Some(call) = self.file_call() {
+                        let (line, col) = (call.line, call.col);
+                        for item in self.queue.iter_mut().skip(first_item) {
+                            relabel(item, line, col);
+                        }
+                        if let Flow::End(end) = &mut flow {
+                            relabel_end(end, line);
+                        }
                     }
                 }
                 let col = self.scanner.words.first().map_or(1, |w| w.col);
                 for (r, value) in std::mem::take(&mut self.scanner.assignments) {
                     self.params.set(&r, value).map_err(|k| self.error(col, k))?;
+                }
+                match flow {
+                    Flow::Next => {}
+                    Flow::End(end) => {
+                        self.queue.push_back(Item::End(end));
+                        self.done = true;
+                    }
+                    Flow::Call { number, count, col } => self.call_m98(number, count, col)?,
+                    Flow::Return { col } => self.m99(line, col)?,
                 }
             }
             LineKind::Control => {
@@ -1614,7 +1867,7 @@ impl<R: BufRead> Interpreter<R> {
             }
             let text = self.buf_text();
             let found = peek_control(&text).is_some_and(|(l, k)| l == *label && k == end);
-            self.store(lines, self.line, text, col)?;
+            self.store(lines, self.at, text, col)?;
             if found {
                 self.at = start;
                 return Ok(());
@@ -1660,6 +1913,307 @@ impl<R: BufRead> Interpreter<R> {
         )
     }
 
+    /// The line being run as a call site.
+    fn call_here(&self, line: usize, col: usize) -> CallAt {
+        let file = self
+            .frames
+            .last()
+            .map_or(&self.main_file, |f| &f.lines.file)
+            .clone();
+        CallAt { file, line, col }
+    }
+
+    /// Finds `name.ngc` (`123.ngc` for `o123`) in the first folder of the subroutine path that
+    /// has it, and stores the subroutine it defines (the lines between its `sub` and `endsub`;
+    /// the rest of the file is not run). Errors are at the calling line.
+    fn load_sub_file(&mut self, label: &Label, col: usize) -> Result<Lines, Error> {
+        let name = match label {
+            Label::Name(name) => name.clone(),
+            Label::Number(n) => n.to_string(),
+        };
+        if !name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-' || c == '_')
+        {
+            return Err(self.error(
+                col,
+                ErrorKind::SubroutineName {
+                    label: label.to_string(),
+                },
+            ));
+        }
+        let file_name = format!("{name}.ngc");
+        let Some(path) = self
+            .subroutine_path
+            .iter()
+            .map(|dir| dir.join(&file_name))
+            .find(|p| p.is_file())
+        else {
+            return Err(self.error(
+                col,
+                ErrorKind::UndefinedSubroutine {
+                    label: label.to_string(),
+                    file_name,
+                    searched: self
+                        .subroutine_path
+                        .iter()
+                        .map(|d| d.display().to_string())
+                        .collect(),
+                },
+            ));
+        };
+        let shown = path.display().to_string();
+        let room = MAX_STORED_BYTES.saturating_sub(self.stored_bytes) as u64;
+        let bytes = crate::files::read_bounded(&path, room).map_err(|e| {
+            self.error(
+                col,
+                ErrorKind::SubroutineFile {
+                    path: shown.clone(),
+                    message: e.to_string(),
+                },
+            )
+        })?;
+        let lines: Vec<(usize, String)> = super::split_lines_inclusive(&bytes)
+            .map(|l| {
+                let end = l
+                    .iter()
+                    .rposition(|b| *b != b'\n' && *b != b'\r')
+                    .map_or(0, |i| i + 1);
+                String::from_utf8_lossy(&l[..end]).into_owned()
+            })
+            .enumerate()
+            .map(|(i, t)| (i + 1, t))
+            .collect();
+        let is = |t: &str, k: Keyword| peek_control(t).is_some_and(|(l, kw)| l == *label && kw == k);
+        let start = lines.iter().position(|(_, t)| is(t, Keyword::Sub));
+        let end = start.and_then(|s| {
+            lines
+                .iter()
+                .skip(s + 1)
+                .position(|(_, t)| is(t, Keyword::EndSub))
+                .map(|k| s + 1 + k)
+        });
+        let (Some(start), Some(end)) = (start, end) else {
+            return Err(self.error(
+                col,
+                ErrorKind::SubroutineFileWithoutSub {
+                    path: shown,
+                    label: label.to_string(),
+                },
+            ));
+        };
+        let body: Vec<(usize, String)> = lines[start + 1..end].to_vec();
+        let body = Body::new(body, Rc::from(shown.as_str()));
+        self.stored_bytes += body.bytes();
+        if self.stored_bytes > MAX_STORED_BYTES {
+            return Err(self.error(
+                col,
+                ErrorKind::StoredTooLarge {
+                    max_bytes: MAX_STORED_BYTES,
+                },
+            ));
+        }
+        self.subs.insert(label.clone(), body.clone());
+        Ok(body)
+    }
+
+    /// `O<number>` after the program started: stores the lines up to and including the next
+    /// line with M99 as subprogram `number` and goes on after them.
+    fn define_m98(&mut self, number: u32, in_frame: bool) -> Result<(), Error> {
+        let label = Label::Number(number);
+        let mut body = Vec::new();
+        let file;
+        if in_frame {
+            let here = self.frames.last().map_or(0, |f| f.pc.saturating_sub(1));
+            let Some(frame) = self.frames.last() else {
+                return Ok(());
+            };
+            let end = frame
+                .lines
+                .lines
+                .iter()
+                .skip(here + 1)
+                .position(|(_, t)| has_m99(t))
+                .map(|k| here + 1 + k)
+                .ok_or_else(|| {
+                    self.error(
+                        1,
+                        ErrorKind::UnclosedControl {
+                            label: label.to_string(),
+                            end: "M99",
+                        },
+                    )
+                })?;
+            body = frame.lines.lines[here + 1..=end].to_vec();
+            file = frame.lines.file.clone();
+            self.stored_bytes += body.iter().map(|(_, t)| t.len() + 16).sum::<usize>();
+            self.jump(end + 1);
+        } else {
+            let start = self.at;
+            loop {
+                if !self.read_line()? {
+                    self.at = start;
+                    return Err(self.error(
+                        1,
+                        ErrorKind::UnclosedControl {
+                            label: label.to_string(),
+                            end: "M99",
+                        },
+                    ));
+                }
+                let text = self.buf_text();
+                let done = has_m99(&text);
+                self.store(&mut body, self.at, text, 1)?;
+                if done {
+                    break;
+                }
+            }
+            self.at = start;
+            file = self.main_file.clone();
+        }
+        self.stored_bytes += BODY_OVERHEAD;
+        if self.stored_bytes > MAX_STORED_BYTES {
+            return Err(self.error(
+                1,
+                ErrorKind::StoredTooLarge {
+                    max_bytes: MAX_STORED_BYTES,
+                },
+            ));
+        }
+        if let Some(old) = self.m98_subs.insert(number, Body::new(body, file)) {
+            self.stored_bytes = self.stored_bytes.saturating_sub(old.bytes());
+        }
+        Ok(())
+    }
+
+    /// M98 P`number` L`count`: runs the subprogram `count` times. One not defined yet is
+    /// looked for further on in the program (LinuxCNC: it follows the call), reading ahead;
+    /// the lines read on the way run afterwards, as the program goes on.
+    fn call_m98(&mut self, number: u32, count: u32, col: usize) -> Result<(), Error> {
+        if count == 0 {
+            return Ok(());
+        }
+        let body = match self.m98_subs.get(&number) {
+            Some(body) => body.clone(),
+            None => self.find_m98(number, col)?,
+        };
+        if self.frames.iter().filter(|f| f.sub).count() >= MAX_CALL_DEPTH {
+            return Err(self.error(
+                col,
+                ErrorKind::CallTooDeep {
+                    max: MAX_CALL_DEPTH,
+                },
+            ));
+        }
+        let mut frame = Frame::new(body, true);
+        frame.m98_passes = Some(count);
+        frame.call = Some(self.call_here(self.at, col));
+        self.frames.push(frame);
+        Ok(())
+    }
+
+    /// Reads ahead (keeping the lines in `ahead`) to the subprogram `O<number>` ... `M99` and
+    /// stores it.
+    fn find_m98(&mut self, number: u32, col: usize) -> Result<Lines, Error> {
+        let at = self.at;
+        let mut start: Option<usize> = None;
+        let mut i = 0;
+        loop {
+            while let Some((_, bytes)) = self.ahead.get(i) {
+                let text = String::from_utf8_lossy(bytes);
+                match start {
+                    None if peek_program_number(&text) == Some(Label::Number(number)) => {
+                        start = Some(i);
+                    }
+                    Some(s) if has_m99(&text) => {
+                        let lines: Vec<(usize, String)> = self
+                            .ahead
+                            .drain(s..=i)
+                            .map(|(n, b)| (n, String::from_utf8_lossy(&b).into_owned()))
+                            .collect();
+                        // The O line is not part of the body; the lines stay counted, as
+                        // the body's.
+                        let body: Vec<(usize, String)> = lines.into_iter().skip(1).collect();
+                        let body = Body::new(body, self.main_file.clone());
+                        self.stored_bytes += BODY_OVERHEAD;
+                        self.m98_subs.insert(number, body.clone());
+                        self.at = at;
+                        return Ok(body);
+                    }
+                    _ => {}
+                }
+                i += 1;
+            }
+            let more = self.pull_line().inspect_err(|_| self.at = at)?;
+            let line = self.at;
+            self.at = at;
+            if !more {
+                return Err(self.error(col, ErrorKind::SubprogramNotFound { number }));
+            }
+            self.stored_bytes += self.buf.len() + 16;
+            if self.stored_bytes > MAX_STORED_BYTES {
+                return Err(self.error(
+                    col,
+                    ErrorKind::StoredTooLarge {
+                        max_bytes: MAX_STORED_BYTES,
+                    },
+                ));
+            }
+            let bytes = std::mem::take(&mut self.buf);
+            self.ahead.push_back((line, bytes));
+        }
+    }
+
+    /// M99: the end of an M98 subprogram's pass; in the main program, a restart (within
+    /// [`Setup::m99_restarts`]) or the end.
+    fn m99(&mut self, line: usize, col: usize) -> Result<(), Error> {
+        match self.frames.iter().rposition(|f| f.sub) {
+            Some(i) if self.frames[i].m98_passes.is_some() => {
+                self.frames.truncate(i + 1);
+                if let Some(frame) = self.frames.last_mut() {
+                    // The end of the body passes or pops it.
+                    frame.pc = frame.lines.lines.len();
+                }
+                Ok(())
+            }
+            Some(_) => Err(self.error(
+                col,
+                ErrorKind::ControlMismatch {
+                    what: "M99".to_owned(),
+                    expected: "to end an M98 subprogram (an o-word subroutine ends with endsub)",
+                },
+            )),
+            None if self.restarts_left > 0 && self.record.is_some() => {
+                self.restarts_left -= 1;
+                for f in std::mem::take(&mut self.frames) {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
+                }
+                for (_, bytes) in std::mem::take(&mut self.ahead) {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(bytes.len() + 16);
+                }
+                self.replay_at = 0;
+                self.line = 0;
+                self.opened = false;
+                self.code_seen = false;
+                self.program_number_seen = false;
+                self.queue.push_back(Item::Note(Note {
+                    line,
+                    col,
+                    text: format!(
+                        "M99: the program restarts from its first line ({} restart(s) left)",
+                        self.restarts_left
+                    ),
+                }));
+                Ok(())
+            }
+            None => {
+                self.queue.push_back(Item::End(ProgramEnd::M99 { line }));
+                self.done = true;
+                Ok(())
+            }
+        }
+    }
+
     /// Runs an O-word control line.
     fn control(
         &mut self,
@@ -1676,6 +2230,7 @@ impl<R: BufRead> Interpreter<R> {
         match c.keyword {
             Sub => {
                 let mut body = Vec::new();
+                let mut file = self.main_file.clone();
                 if in_frame {
                     let end = self
                         .find_control(&c.label, &[EndSub], here + 1, true)
@@ -1688,6 +2243,7 @@ impl<R: BufRead> Interpreter<R> {
                             .get(here + 1..end)
                             .unwrap_or_default()
                             .to_vec();
+                        file = frame.lines.file.clone();
                     }
                     let bytes: usize = body.iter().map(|(_, t)| t.len() + 16).sum();
                     self.stored_bytes += bytes + BODY_OVERHEAD;
@@ -1709,19 +2265,15 @@ impl<R: BufRead> Interpreter<R> {
                     }
                 }
                 // A redefinition frees what the old body held.
-                if let Some(old) = self.subs.insert(c.label, Body::new(body)) {
+                if let Some(old) = self.subs.insert(c.label, Body::new(body, file)) {
                     self.stored_bytes = self.stored_bytes.saturating_sub(old.bytes());
                 }
             }
             Call => {
-                let body = self.subs.get(&c.label).cloned().ok_or_else(|| {
-                    self.error(
-                        c.col,
-                        ErrorKind::UndefinedSubroutine {
-                            label: c.label.to_string(),
-                        },
-                    )
-                })?;
+                let body = match self.subs.get(&c.label) {
+                    Some(body) => body.clone(),
+                    None => self.load_sub_file(&c.label, c.col)?,
+                };
                 if self.frames.iter().filter(|f| f.sub).count() >= MAX_CALL_DEPTH {
                     return Err(self.error(
                         c.col,
@@ -1731,16 +2283,20 @@ impl<R: BufRead> Interpreter<R> {
                     ));
                 }
                 self.params.push_scope(&c.values);
-                self.frames.push(Frame {
-                    lines: body,
-                    pc: 0,
-                    sub: true,
-                    repeats: HashMap::new(),
-                });
+                let mut frame = Frame::new(body, true);
+                frame.call = Some(self.call_here(line, c.col));
+                self.frames.push(frame);
             }
             Return | EndSub => {
-                if !self.frames.iter().any(|f| f.sub) {
-                    return Err(self.mismatch(&c, "to be inside a subroutine"));
+                match self.frames.iter().rev().find(|f| f.sub) {
+                    None => return Err(self.mismatch(&c, "to be inside a subroutine")),
+                    Some(f) if !f.scoped() => {
+                        return Err(self.mismatch(
+                            &c,
+                            "to be inside an o-word subroutine (an M98 subprogram ends with M99)",
+                        ));
+                    }
+                    Some(_) => {}
                 }
                 while let Some(f) = self.frames.pop() {
                     if f.sub {
@@ -1766,12 +2322,8 @@ impl<R: BufRead> Interpreter<R> {
                 self.store(&mut lines, line, text.to_owned(), c.col)?;
                 self.capture(&c.label, end, c.col, &mut lines)?;
                 self.stored_bytes += BODY_OVERHEAD;
-                self.frames.push(Frame {
-                    lines: Body::new(lines),
-                    pc: 0,
-                    sub: false,
-                    repeats: HashMap::new(),
-                });
+                self.frames
+                    .push(Frame::new(Body::new(lines, self.main_file.clone()), false));
             }
             _ if !in_frame => return Err(self.mismatch(&c, "to follow its opening line")),
             If => {

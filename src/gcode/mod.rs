@@ -170,6 +170,12 @@ pub enum ProgramEnd {
         /// 1-based line.
         line: usize,
     },
+    /// M99 in the main program on this line, after the restarts [`Setup::m99_restarts`]
+    /// allows (on a controller, M99 there restarts the program endlessly).
+    M99 {
+        /// 1-based line.
+        line: usize,
+    },
 }
 
 /// A whole program, interpreted before any motion starts (see [`parse_program`]).
@@ -237,10 +243,13 @@ pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Progra
 /// An error: where it is and what is wrong. Displays as `file:line:col: message`, or
 /// `file:line: message` with no column, or `file: message` when it concerns no line (a read
 /// error, a bad setup).
+///
+/// An error inside a subroutine file names that file and its line, then the calls that led
+/// there: `sub.ngc:3:5: message (called from main.ngc:12)`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}{kind}", Place { file, line: *line, col: *col })]
+#[error("{}{kind}{}", Place { file, line: *line, col: *col }, CallChain(called_from))]
 pub struct Error {
-    /// Name of the source.
+    /// Name of the source (the subroutine file's path when the line is in one).
     pub file: String,
     /// 1-based line (0 for errors that concern no line: a bad setup, a read error).
     pub line: usize,
@@ -248,6 +257,34 @@ pub struct Error {
     pub col: usize,
     /// What is wrong.
     pub kind: ErrorKind,
+    /// When `file` is a subroutine file: the call lines that led to it, innermost first
+    /// (empty otherwise).
+    pub called_from: Vec<CallSite>,
+}
+
+/// A line that called a subroutine.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CallSite {
+    /// The file of the calling line.
+    pub file: String,
+    /// Its 1-based line.
+    pub line: usize,
+}
+
+/// ` (called from a:3, from b:12)`, or nothing.
+struct CallChain<'a>(&'a [CallSite]);
+
+impl fmt::Display for CallChain<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, site) in self.0.iter().enumerate() {
+            let sep = if i == 0 { " (called from " } else { ", from " };
+            write!(f, "{sep}{}:{}", site.file, site.line)?;
+        }
+        if !self.0.is_empty() {
+            f.write_str(")")?;
+        }
+        Ok(())
+    }
 }
 
 /// `file:line:col: `, without the parts that are 0 (unknown).
@@ -264,6 +301,18 @@ impl fmt::Display for Place<'_> {
             (line, 0) => write!(f, "{}:{line}: ", self.file),
             (line, col) => write!(f, "{}:{line}:{col}: ", self.file),
         }
+    }
+}
+
+/// The folders searched for a subroutine file, or `none`.
+struct Searched<'a>(&'a [String]);
+
+impl fmt::Display for Searched<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_empty() {
+            return f.write_str("no subroutine_path is set");
+        }
+        f.write_str(&self.0.join(", "))
     }
 }
 
@@ -433,13 +482,59 @@ pub enum ErrorKind {
         /// The keyword that closes it.
         end: &'static str,
     },
-    /// A call of a subroutine not defined before.
+    /// A call of a subroutine neither defined before nor found as a file on the subroutine
+    /// path.
     #[error(
-        "subroutine {label} is not defined (define it with 'sub' before the call; subroutine files are not searched)"
+        "subroutine {label} is not defined: define it with 'sub' before the call, or put {file_name} in a folder of the machine file's [program] subroutine_path (searched: {})",
+        Searched(searched)
     )]
     UndefinedSubroutine {
         /// The label.
         label: String,
+        /// The file that was looked for, e.g. `probe.ngc`.
+        file_name: String,
+        /// The folders searched, in order (empty: no subroutine path is set).
+        searched: Vec<String>,
+    },
+    /// A called subroutine's name that cannot name a file.
+    #[error(
+        "subroutine {label} cannot be looked up as a file: file names of subroutines hold only lowercase letters, digits, '-' and '_' (as in LinuxCNC)"
+    )]
+    SubroutineName {
+        /// The label.
+        label: String,
+    },
+    /// A subroutine file that could not be read.
+    #[error("cannot read subroutine file {path}: {message}")]
+    SubroutineFile {
+        /// The file.
+        path: String,
+        /// Why.
+        message: String,
+    },
+    /// A subroutine file without the definition of its subroutine.
+    #[error(
+        "subroutine file {path} does not define {label}: it needs a '{label} sub' line and a '{label} endsub' line after it"
+    )]
+    SubroutineFileWithoutSub {
+        /// The file.
+        path: String,
+        /// The label.
+        label: String,
+    },
+    /// `M98 P<n>` with no `O<n>` ... `M99` subprogram after the call.
+    #[error(
+        "M98 P{number}: no subprogram O{number} (an 'O{number}' line, its lines, then M99) follows in the program"
+    )]
+    SubprogramNotFound {
+        /// The program number.
+        number: u32,
+    },
+    /// A computed O-word label (`o[#1+2] call`) that is no label number.
+    #[error("computed O-word label {value} is not a non-negative integer")]
+    ComputedLabel {
+        /// The value computed.
+        value: f64,
     },
     /// Calls nested too deeply.
     #[error("subroutine calls nested more than {max} deep")]
