@@ -564,7 +564,7 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "o<probe> call",
         1,
         1,
-        "subroutine o<probe> is not defined (define it with 'sub' before the call; subroutine files are not searched)",
+        "subroutine o<probe> is not defined: define it with 'sub' before the call, or put probe.ngc in a folder of the machine file's [program] subroutine_path (searched: no subroutine_path is set)",
     ),
     (
         "G21 F60\nG2 X30 R10",
