@@ -81,6 +81,7 @@ fn dump_program(p: &Program) -> String {
         ProgramEnd::M2 { line } => format!("{line} end M2"),
         ProgramEnd::M30 { line } => format!("{line} end M30"),
         ProgramEnd::Percent { line } => format!("{line} end %"),
+        ProgramEnd::M99 { line } => format!("{line} end M99"),
     });
     out.join("\n")
 }

@@ -197,7 +197,11 @@ fn a_subroutine_that_cannot_be_found_or_read_is_an_error_at_the_call() {
             searched: vec![dir.path().display().to_string()],
         }
     );
-    std::fs::write(dir.path().join("probe.ngc"), "o<other> sub\no<other> endsub\n").unwrap();
+    std::fs::write(
+        dir.path().join("probe.ngc"),
+        "o<other> sub\no<other> endsub\n",
+    )
+    .unwrap();
     let e = run("o<probe> call\n", with_path(&[dir.path()])).unwrap_err();
     assert!(
         matches!(&e.kind, ErrorKind::SubroutineFileWithoutSub { path, label }
@@ -216,7 +220,10 @@ fn a_subroutine_that_cannot_be_found_or_read_is_an_error_at_the_call() {
     .unwrap();
     std::fs::remove_file(dir.path().join("probe.ngc")).unwrap();
     let items = run("o<probe> call\n", with_path(&[dir.path(), second.path()])).unwrap();
-    assert!(matches!(&items[0], Item::Motion(m) if m.end_mm.x == 7.0), "{items:?}");
+    assert!(
+        matches!(&items[0], Item::Motion(m) if m.end_mm.x == 7.0),
+        "{items:?}"
+    );
 }
 
 #[test]
@@ -226,7 +233,10 @@ fn computed_labels_call_and_only_call() {
         Setup::new(Vector3::zeros()),
     )
     .unwrap();
-    assert!(matches!(&items[0], Item::Motion(m) if m.end_mm.x == 2.0), "{items:?}");
+    assert!(
+        matches!(&items[0], Item::Motion(m) if m.end_mm.x == 2.0),
+        "{items:?}"
+    );
     let e = run("#1 = 1.5\no[#1] call\n", Setup::new(Vector3::zeros())).unwrap_err();
     assert_eq!((e.line, e.col), (2, 2));
     assert_eq!(e.kind, ErrorKind::ComputedLabel { value: 1.5 });
@@ -237,7 +247,11 @@ fn computed_labels_call_and_only_call() {
 
 #[test]
 fn m98_errors_name_the_call() {
-    let e = run("G0 X1\n  M98 P9\nM30\nO8\nM99\n", Setup::new(Vector3::zeros())).unwrap_err();
+    let e = run(
+        "G0 X1\n  M98 P9\nM30\nO8\nM99\n",
+        Setup::new(Vector3::zeros()),
+    )
+    .unwrap_err();
     assert_eq!((e.line, e.col), (2, 3));
     assert_eq!(e.kind, ErrorKind::SubprogramNotFound { number: 9 });
     // M99 ends M98 subprograms, not o-word subroutines.
@@ -254,7 +268,10 @@ fn m98_errors_name_the_call() {
         Setup::new(Vector3::zeros()),
     )
     .unwrap();
-    assert!(matches!(&items[0], Item::Motion(m) if m.end_mm.x == 3.0), "{items:?}");
+    assert!(
+        matches!(&items[0], Item::Motion(m) if m.end_mm.x == 3.0),
+        "{items:?}"
+    );
 }
 
 #[test]
@@ -268,13 +285,22 @@ fn the_subroutine_path_is_relative_to_the_machine_file_and_checked() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(programs().join("subs.toml"))
         .unwrap()
-        .replace("../../dictionaries", &format!("{}/dictionaries", env!("CARGO_MANIFEST_DIR")))
-        .replace("subroutine_path = [\"subs\", \"subs/lib\"]", "subroutine_path = [\"nowhere\"]");
+        .replace(
+            "../../dictionaries",
+            &format!("{}/dictionaries", env!("CARGO_MANIFEST_DIR")),
+        )
+        .replace(
+            "subroutine_path = [\"subs\", \"subs/lib\"]",
+            "subroutine_path = [\"nowhere\"]",
+        );
     let file = dir.path().join("m.toml");
     std::fs::write(&file, text).unwrap();
     match Machine::load(&file).unwrap_err() {
         ConfigError::Invalid { table, key, .. } => {
-            assert_eq!((table.as_str(), key.as_str()), ("program", "subroutine_path"));
+            assert_eq!(
+                (table.as_str(), key.as_str()),
+                ("program", "subroutine_path")
+            );
         }
         e => panic!("{e}"),
     }

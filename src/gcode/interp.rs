@@ -1984,7 +1984,8 @@ impl<R: BufRead> Interpreter<R> {
             .enumerate()
             .map(|(i, t)| (i + 1, t))
             .collect();
-        let is = |t: &str, k: Keyword| peek_control(t).is_some_and(|(l, kw)| l == *label && kw == k);
+        let is =
+            |t: &str, k: Keyword| peek_control(t).is_some_and(|(l, kw)| l == *label && kw == k);
         let start = lines.iter().position(|(_, t)| is(t, Keyword::Sub));
         let end = start.and_then(|s| {
             lines

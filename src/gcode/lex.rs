@@ -487,11 +487,7 @@ pub(super) fn has_m99(line: &str) -> bool {
 
 /// The label at `at` (on the O) and the index after it. With `params`, a computed label
 /// (`o#1`, `o[#1+2]`) is evaluated to a number; without, it is an error.
-fn o_label(
-    chars: &[char],
-    at: usize,
-    params: Option<&Params>,
-) -> Result<(Label, usize), LexError> {
+fn o_label(chars: &[char], at: usize, params: Option<&Params>) -> Result<(Label, usize), LexError> {
     let col = at + 1;
     let mut j = at + 1;
     while chars.get(j).is_some_and(|c| *c == ' ' || *c == '\t') {
