@@ -331,7 +331,7 @@ where
             line: e.line,
             col: e.col,
             kind,
-            called_from: Vec::new(),
+            called_from: None,
         }
     }
 
@@ -645,7 +645,7 @@ where
                 kind: ErrorKind::CompensationLookAhead {
                     max: MAX_HELD_ITEMS,
                 },
-                called_from: Vec::new(),
+                called_from: None,
             });
         }
         self.held.push(item);

@@ -39,7 +39,9 @@ use super::lex::{
     Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
 };
 use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
-use super::{CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
+use super::{
+    CallChain, CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop,
+};
 
 // The canned cycles live in their own file; as a child of this module they extend `State`.
 #[path = "cycles.rs"]
@@ -1460,7 +1462,7 @@ impl<R: BufRead> Interpreter<R> {
             line: 0,
             col: 0,
             kind,
-            called_from: Vec::new(),
+            called_from: None,
         });
         let main_file: Rc<str> = Rc::from(file.as_str());
         let subroutine_path = setup.subroutine_path.clone();
@@ -1542,19 +1544,19 @@ impl<R: BufRead> Interpreter<R> {
             .frames
             .last()
             .map_or(&self.main_file, |f| &f.lines.file);
-        let called_from = if **file == *self.main_file {
-            Vec::new()
-        } else {
-            self.frames
-                .iter()
-                .rev()
-                .filter_map(|f| f.call.as_ref())
-                .map(|c| CallSite {
-                    file: c.file.to_string(),
-                    line: c.line,
-                })
-                .collect()
-        };
+        let called_from = (**file != *self.main_file).then(|| {
+            Box::new(CallChain(
+                self.frames
+                    .iter()
+                    .rev()
+                    .filter_map(|f| f.call.as_ref())
+                    .map(|c| CallSite {
+                        file: c.file.to_string(),
+                        line: c.line,
+                    })
+                    .collect(),
+            ))
+        });
         Error {
             file: file.to_string(),
             line: self.at,
@@ -1597,7 +1599,7 @@ impl<R: BufRead> Interpreter<R> {
                             lines_read: self.line,
                             message: e.to_string(),
                         },
-                        called_from: Vec::new(),
+                        called_from: None,
                     });
                 }
             };

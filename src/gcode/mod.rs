@@ -247,7 +247,7 @@ pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Progra
 /// An error inside a subroutine file names that file and its line, then the calls that led
 /// there: `sub.ngc:3:5: message (called from main.ngc:12)`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}{kind}{}", Place { file, line: *line, col: *col }, CallChain(called_from))]
+#[error("{}{kind}{}", Place { file, line: *line, col: *col }, Calls(called_from.as_deref()))]
 pub struct Error {
     /// Name of the source (the subroutine file's path when the line is in one).
     pub file: String,
@@ -257,10 +257,14 @@ pub struct Error {
     pub col: usize,
     /// What is wrong.
     pub kind: ErrorKind,
-    /// When `file` is a subroutine file: the call lines that led to it, innermost first
-    /// (empty otherwise).
-    pub called_from: Vec<CallSite>,
+    /// When `file` is a subroutine file: the call lines that led to it (`None` otherwise;
+    /// boxed, to keep errors small).
+    pub called_from: Option<Box<CallChain>>,
 }
+
+/// The lines that called the subroutines an error is in, innermost first.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CallChain(pub Vec<CallSite>);
 
 /// A line that called a subroutine.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -272,15 +276,16 @@ pub struct CallSite {
 }
 
 /// ` (called from a:3, from b:12)`, or nothing.
-struct CallChain<'a>(&'a [CallSite]);
+struct Calls<'a>(Option<&'a CallChain>);
 
-impl fmt::Display for CallChain<'_> {
+impl fmt::Display for Calls<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        for (i, site) in self.0.iter().enumerate() {
+        let sites = self.0.map_or(&[][..], |c| c.0.as_slice());
+        for (i, site) in sites.iter().enumerate() {
             let sep = if i == 0 { " (called from " } else { ", from " };
             write!(f, "{sep}{}:{}", site.file, site.line)?;
         }
-        if !self.0.is_empty() {
+        if !sites.is_empty() {
             f.write_str(")")?;
         }
         Ok(())
