@@ -105,7 +105,7 @@ fn classify_g(tenths: u32) -> Known {
         0 | 10 | 20 | 30 | 800 => In(Group::Motion),
         // Canned cycles (see `cycles.rs`).
         730 | 740 | 810..=860 | 890 => In(Group::Motion),
-        40 | 100 | 280 | 281 | 300 | 301 | 530 | 920..=923 => In(Group::NonModal),
+        40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920..=923 => In(Group::NonModal),
         170 | 180 | 190 => In(Group::Plane),
         900 | 910 => In(Group::Distance),
         901 | 911 => In(Group::ArcDistance),
@@ -134,9 +134,7 @@ fn classify_g(tenths: u32) -> Known {
         ),
         950 => Unsupported("feed per revolution is spindle-synchronised: not supported"),
         960 => Unsupported("constant surface speed is spindle-synchronised: not supported"),
-        500 | 510 | 520 | 680 | 690 => {
-            Unsupported("scaling, local offsets and G68 rotation are not supported")
-        }
+        500 | 510 | 680 | 690 => Unsupported("scaling and G68 rotation are not supported"),
         _ => Unknown,
     }
 }
@@ -425,9 +423,8 @@ impl Block {
 /// Value domains that hold whatever the codes on the line.
 fn check_domain(word: &Word) -> Result<(), BlockError> {
     match word.letter {
-        'N' if as_index(word.value).is_none() => {
-            Err(invalid(word, "a non-negative integer line number"))
-        }
+        // LinuxCNC reads fractional line numbers (N4567.789) too.
+        'N' if word.value < 0.0 => Err(invalid(word, "a non-negative line number")),
         'F' if word.value < 0.0 => Err(invalid(word, "a feed rate of 0 or more")),
         'S' if word.value < 0.0 => Err(invalid(word, "a non-negative spindle speed")),
         'T' | 'H' if as_index(word.value).is_none() => {

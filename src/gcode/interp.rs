@@ -77,10 +77,12 @@ pub struct Setup {
     /// the tool in the spindle.
     pub loaded_tool: u32,
     /// Arc end-point check (centre format): the distances from the centre to the start and to
-    /// the end may differ by this much...
+    /// the end may differ by this much (2.54 times as much in an inch program, as LinuxCNC's
+    /// inch tolerance)...
     pub arc_tolerance_mm: f64,
-    /// ...or by this fraction of the radius, whichever is larger. Beyond, the arc would be a
-    /// spiral, which is reported as unsupported; within, the path spirals between the two radii.
+    /// ...or by this fraction of the larger radius, up to 100 times the absolute tolerance
+    /// (LinuxCNC's rule). Within, the path spirals between the two radii, the radius changing
+    /// in proportion to the angle, as LinuxCNC interpolates it; beyond, it is an error.
     pub arc_tolerance_rel: f64,
     /// Block delete switch: skip lines starting with `/` (LinuxCNC's default: on).
     pub block_delete: bool,
@@ -617,7 +619,7 @@ impl State {
 
         // Codes that take the axis words for themselves.
         let consumer = non_modal
-            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 920))
+            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 520 | 920))
             .or(b.tool_length().filter(|c| matches!(c.tenths, 431 | 432)));
         if let (Some(first), Some(motion)) = (consumer, b.motion().filter(|m| m.tenths != 800)) {
             return Err(err_at(
@@ -648,6 +650,19 @@ impl State {
                             Some(v) => q[i] - v,
                             None => base[i],
                         };
+                    }
+                    self.g92_on = true;
+                    self.resync();
+                }
+                // G52: a local offset, in the register G92 uses (as LinuxCNC): the given
+                // axes' offsets are the words themselves; G92.1 or G52 X0 Y0 Z0 clears it.
+                520 => {
+                    if b.first_axis().is_none() {
+                        return Err(missing(code.col, code, 'X', "at least one axis word"));
+                    }
+                    let base = self.g92();
+                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                        self.g92_mm[i] = self.take_mm(b, letter).unwrap_or(base[i]);
                     }
                     self.g92_on = true;
                     self.resync();
@@ -1174,10 +1189,19 @@ impl State {
                 if r1 < MIN_ARC_RADIUS_MM || r2 < MIN_ARC_RADIUS_MM {
                     return Err(err_at(col, ErrorKind::ArcZeroRadius));
                 }
-                let tolerance_mm = self
-                    .arc_tolerance_mm
-                    .max(self.arc_tolerance_rel * r1.max(r2));
-                if (r1 - r2).abs() > tolerance_mm {
+                // LinuxCNC's rule (interp_arc.cc): a spiral within the absolute tolerance, or
+                // within the relative one up to 100 times the absolute one; an inch program
+                // has the inch tolerance (0.002828 in: 2.54 times the metric 0.02828 mm).
+                let abs_mm = self.arc_tolerance_mm * if self.inch { 2.54 } else { 1.0 };
+                let error_mm = (r1 - r2).abs();
+                let relative_mm = abs_mm.max(self.arc_tolerance_rel * r1.max(r2));
+                // The tolerance broken: the relative one if it is, else the 100-times cap.
+                let tolerance_mm = if error_mm <= relative_mm && error_mm > 100.0 * abs_mm {
+                    100.0 * abs_mm
+                } else {
+                    relative_mm
+                };
+                if error_mm > tolerance_mm {
                     return Err(err_at(
                         col,
                         ErrorKind::ArcRadiusMismatch {

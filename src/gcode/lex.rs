@@ -389,12 +389,12 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
         i += 1;
         skip_blanks(&mut i);
     }
-    // An N word may precede the O-word.
+    // An N word (fractional too) may precede the O-word.
     if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
         i += 1;
         while chars
             .get(i)
-            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace())
+            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace() || *c == '.')
         {
             i += 1;
         }

@@ -40,13 +40,19 @@
 //!   `_`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
 //!   LinuxCNC's operators and functions, and O-word flow control: `sub`/`endsub`/`call`/`return`,
 //!   `if`/`elseif`/`else`/`endif`, `while`/`endwhile`, `do`/`while`, `repeat`/`endrepeat`,
-//!   `break`, `continue`. Subroutine bodies, and a loop or `if` of the main program while it
-//!   runs, are kept in memory (at most [`MAX_STORED_BYTES`]); everything else streams.
+//!   `break`, `continue`; computed call labels (`o[#1+2] call`); subroutine files
+//!   (`o<name> call` loads `name.ngc` from [`Setup::subroutine_path`], errors inside name that
+//!   file and the calls that led there: [`Error::called_from`]); Fanuc-style `O100` ... `M99`
+//!   subprograms called by `M98 P L` (read ahead when they follow the call), and M99 in the
+//!   main program (restarts it [`Setup::m99_restarts`] times, then ends it). Subroutine bodies,
+//!   lines read ahead, and a loop or `if` of the main program while it runs, are kept in memory
+//!   (at most [`MAX_STORED_BYTES`]); everything else streams.
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
 //! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
-//! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), subroutine files
-//! are [`ErrorKind::Unsupported`] (or [`ErrorKind::UndefinedSubroutine`]).
+//! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), computed labels
+//! on anything but `call` are [`ErrorKind::Unsupported`]; a subroutine neither defined nor
+//! found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
 //! Every number of a line is read in the units in force *after* that line's G20/G21, and a feed
 //! keeps its physical speed when the units change later.
@@ -645,7 +651,7 @@ pub enum ErrorKind {
         /// The second code, e.g. `G1`.
         second: String,
     },
-    /// A value that is not valid for its letter (G1.23, M-1, N1.5, F0, S-5, T2.5).
+    /// A value that is not valid for its letter (G1.23, M-1, N-5, F0, S-5, T2.5).
     #[error("invalid {word}: expected {expected}")]
     InvalidValue {
         /// The word as written, e.g. `F0`.

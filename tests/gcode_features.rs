@@ -1,0 +1,206 @@
+//! Issue 15 item 5, the smaller gaps: G52 local offsets, spiral arcs within LinuxCNC's
+//! tolerance, fractional line numbers. Each has a program in `tests/programs/`, planned through
+//! `canmotion plan --path` and compared with hand-computed points (to 0.001 mm); the variants
+//! that stay errors are matched by kind, line and column.
+
+use std::path::Path;
+use std::process::Command;
+
+use canmotion::gcode::{ElementKind, ErrorKind, parse_program};
+use nalgebra::Vector3;
+
+/// An element of the path file: source line, kind, rapid, end, centre (arcs).
+type Record = (u64, String, bool, [f64; 3], Option<[f64; 3]>);
+
+fn plan_path(program: &str) -> Vec<Record> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("path.jsonl");
+    let out = Command::new(env!("CARGO_BIN_EXE_canmotion"))
+        .arg("plan")
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/programs")
+                .join(program),
+        )
+        .arg("--path")
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let point = |v: &serde_json::Value| -> Option<[f64; 3]> {
+        let a = v.as_array()?;
+        Some([0, 1, 2].map(|i| a[i].as_f64().unwrap()))
+    };
+    let mut at = [0.0; 3];
+    std::fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            assert_eq!(point(&v["start"]), Some(at), "continuity: {v}");
+            at = point(&v["end"]).unwrap();
+            (
+                v["line"].as_u64().unwrap(),
+                v["kind"].as_str().unwrap().to_owned(),
+                v["rapid"].as_bool().unwrap(),
+                at,
+                point(&v["center"]),
+            )
+        })
+        .collect()
+}
+
+fn close(a: [f64; 3], b: [f64; 3]) -> bool {
+    (0..3).all(|k| (a[k] - b[k]).abs() <= 0.001)
+}
+
+#[track_caller]
+fn check(program: &str, expected: &[(u64, &str, bool, [f64; 3], Option<[f64; 3]>)]) {
+    let path = plan_path(program);
+    for (i, (got, want)) in path.iter().zip(expected).enumerate() {
+        let centre_ok = match (got.4, want.4) {
+            (Some(a), Some(b)) => close(a, b),
+            (None, None) => true,
+            _ => false,
+        };
+        assert!(
+            got.0 == want.0
+                && got.1 == want.1
+                && got.2 == want.2
+                && close(got.3, want.3)
+                && centre_ok,
+            "{program}: element {i}: got {got:?}, expected {want:?}"
+        );
+    }
+    assert_eq!(path.len(), expected.len(), "{program}: {path:?}");
+}
+
+const R: bool = true;
+const F: bool = false;
+
+#[test]
+fn g52_offsets_the_work_system_locally_and_g92_1_clears_it() {
+    check(
+        "g52.ngc",
+        &[
+            (4, "line", R, [5.0, 0.0, 1.0], None),
+            // G52 X10 Y20 on G54 (X5): program 0,0 is machine 15,20.
+            (6, "line", R, [15.0, 20.0, 1.0], None),
+            (7, "line", F, [20.0, 20.0, 1.0], None),
+            // G52 X0 Y0: back on G54.
+            (9, "line", R, [5.0, 0.0, 1.0], None),
+            // G52 Z-1 keeps X and Y (0): Z0 is machine -1.
+            (11, "line", R, [5.0, 0.0, -1.0], None),
+            // G92.1 clears the shared register: Z1 is machine 1.
+            (13, "line", R, [5.0, 0.0, 1.0], None),
+        ],
+    );
+    // G52 needs an axis word, and takes the axis words for itself.
+    let e = parse_program("G21\nG52\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 1));
+    assert!(matches!(e.kind, ErrorKind::MissingWord { .. }), "{e}");
+    let e = parse_program("G21\nG1 G52 X1 F60\n", "p", Vector3::zeros()).unwrap_err();
+    assert!(
+        matches!(e.kind, ErrorKind::AxisWordsClaimedTwice { .. }),
+        "{e}"
+    );
+}
+
+#[test]
+fn spiral_arcs_within_the_tolerance_are_planned_as_linuxcnc_interpolates_them() {
+    check(
+        "spiral.ngc",
+        &[
+            (3, "line", R, [110.0, 100.0, 0.0], None),
+            (5, "arc", F, [89.98, 100.0, 0.0], Some([100.0, 100.0, 0.0])),
+            (6, "line", R, [140.0, 100.0, 0.0], None),
+            (8, "arc", F, [59.965, 100.0, 0.0], Some([100.0, 100.0, 0.0])),
+        ],
+    );
+    // The radius changes in proportion to the angle: half way round, it is the mean radius.
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/programs/spiral.ngc"),
+    )
+    .unwrap();
+    let p = parse_program(&text, "spiral.ngc", Vector3::zeros()).unwrap();
+    let arcs: Vec<_> = p
+        .elements()
+        .filter(|e| matches!(e.kind, ElementKind::Arc { .. }))
+        .map(|e| e.arc().unwrap())
+        .collect();
+    let mid = |k: usize| arcs[k].point_at(0.5);
+    assert!(
+        (mid(0) - Vector3::new(100.0, 110.01, 0.0)).norm() < 1e-9,
+        "{}",
+        mid(0)
+    );
+    assert!(
+        (mid(1) - Vector3::new(100.0, 59.9825, 0.0)).norm() < 1e-9,
+        "{}",
+        mid(1)
+    );
+}
+
+#[test]
+fn spiral_arcs_beyond_linuxcnc_s_tolerance_stay_errors() {
+    // 3 mm off on a 10 m radius: 0.03 % of it, but more than 100 times 0.0283 mm.
+    let e = parse_program(
+        "G21 F600\nG0 X10000\nG3 X-10003 Y0 I-10000 J0\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap_err();
+    assert_eq!((e.line, e.col), (3, 1));
+    assert!(
+        matches!(e.kind, ErrorKind::ArcRadiusMismatch { tolerance_mm, .. }
+            if (tolerance_mm - 2.828427).abs() < 1e-6),
+        "{e}"
+    );
+    // 0.1 mm off a 5 mm radius: 2 % and more than 0.0283 mm.
+    let e = parse_program("G21 F60\nG0 X10\nG2 X0.1 Y0 I-5", "p", Vector3::zeros()).unwrap_err();
+    assert!(matches!(e.kind, ErrorKind::ArcRadiusMismatch { .. }), "{e}");
+    // An inch program has the inch tolerance, 0.002828 in: 0.0025 in off a 1 in radius is
+    // a spiral there (it would not be in mm: 0.0635 mm and 0.25 %).
+    let p = parse_program(
+        "G20 F10\nG0 X1 Y0\nG3 X-1.0025 Y0 I-1 J0\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap();
+    let arc = p.elements().last().unwrap().arc().unwrap();
+    assert!((arc.end_radius_mm - 1.0025 * 25.4).abs() < 1e-9);
+    let e = parse_program(
+        "G21 F10\nG0 X25.4 Y0\nG3 X-25.4635 Y0 I-25.4 J0\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap_err();
+    assert!(matches!(e.kind, ErrorKind::ArcRadiusMismatch { .. }), "{e}");
+}
+
+#[test]
+fn fractional_line_numbers_are_read() {
+    check(
+        "line_numbers.ngc",
+        &[
+            (2, "line", R, [1.0, 0.0, 0.0], None),
+            (3, "line", R, [2.0, 3.0, 0.0], None),
+        ],
+    );
+    let e = parse_program("N-5 G0 X1\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!((e.line, e.col), (1, 1));
+    assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
+    // An N word before an O-word may be fractional too.
+    let p = parse_program(
+        "o1 sub\nG0 X#1\no1 endsub\nN7.5 o1 call [4]\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap();
+    assert_eq!(p.end_mm(), Vector3::new(4.0, 0.0, 0.0));
+}
