@@ -204,3 +204,55 @@ fn fractional_line_numbers_are_read() {
     .unwrap();
     assert_eq!(p.end_mm(), Vector3::new(4.0, 0.0, 0.0));
 }
+
+/// The feeds of a plan's elements, mm/s (0 for rapids).
+fn feeds(program: &str) -> Vec<f64> {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/programs")
+            .join(program),
+    )
+    .unwrap();
+    parse_program(&text, program, Vector3::zeros())
+        .unwrap()
+        .elements()
+        .map(|e| e.feed_mm_s.unwrap_or(0.0))
+        .collect()
+}
+
+#[test]
+fn m70_to_m73_save_invalidate_and_restore_the_modal_state() {
+    check(
+        "modal_state.ngc",
+        &[
+            (3, "line", R, [10.0, 10.0, 0.0], None),
+            // G20 G91 after M70: X1 is 25.4 mm further, at 60 in/min.
+            (6, "line", F, [35.4, 10.0, 0.0], None),
+            // M72: G21 G90 F600 again.
+            (8, "line", F, [20.0, 10.0, 0.0], None),
+            // In o<inc>, after M73: G91 F300.
+            (12, "line", F, [20.0, 15.0, 0.0], None),
+            // Its return restored G90 F600.
+            (15, "line", F, [20.0, 0.0, 0.0], None),
+        ],
+    );
+    assert_eq!(feeds("modal_state.ngc"), [0.0, 25.4, 10.0, 5.0, 10.0]);
+    let err = |text: &str| parse_program(text, "p", Vector3::zeros()).unwrap_err();
+    // Nothing saved; invalidated by M71; saved at another call level.
+    for (text, line, col) in [
+        ("G21\n  M72\n", 2, 3),
+        ("M70\nM71\nM72\n", 3, 1),
+        ("M70\no1 sub\nM72\no1 endsub\no1 call\n", 3, 1),
+    ] {
+        let e = err(text);
+        assert_eq!(
+            (e.line, e.col, &e.kind),
+            (line, col, &ErrorKind::NoSavedModalState),
+            "{text}"
+        );
+    }
+    // A restore that would switch cutter compensation is refused.
+    let e = err("G21 F60\nM70\nG41.1 D2\nM72\n");
+    assert_eq!((e.line, e.col), (4, 1));
+    assert!(e.is_unsupported(), "{e}");
+}

@@ -58,6 +58,7 @@ enum Group {
     Spindle,
     Coolant,
     Override,
+    ModalState,
 }
 
 impl Group {
@@ -82,6 +83,7 @@ impl Group {
             Group::Spindle => "spindle",
             Group::Coolant => "coolant",
             Group::Override => "override switch",
+            Group::ModalState => "modal state save/restore",
         }
     }
 
@@ -90,7 +92,7 @@ impl Group {
     }
 }
 
-const GROUPS: usize = Group::Override as usize + 1;
+const GROUPS: usize = Group::ModalState as usize + 1;
 
 /// What a G code is: its group, or why it is not executed.
 enum Known {
@@ -149,7 +151,7 @@ fn classify_m(number: u32) -> Known {
         48..=53 => In(Group::Override),
         60 => Unsupported("pallet change pause is not supported"),
         62..=68 => Unsupported("digital and analog I/O is not supported"),
-        70..=73 => Unsupported("saving and restoring modal state is not supported"),
+        70..=73 => In(Group::ModalState),
         100..=199 => Unsupported("user-defined M codes are not supported"),
         _ => Unknown,
     }
@@ -417,6 +419,10 @@ impl Block {
     /// M48 … M53.
     pub fn override_switch(&self) -> Option<Code> {
         self.get(Group::Override)
+    }
+    /// M70 … M73.
+    pub fn modal_state(&self) -> Option<Code> {
+        self.get(Group::ModalState)
     }
 }
 

@@ -181,6 +181,31 @@ enum Motion {
     Cycle(Cycle),
 }
 
+/// The modal state M70/M73 save and M72 restores (LinuxCNC's list, less what has no effect
+/// here: spindle speed mode, coolant, override switches; the motion mode is not saved).
+#[derive(Debug, Clone, PartialEq)]
+struct Modal {
+    inch: bool,
+    plane: Plane,
+    comp: CompState,
+    incremental: bool,
+    inverse_time: bool,
+    coord: usize,
+    tool_offset_mm: Vector3<f64>,
+    retract_to_r: bool,
+    arc_absolute: bool,
+    blend: BlendMode,
+    feed_mm_s: Option<f64>,
+    spindle: Spindle,
+}
+
+/// A saved modal state, and whether it comes back when its subroutine returns (M73).
+#[derive(Debug, Clone)]
+struct Saved {
+    modal: Modal,
+    auto_restore: bool,
+}
+
 /// Modal state and positions.
 #[derive(Debug, Clone)]
 struct State {
@@ -217,6 +242,8 @@ struct State {
     cycles: CycleState,
     /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
     used: u16,
+    /// The modal state saved by M70/M73 at each call level (0: the main program).
+    saved: Vec<Option<Saved>>,
 }
 
 const CHECKED: &str = "XYZIJKRPQDHL";
@@ -290,7 +317,111 @@ impl State {
             spindle: Spindle::Stopped,
             cycles: CycleState::default(),
             used: 0,
+            saved: vec![None],
         }
+    }
+
+    fn modal(&self) -> Modal {
+        Modal {
+            inch: self.inch,
+            plane: self.plane,
+            comp: self.comp,
+            incremental: self.incremental,
+            inverse_time: self.inverse_time,
+            coord: self.coord,
+            tool_offset_mm: self.tool_offset_mm,
+            retract_to_r: self.retract_to_r,
+            arc_absolute: self.arc_absolute,
+            blend: self.blend,
+            feed_mm_s: self.feed_mm_s,
+            spindle: self.spindle,
+        }
+    }
+
+    /// M72 (or a return after M73): the saved modes come back. Cutter compensation cannot be
+    /// switched by a restore here (it needs its entry and exit moves): a restore that would
+    /// turn it on, off or change it is refused, as is a plane change under it.
+    fn restore(&mut self, m: &Modal, code: Code) -> Result<(), BlockError> {
+        if m.comp != self.comp || (self.comp != CompState::Off && m.plane != self.plane) {
+            return Err(err_at(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!("{code} changing cutter compensation or its plane"),
+                    reason: "turn cutter compensation on or off with G41/G42/G40 and their moves",
+                },
+            ));
+        }
+        self.inch = m.inch;
+        self.plane = m.plane;
+        self.incremental = m.incremental;
+        self.inverse_time = m.inverse_time;
+        self.coord = m.coord;
+        self.tool_offset_mm = m.tool_offset_mm;
+        self.retract_to_r = m.retract_to_r;
+        self.arc_absolute = m.arc_absolute;
+        self.blend = m.blend;
+        self.feed_mm_s = m.feed_mm_s;
+        self.spindle = m.spindle;
+        self.resync();
+        Ok(())
+    }
+
+    /// A subroutine call: a new call level with nothing saved.
+    fn enter_call(&mut self) {
+        self.saved.push(None);
+    }
+
+    /// A subroutine return: its level goes, restoring what M73 saved there.
+    fn leave_call(&mut self, line: usize, out: &mut VecDeque<Item>) -> Result<(), BlockError> {
+        if self.saved.len() > 1
+            && let Some(Some(saved)) = self.saved.pop()
+            && saved.auto_restore
+        {
+            let code = Code {
+                letter: 'M',
+                tenths: 730,
+                col: 0,
+            };
+            self.restore(&saved.modal, code)?;
+            out.push_back(Item::Note(Note {
+                line,
+                col: 0,
+                text: "M73: the modal state saved in the subroutine is restored on its return"
+                    .to_owned(),
+            }));
+        }
+        Ok(())
+    }
+
+    /// M70 … M73.
+    fn modal_state(&mut self, code: Code) -> Result<(), BlockError> {
+        let level = self.saved.len().saturating_sub(1);
+        match code.tenths {
+            700 | 730 => {
+                let saved = Saved {
+                    modal: self.modal(),
+                    auto_restore: code.tenths == 730 && level > 0,
+                };
+                if let Some(slot) = self.saved.last_mut() {
+                    *slot = Some(saved);
+                }
+            }
+            710 => {
+                if let Some(slot) = self.saved.last_mut() {
+                    *slot = None;
+                }
+            }
+            _ => {
+                let modal = self
+                    .saved
+                    .last()
+                    .and_then(|s| s.as_ref())
+                    .map(|s| s.modal.clone())
+                    .ok_or_else(|| err_at(code.col, ErrorKind::NoSavedModalState))?;
+                self.restore(&modal, code)?;
+            }
+        }
+        Ok(())
     }
 
     fn scale(&self) -> f64 {
@@ -694,6 +825,10 @@ impl State {
                 inverse_f,
                 out,
             )?;
+        }
+
+        if let Some(code) = b.modal_state() {
+            self.modal_state(code)?;
         }
 
         let call = match b.stop() {
@@ -1754,6 +1889,9 @@ impl<R: BufRead> Interpreter<R> {
                 } else if !f.sub {
                     self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
                 }
+                if f.sub {
+                    self.leave_call(f.call)?;
+                }
             }
             return Ok(());
         }
@@ -1937,6 +2075,18 @@ impl<R: BufRead> Interpreter<R> {
                 expected,
             },
         )
+    }
+
+    /// A subroutine called from `call` returned: the modal state M73 saved in it comes back
+    /// (a note on the call's line, in the program).
+    fn leave_call(&mut self, call: Option<CallAt>) -> Result<(), Error> {
+        let line = match self.file_call() {
+            Some(outer) => outer.line,
+            None => call.map_or(self.at, |c| c.line),
+        };
+        self.state
+            .leave_call(line, &mut self.queue)
+            .map_err(|(col, k)| self.error(col, k))
     }
 
     /// The line being run as a call site.
@@ -2132,6 +2282,7 @@ impl<R: BufRead> Interpreter<R> {
                 },
             ));
         }
+        self.state.enter_call();
         let mut frame = Frame::new(body, true);
         frame.m98_passes = Some(count);
         frame.call = Some(self.call_here(self.at, col));
@@ -2310,6 +2461,7 @@ impl<R: BufRead> Interpreter<R> {
                     ));
                 }
                 self.params.push_scope(&c.values);
+                self.state.enter_call();
                 let mut frame = Frame::new(body, true);
                 frame.call = Some(self.call_here(line, c.col));
                 self.frames.push(frame);
@@ -2325,12 +2477,15 @@ impl<R: BufRead> Interpreter<R> {
                     }
                     Some(_) => {}
                 }
+                let mut call = None;
                 while let Some(f) = self.frames.pop() {
                     if f.sub {
                         self.params.pop_scope();
+                        call = f.call;
                         break;
                     }
                 }
+                self.leave_call(call)?;
                 if let Some(v) = c.values.first() {
                     self.params
                         .set(&ParamRef::Name("_value".into()), *v)

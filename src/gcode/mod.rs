@@ -533,6 +533,11 @@ pub enum ErrorKind {
         /// The label.
         label: String,
     },
+    /// M72 with no modal state saved at this call level.
+    #[error(
+        "M72: no modal state to restore at this call level (save it with M70 or M73 first; M71 and the end of the subroutine that saved it discard it)"
+    )]
+    NoSavedModalState,
     /// `M98 P<n>` with no `O<n>` ... `M99` subprogram after the call.
     #[error(
         "M98 P{number}: no subprogram O{number} (an 'O{number}' line, its lines, then M99) follows in the program"
