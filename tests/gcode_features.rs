@@ -256,3 +256,27 @@ fn m70_to_m73_save_invalidate_and_restore_the_modal_state() {
     assert_eq!((e.line, e.col), (4, 1));
     assert!(e.is_unsupported(), "{e}");
 }
+
+#[test]
+fn system_parameters_read_the_interpreter_s_state() {
+    check(
+        "system_params.ngc",
+        &[
+            // G55 at machine (100, 50).
+            (5, "line", R, [110.0, 70.0, 2.0], None),
+            // #5420 (X now, 10) + 5; #5242 (G55's Y origin, 50).
+            (6, "line", R, [115.0, 100.0, 2.0], None),
+            // #5220 (work system 2); #5599 (1) + #5070 (0) + #5399 (0).
+            (7, "line", R, [102.0, 51.0, 2.0], None),
+            // Under G20, #5422 is Z in inches (2 mm); half of it.
+            (9, "line", R, [102.0, 51.0, 1.0], None),
+        ],
+    );
+    // Read-only, and the ones not kept are named.
+    let e = parse_program("G21\n#5220 = 1\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!(e.line, 2);
+    assert!(e.is_unsupported(), "{e}");
+    let e = parse_program("G21\nG0 X#5001\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 5));
+    assert_eq!(e.unsupported_feature(), Some("system parameter #5001"));
+}

@@ -321,6 +321,49 @@ impl State {
         }
     }
 
+    /// LinuxCNC's system parameters this interpreter keeps, read-only, lengths in the program's
+    /// units as they are now: #5070 (the last probe succeeded: none runs here, 0), #5161-#5163
+    /// and #5181-#5183 (the G28 and G30 positions), #5210 (G92 on), #5211-#5213 (the G92/G52
+    /// offsets), #5220 (the work system, 1 to 9), #5221-#5223 and #5230 for G54 and +20 for each
+    /// next system (its origin and rotation), #5399 (M66's result: none runs here, 0), #5400 (the
+    /// tool in the spindle), #5401-#5403 (the tool length offset in effect), #5410 (the tool's
+    /// diameter), #5420-#5422 (the current point in the work system), #5599 (DEBUG output on,
+    /// 1).
+    fn system_parameters(&self, params: &mut Params) {
+        let scale = self.scale();
+        let mut set3 = |first: u32, v: Vector3<f64>| {
+            for (i, c) in v.iter().enumerate() {
+                params.set_system(first + i as u32, c / scale);
+            }
+        };
+        set3(5161, self.g28_mm);
+        set3(5181, self.g30_mm);
+        set3(5211, self.g92_mm);
+        for (k, offset) in self.work_offsets_mm.iter().enumerate() {
+            set3(5221 + 20 * k as u32, *offset);
+        }
+        set3(5401, self.tool_offset_mm);
+        set3(5420, self.prog_mm);
+        for (k, r) in self.rotations_deg.iter().enumerate() {
+            params.set_system(5230 + 20 * k as u32, *r);
+        }
+        let diameter = self
+            .tools
+            .get(self.loaded_tool)
+            .map_or(0.0, |t| 2.0 * t.radius_mm / scale);
+        for (n, v) in [
+            (5070, 0.0),
+            (5210, if self.g92_on { 1.0 } else { 0.0 }),
+            (5220, (self.coord + 1) as f64),
+            (5399, 0.0),
+            (5400, f64::from(self.loaded_tool)),
+            (5410, diameter),
+            (5599, 1.0),
+        ] {
+            params.set_system(n, v);
+        }
+    }
+
     fn modal(&self) -> Modal {
         Modal {
             inch: self.inch,
@@ -1906,6 +1949,9 @@ impl<R: BufRead> Interpreter<R> {
 
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
         self.at = line;
+        if text.contains('#') {
+            self.state.system_parameters(&mut self.params);
+        }
         let kind = self
             .scanner
             .scan(text, self.block_delete, &self.params)
