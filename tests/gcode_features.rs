@@ -280,3 +280,38 @@ fn system_parameters_read_the_interpreter_s_state() {
     assert_eq!((e.line, e.col), (2, 5));
     assert_eq!(e.unsupported_feature(), Some("system parameter #5001"));
 }
+
+#[test]
+fn polar_coordinates_place_g0_g1_moves_about_the_origin() {
+    let h = 5.0 * std::f64::consts::FRAC_1_SQRT_2;
+    check(
+        "polar.ngc",
+        &[
+            // G54 at (100, 100): @10 ^0 is program (10, 0).
+            (4, "line", R, [110.0, 100.0, 0.0], None),
+            // ^90 alone keeps the distance, 10.
+            (5, "line", F, [100.0, 110.0, 0.0], None),
+            // @20 alone keeps the angle, 90°.
+            (6, "line", F, [100.0, 120.0, 0.0], None),
+            // G91: distance 20 - 10, angle 90° + 90°.
+            (7, "line", F, [90.0, 100.0, 0.0], None),
+            (8, "line", R, [100.0 + h, 100.0 + h, 1.0], None),
+        ],
+    );
+    let err = |text: &str| parse_program(text, "p", Vector3::zeros()).unwrap_err();
+    let e = err("G21\nG0 @2 X1\n");
+    assert_eq!(
+        (e.line, e.col, &e.kind),
+        (2, 7, &ErrorKind::PolarWithXy { letter: 'X' })
+    );
+    let e = err("G21 G91\nG0 ^10\n");
+    assert_eq!(
+        (e.line, e.col, &e.kind),
+        (2, 4, &ErrorKind::PolarFromOrigin)
+    );
+    for (text, col) in [("G21 F60\nG2 @5 ^90 R5\n", 4), ("G21\nG28 @1\n", 5)] {
+        let e = err(text);
+        assert_eq!((e.line, e.col), (2, col), "{text}");
+        assert!(e.is_unsupported(), "{text}: {e}");
+    }
+}

@@ -514,10 +514,10 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: axis word 'A' (the machine has the X, Y and Z axes only)",
     ),
     (
-        "G1 @1 ^30",
+        "G2 @1 ^30 R1 F60",
         1,
         4,
-        "unsupported: polar coordinate word '@' (polar coordinates are not supported)",
+        "unsupported: polar coordinate word '@' on an arc (polar coordinates are read on G0 and G1 moves only)",
     ),
     (
         "M60",
@@ -538,10 +538,10 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: G10 L10 (tool touch-off from the current position is not supported: use G10 L1)",
     ),
     (
-        "G0 X#5220",
+        "G0 X#5001",
         1,
         5,
-        "unsupported: system parameter #5220 (parameters #5000 and above (LinuxCNC's system parameters) are not kept)",
+        "unsupported: system parameter #5001 (of LinuxCNC's system parameters (#5000 and above), these are kept, read-only: #5070, #5161-#5163, #5181-#5183, #5210-#5213, #5220, #5221-#5223 and #5230 per work system (+20 each), #5399, #5400-#5403, #5410, #5420-#5422, #5599)",
     ),
     (
         "G17 G41.1 D2\nG40\nG19 G41.1 D2",

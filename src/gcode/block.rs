@@ -122,7 +122,9 @@ fn classify_g(tenths: u32) -> Known {
         970 => In(Group::SpindleMode),
         50..=53 => Unsupported("splines (G5, G5.1, G5.2, G5.3) are not supported"),
         70 => Unsupported("lathe diameter mode is not supported"),
-        150 | 160 => Unsupported("polar coordinates are not supported"),
+        150 | 160 => Unsupported(
+            "Fanuc polar mode (G15/G16) is not supported: use LinuxCNC's polar words @ (distance) and ^ (angle)",
+        ),
         171 | 181 | 191 => Unsupported("the UVW planes are not supported: the machine has X, Y, Z"),
         330 | 331 | 760 => {
             Unsupported("spindle-synchronised motion (threading, rigid tapping) is not supported")
@@ -158,8 +160,8 @@ fn classify_m(number: u32) -> Known {
 }
 
 /// The letters a block may hold (besides G and M), in a fixed order for the word table.
-const LETTERS: [char; 16] = [
-    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N',
+const LETTERS: [char; 18] = [
+    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N', '@', '^',
 ];
 
 fn letter_index(letter: char) -> Option<usize> {
@@ -345,7 +347,16 @@ impl Block {
 
     /// The first axis word of the line (by column).
     pub fn first_axis(&self) -> Option<Word> {
-        self.axes().into_iter().flatten().min_by_key(|w| w.col)
+        self.axes()
+            .into_iter()
+            .chain(self.polar())
+            .flatten()
+            .min_by_key(|w| w.col)
+    }
+
+    /// The polar coordinate words: `@` (distance) and `^` (angle, degrees).
+    pub fn polar(&self) -> [Option<Word>; 2] {
+        [self.word('@'), self.word('^')]
     }
 
     /// G0, G1, G2, G3, G80 or a canned cycle (G73, G74, G81…G86, G89).

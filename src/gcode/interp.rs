@@ -246,7 +246,7 @@ struct State {
     saved: Vec<Option<Saved>>,
 }
 
-const CHECKED: &str = "XYZIJKRPQDHL";
+const CHECKED: &str = "XYZIJKRPQDHL@^";
 
 fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
     if deg == 0.0 {
@@ -525,6 +525,41 @@ impl State {
             }
         }
         p
+    }
+
+    /// The program-coordinate target of a G0/G1 line, polar words (`@` distance, `^` angle in
+    /// degrees) included, as LinuxCNC: under G90 about the work system's origin (the word
+    /// left out keeps the current point's distance or angle); under G91 both add to the
+    /// current point's distance and angle about the origin (so not from the origin itself).
+    fn prog_target_polar(&mut self, b: &Block) -> Result<Vector3<f64>, BlockError> {
+        let [d, a] = b.polar();
+        let Some(first) = d.or(a) else {
+            return Ok(self.prog_target(b));
+        };
+        if let Some(w) = b.word('X').or(b.word('Y')) {
+            return Err(err_at(w.col, ErrorKind::PolarWithXy { letter: w.letter }));
+        }
+        let (x0, y0) = (self.prog_mm.x, self.prog_mm.y);
+        let d_mm = self.take_mm(b, '@');
+        let a_deg = self.take(b, '^').map(|w| w.value);
+        let (r, theta) = if self.incremental {
+            if x0 == 0.0 && y0 == 0.0 {
+                return Err(err_at(first.col, ErrorKind::PolarFromOrigin));
+            }
+            (
+                x0.hypot(y0) + d_mm.unwrap_or(0.0),
+                y0.atan2(x0) + a_deg.unwrap_or(0.0).to_radians(),
+            )
+        } else {
+            (
+                d_mm.unwrap_or_else(|| x0.hypot(y0)),
+                a_deg.map_or_else(|| y0.atan2(x0), f64::to_radians),
+            )
+        };
+        let mut p = self.prog_target(b);
+        p.x = r * theta.cos();
+        p.y = r * theta.sin();
+        Ok(p)
     }
 
     /// The machine point of a program target; axes whose program coordinate does not change
@@ -1279,7 +1314,7 @@ impl State {
             // G0/G1 alone only sets the mode.
             Motion::Rapid | Motion::Linear if first_axis.is_none() => {}
             Motion::Rapid | Motion::Linear => {
-                let prog = self.prog_target(b);
+                let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
                 self.check_position(col, &m)?;
                 let f = feed(self, (m - self.pos_mm).norm())?;
@@ -1301,6 +1336,15 @@ impl State {
 
     /// Builds the arc of a G2/G3 line and moves the current point to its end.
     fn arc(&mut self, b: &Block, line: usize, col: usize, cw: bool) -> Result<Element, BlockError> {
+        if let Some(w) = b.polar().into_iter().flatten().next() {
+            return Err(err_at(
+                w.col,
+                ErrorKind::Unsupported {
+                    what: format!("polar coordinate word '{}' on an arc", w.letter),
+                    reason: "polar coordinates are read on G0 and G1 moves only",
+                },
+            ));
+        }
         let (a, c, n) = self.plane.axes();
         let axis_letters = ['X', 'Y', 'Z'];
         let offset_letters = ['I', 'J', 'K'];
@@ -1469,6 +1513,10 @@ impl State {
             if let Some(w) = b.word(letter) {
                 let kind = match letter {
                     'X' | 'Y' | 'Z' => ErrorKind::AxisWithoutMotion,
+                    '@' | '^' => ErrorKind::Unsupported {
+                        what: format!("polar coordinate word '{letter}' here"),
+                        reason: "polar coordinates are read on G0 and G1 moves only",
+                    },
                     _ => ErrorKind::UnusedWord {
                         letter,
                         users: match letter {

@@ -253,14 +253,19 @@ impl Scanner {
                     let value = real_value(chars, &mut i, params, 0, '=')?;
                     self.assignments.push((r, value));
                 }
+                // Polar coordinates: @ distance, ^ angle (degrees).
                 '@' | '^' => {
-                    return Err((
-                        col,
-                        unsupported(
-                            format!("polar coordinate word '{c}'"),
-                            "polar coordinates are not supported",
-                        ),
-                    ));
+                    let letter = c;
+                    i += 1;
+                    let value =
+                        real_value(chars, &mut i, params, 0, letter).map_err(|(c, k)| match k {
+                            ErrorKind::ExpectedNumber { letter: l } if l == letter => (col, k),
+                            _ => (c, k),
+                        })?;
+                    if value.abs() > MAX_ABS_VALUE {
+                        return Err((col, ErrorKind::NumberOutOfRange { letter, value }));
+                    }
+                    self.words.push(Word { letter, value, col });
                 }
                 c if c.is_ascii_alphabetic() => {
                     let letter = c.to_ascii_uppercase();

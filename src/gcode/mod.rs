@@ -533,6 +533,19 @@ pub enum ErrorKind {
         /// The label.
         label: String,
     },
+    /// Polar coordinates and X or Y on one line.
+    #[error(
+        "polar coordinates (@ distance, ^ angle) and {letter} on one line: give the point one way"
+    )]
+    PolarWithXy {
+        /// X or Y.
+        letter: char,
+    },
+    /// Incremental polar coordinates from the origin, where no angle is defined.
+    #[error(
+        "incremental polar coordinates (G91 @ ^) from the origin of the work system: the angle there is undefined"
+    )]
+    PolarFromOrigin,
     /// M72 with no modal state saved at this call level.
     #[error(
         "M72: no modal state to restore at this call level (save it with M70 or M73 first; M71 and the end of the subroutine that saved it discard it)"
