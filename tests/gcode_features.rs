@@ -59,8 +59,11 @@ fn close(a: [f64; 3], b: [f64; 3]) -> bool {
     (0..3).all(|k| (a[k] - b[k]).abs() <= 0.001)
 }
 
+/// An expected element: source line, kind, rapid, end, centre (arcs).
+type Want<'a> = (u64, &'a str, bool, [f64; 3], Option<[f64; 3]>);
+
 #[track_caller]
-fn check(program: &str, expected: &[(u64, &str, bool, [f64; 3], Option<[f64; 3]>)]) {
+fn check(program: &str, expected: &[Want]) {
     let path = plan_path(program);
     for (i, (got, want)) in path.iter().zip(expected).enumerate() {
         let centre_ok = match (got.4, want.4) {
