@@ -318,3 +318,41 @@ fn polar_coordinates_place_g0_g1_moves_about_the_origin() {
         assert!(e.is_unsupported(), "{text}: {e}");
     }
 }
+
+#[test]
+fn g10_l10_and_l11_touch_tools_off_at_the_current_point() {
+    check(
+        "touch_off.ngc",
+        &[
+            // G54 Z origin at -50: Z10 is machine -40.
+            (4, "line", R, [0.0, 0.0, -40.0], None),
+            // L10: tool 1 is 10 long (Z reads 0 here); under G43 H1, Z5 is -50 + 10 + 5.
+            (7, "line", R, [0.0, 0.0, -35.0], None),
+            // L11 against G59.3 (Z -60): tool 2 is -35 + 60 = 25 long; Z0 is -50 + 25.
+            (11, "line", R, [0.0, 0.0, -25.0], None),
+            // G92 Z1 (here, Z reads 1), then L10 counts it: tool 3 is -25 + 50 - g92 - 0
+            // where g92 = -1 (the point read 0, now 1): 26 long; Z-2 is -50 - 1 + 26 - 2.
+            (15, "line", R, [0.0, 0.0, -27.0], None),
+        ],
+    );
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/programs/touch_off.ngc"),
+    )
+    .unwrap();
+    let mut it = canmotion::gcode::Interpreter::new(
+        text.as_bytes(),
+        "t",
+        canmotion::gcode::Setup::new(Vector3::zeros()),
+    );
+    for item in it.by_ref() {
+        item.unwrap();
+    }
+    let tools = it.tools();
+    assert_eq!(tools.get(1).unwrap().length_mm, 10.0);
+    assert_eq!(tools.get(2).unwrap().length_mm, 25.0);
+    assert_eq!(tools.get(2).unwrap().radius_mm, 1.5);
+    assert_eq!(tools.get(3).unwrap().length_mm, 26.0);
+    let e = parse_program("G21\nG10 L10 P1 X0 Z0\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 12));
+    assert!(e.is_unsupported(), "{e}");
+}

@@ -532,10 +532,10 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: M101 (user-defined M codes are not supported)",
     ),
     (
-        "G10 L10 P1 Z0",
+        "G10 L11 P1 Y0",
         1,
-        5,
-        "unsupported: G10 L10 (tool touch-off from the current position is not supported: use G10 L1)",
+        12,
+        "unsupported: G10 L11 with Y (lathe tool offsets are not supported: give Z (and R))",
     ),
     (
         "G0 X#5001",

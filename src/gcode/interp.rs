@@ -1040,7 +1040,7 @@ impl State {
     fn g10(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
         let l = self
             .take(b, 'L')
-            .ok_or_else(|| missing(code.col, code, 'L', "L1, L2 or L20"))?;
+            .ok_or_else(|| missing(code.col, code, 'L', "L1, L2, L10, L11 or L20"))?;
         let p = self
             .take(b, 'P')
             .ok_or_else(|| missing(code.col, code, 'P', "the tool or coordinate system number"))?;
@@ -1125,16 +1125,55 @@ impl State {
                     self.resync();
                 }
             }
+            // Tool touch-off (LinuxCNC): the length (and R radius) of tool P such that, with
+            // its offset applied, the current point reads Z in the current work system (L10,
+            // G92 included) or in G59.3 (L11, without G92). Rotation is about Z: no effect.
             10 | 11 => {
-                return Err(err_at(
-                    l.col,
-                    ErrorKind::Unsupported {
-                        what: format!("G10 L{}", l.value),
-                        reason: "tool touch-off from the current position is not supported: use G10 L1",
-                    },
+                let n = as_index(p.value)
+                    .filter(|n| (1..=MAX_TOOL_NUMBER).contains(n))
+                    .ok_or_else(|| invalid(p, "a tool number from 1 to 99999"))?;
+                for letter in ['X', 'Y'] {
+                    if let Some(w) = b.word(letter) {
+                        return Err(err_at(
+                            w.col,
+                            ErrorKind::Unsupported {
+                                what: format!("G10 L{} with {letter}", l.value),
+                                reason: "lathe tool offsets are not supported: give Z (and R)",
+                            },
+                        ));
+                    }
+                }
+                let mut tool = self.tools.get(n).unwrap_or(Tool::NONE);
+                if let Some(z) = self.take(b, 'Z') {
+                    let (origin_z, g92_z) = if l.value as u32 == 10 {
+                        (self.work_offsets_mm[self.coord].z, self.g92().z)
+                    } else {
+                        (self.work_offsets_mm[8].z, 0.0)
+                    };
+                    let length_mm = self.pos_mm.z - origin_z - g92_z - z.value * scale;
+                    if !(length_mm.abs() <= MAX_TOOL_SIZE_MM) {
+                        return Err(invalid(
+                            z,
+                            "a touch-off giving a tool length of at most 10000 mm",
+                        ));
+                    }
+                    tool.length_mm = length_mm;
+                }
+                if let Some(r) = self.take(b, 'R') {
+                    let radius_mm = r.value * scale;
+                    if !(0.0..=MAX_TOOL_SIZE_MM).contains(&radius_mm) {
+                        return Err(invalid(r, "a tool radius from 0 to 10000 mm"));
+                    }
+                    tool.radius_mm = radius_mm;
+                }
+                self.tools.insert(n, tool);
+            }
+            _ => {
+                return Err(invalid(
+                    l,
+                    "L1, L10 or L11 (tool), L2 or L20 (coordinate system)",
                 ));
             }
-            _ => return Err(invalid(l, "L1 (tool), L2 or L20 (coordinate system)")),
         }
         Ok(())
     }
