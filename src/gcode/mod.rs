@@ -26,18 +26,23 @@
 //!   G89 with R Q P L and G98/G99 (expanded into lines and dwells: `cycles.rs`). G53
 //!   (non-modal: G0/G1 in machine
 //!   coordinates), G28/G30 (rapid to the stored position, via the axis words' point if any),
-//!   G28.1/G30.1 (store the current position).
+//!   G28.1/G30.1 (store the current position). Polar words on G0/G1: `@` distance, `^` angle
+//!   (degrees) about the work system's origin (G91: added to the current distance and angle).
+//!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
 //!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D,
 //!   G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
-//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L2/L20 P X Y Z R (work offsets and
-//!   rotation), G92/G92.1/G92.2/G92.3.
+//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off),
+//!   G10 L2/L20 P X Y Z R (work offsets and rotation), G52 (local offset, in the G92 register),
+//!   G92/G92.1/G92.2/G92.3; line numbers `N`, fractional too.
 //! - M0/M1 (program stops), M2/M30 (end: nothing after them is read), M6 and M61 Q (set the
-//!   tool in the spindle), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97 accepted:
+//!   tool in the spindle), M70/M71/M72/M73 (save, invalidate, restore, auto-restore the modal
+//!   state, per call level), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97 accepted:
 //!   the ones without a motion effect leave a [`Note`].
 //!
 //! - Parameters `#1`…`#4999` and `#<name>` (local to a call, global when the name starts with
-//!   `_`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
+//!   `_`), LinuxCNC's system parameters #5070, #5161…, #5220, #5420… (read-only, see
+//!   `State::system_parameters`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
 //!   LinuxCNC's operators and functions, and O-word flow control: `sub`/`endsub`/`call`/`return`,
 //!   `if`/`elseif`/`else`/`endif`, `while`/`endwhile`, `do`/`while`, `repeat`/`endrepeat`,
 //!   `break`, `continue`; computed call labels (`o[#1+2] call`); subroutine files
@@ -50,9 +55,9 @@
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
 //! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
-//! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), computed labels
-//! on anything but `call` are [`ErrorKind::Unsupported`]; a subroutine neither defined nor
-//! found as a file is [`ErrorKind::UndefinedSubroutine`].
+//! G7, polar words on arcs, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
+//! tolerance, computed labels on anything but `call` are [`ErrorKind::Unsupported`]; a
+//! subroutine neither defined nor found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
 //! Every number of a line is read in the units in force *after* that line's G20/G21, and a feed
 //! keeps its physical speed when the units change later.
