@@ -306,3 +306,40 @@ fn the_subroutine_path_is_relative_to_the_machine_file_and_checked() {
         e => panic!("{e}"),
     }
 }
+
+#[test]
+fn optimize_leaves_the_moves_of_subroutine_files_alone() {
+    // Their F words are in another file: writing one on the call line would break it.
+    let dir = tempfile::tempdir().unwrap();
+    let program = dir.path().join("p.ngc");
+    std::fs::write(
+        &program,
+        "G21 G90 G17\nG0 X10 Y10 Z1\no<square> call [5] [99000]\nG1 X50 F99000\nM2\n",
+    )
+    .unwrap();
+    let out_file = dir.path().join("out.ngc");
+    let out = Command::new(env!("CARGO_BIN_EXE_canmotion"))
+        .arg("optimize")
+        .arg(&program)
+        .arg("--machine")
+        .arg(programs().join("subs.toml"))
+        .arg("-o")
+        .arg(&out_file)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("left alone (first: line 3)"), "{stdout}");
+    let text = std::fs::read_to_string(&out_file).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines[2], "o<square> call [5] [99000]");
+    assert!(lines[3].starts_with("G1 X50 F"), "{text}");
+    assert_ne!(
+        lines[3], "G1 X50 F99000",
+        "the main program's own move is still lowered"
+    );
+}

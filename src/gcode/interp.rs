@@ -1821,6 +1821,12 @@ impl<R: BufRead> Interpreter<R> {
         self.state.inverse_time
     }
 
+    /// Whether the line read last is in a subroutine file (its items carry the line and
+    /// column of the call in the program).
+    pub fn in_subroutine_file(&self) -> bool {
+        self.file_call().is_some()
+    }
+
     /// The interpreter's tool table, with the G10 L1 changes made so far.
     pub fn tools(&self) -> &ToolTable {
         &self.state.tools
