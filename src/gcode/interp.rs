@@ -1151,7 +1151,7 @@ impl State {
                         (self.work_offsets_mm[8].z, 0.0)
                     };
                     let length_mm = self.pos_mm.z - origin_z - g92_z - z.value * scale;
-                    if !(length_mm.abs() <= MAX_TOOL_SIZE_MM) {
+                    if length_mm.abs() > MAX_TOOL_SIZE_MM {
                         return Err(invalid(
                             z,
                             "a touch-off giving a tool length of at most 10000 mm",
