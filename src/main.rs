@@ -123,6 +123,10 @@ enum Command {
         /// (capped by the machine's limits as usual), rapids up to 100 %.
         #[arg(long, value_name = "PERCENT", value_parser = parse_plan_override)]
         r#override: Option<f64>,
+        /// M99 in the main program restarts it endlessly on a controller: plan this many
+        /// restarts, then end at M99 (default 0: the plan ends at the first M99).
+        #[arg(long, value_name = "N", default_value_t = 0)]
+        m99_restarts: u32,
     },
     /// Lower the program's F words to the machine's per-axis velocity and acceleration limits
     /// (source 002's feed optimiser); the rest of the program is copied byte for byte.
@@ -432,6 +436,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             setpoints,
             plot,
             r#override,
+            m99_restarts,
         } => {
             if let Some(p) = &plot {
                 canmotion::plot::PlotFormat::of(p)?;
@@ -445,6 +450,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 setpoints_out: setpoints,
                 plot_out: plot,
                 feed_override: r#override.map(|p| p / 100.0),
+                m99_restarts,
             };
             let start_mm = nalgebra::Vector3::zeros();
             let summary = if program.as_os_str() == "-" {

@@ -36,6 +36,9 @@ pub struct PlanOptions {
     /// follow it up to 100 % (they already run at the machine's fastest). Must lie in
     /// `0.01..=2` (see [`check_override`]).
     pub feed_override: Option<f64>,
+    /// How many times M99 in the main program (an endless program) restarts it before the
+    /// plan ends there ([`crate::gcode::Setup::m99_restarts`]; 0: M99 ends it).
+    pub m99_restarts: u32,
 }
 
 /// Largest planning-time feed override (200 %).
@@ -171,7 +174,8 @@ pub fn plan_stream<R: BufRead>(
     start_mm: Vector3<f64>,
     opts: &PlanOptions,
 ) -> Result<PlanSummary, OfflineError> {
-    let setup = machine.setup(start_mm);
+    let mut setup = machine.setup(start_mm);
+    setup.m99_restarts = opts.m99_restarts;
     let interpreter = Compensator::new(
         Interpreter::new(reader, name, setup),
         name,

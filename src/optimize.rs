@@ -107,6 +107,9 @@ pub struct OptimizeReport {
     pub lines_feed_kept: u64,
     /// Lines of G93 (inverse time) feed moves, left alone.
     pub inverse_time_lines: Vec<usize>,
+    /// Lines calling subroutine files whose feed moves were left alone (their F words are in
+    /// another file).
+    pub subroutine_file_lines: Vec<usize>,
     /// The largest relative reduction.
     pub largest: Option<Reduction>,
 }
@@ -138,6 +141,12 @@ impl OptimizeReport {
             s += &format!(
                 "inverse time      {} G93 line(s) left alone (first: line {first}): their F is a time, not a feed\n",
                 self.inverse_time_lines.len()
+            );
+        }
+        if let Some(first) = self.subroutine_file_lines.first() {
+            s += &format!(
+                "subroutine files  the feed moves of {} call(s) left alone (first: line {first}): their F words are in the subroutine's file\n",
+                self.subroutine_file_lines.len()
             );
         }
         s
@@ -508,6 +517,16 @@ pub fn optimize(
         };
         let length_mm = e.length_mm();
         let feed = e.feed_mm_s.filter(|_| !e.rapid);
+        // A move of a subroutine file carries its call's line, which has no F word to lower:
+        // it is left alone, and the moves around it are planned from rest.
+        if interp.in_subroutine_file() {
+            if feed.is_some() && report.subroutine_file_lines.last() != Some(&e.line) {
+                report.subroutine_file_lines.push(e.line);
+            }
+            rest = true;
+            steps.push(Step::Other(e.line));
+            continue;
+        }
         if feed.is_some() {
             report.blocks_examined += 1;
         }

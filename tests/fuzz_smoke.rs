@@ -45,6 +45,16 @@ fn canned_cycle_programs() {
 }
 
 #[test]
+fn subroutine_programs() {
+    let mut s = seeds("tests/programs", &["subroutines.ngc", "m99_restart.ngc"]);
+    s.extend(seeds("tests/programs/subs", &[".ngc"]));
+    // A main program, a 0 byte, then the text of the subroutine file f.ngc.
+    s.push(b"G21\no<f> call [3]\nM98 P100 L2\nM30\nO100\nG0 X1\nM99\n\0o<f> sub\nG1 X#1 F60\no<f> endsub\n".to_vec());
+    let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();
+    run_seeded(&s, 2000, 7, fuzzing::subroutines::program);
+}
+
+#[test]
 fn control_lines() {
     let s = seeds("tests/control_lines", &[".txt"]);
     let s: Vec<&[u8]> = s.iter().map(Vec::as_slice).collect();

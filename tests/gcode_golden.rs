@@ -81,6 +81,7 @@ fn dump_program(p: &Program) -> String {
         ProgramEnd::M2 { line } => format!("{line} end M2"),
         ProgramEnd::M30 { line } => format!("{line} end M30"),
         ProgramEnd::Percent { line } => format!("{line} end %"),
+        ProgramEnd::M99 { line } => format!("{line} end M99"),
     });
     out.join("\n")
 }
@@ -513,10 +514,10 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: axis word 'A' (the machine has the X, Y and Z axes only)",
     ),
     (
-        "G1 @1 ^30",
+        "G2 @1 ^30 R1 F60",
         1,
         4,
-        "unsupported: polar coordinate word '@' (polar coordinates are not supported)",
+        "unsupported: polar coordinate word '@' on an arc (polar coordinates are read on G0 and G1 moves only)",
     ),
     (
         "M60",
@@ -531,16 +532,16 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: M101 (user-defined M codes are not supported)",
     ),
     (
-        "G10 L10 P1 Z0",
+        "G10 L11 P1 Y0",
         1,
-        5,
-        "unsupported: G10 L10 (tool touch-off from the current position is not supported: use G10 L1)",
+        12,
+        "unsupported: G10 L11 with Y (lathe tool offsets are not supported: give Z (and R))",
     ),
     (
-        "G0 X#5220",
+        "G0 X#5001",
         1,
         5,
-        "unsupported: system parameter #5220 (parameters #5000 and above (LinuxCNC's system parameters) are not kept)",
+        "unsupported: system parameter #5001 (of LinuxCNC's system parameters (#5000 and above), these are kept, read-only: #5070, #5161-#5163, #5181-#5183, #5210-#5213, #5220, #5221-#5223 and #5230 per work system (+20 each), #5399, #5400-#5403, #5410, #5420-#5422, #5599)",
     ),
     (
         "G17 G41.1 D2\nG40\nG19 G41.1 D2",
@@ -564,7 +565,7 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "o<probe> call",
         1,
         1,
-        "subroutine o<probe> is not defined (define it with 'sub' before the call; subroutine files are not searched)",
+        "subroutine o<probe> is not defined: define it with 'sub' before the call, or put probe.ngc in a folder of the machine file's [program] subroutine_path (searched: no subroutine_path is set)",
     ),
     (
         "G21 F60\nG2 X30 R10",

@@ -331,6 +331,7 @@ where
             line: e.line,
             col: e.col,
             kind,
+            called_from: None,
         }
     }
 
@@ -644,6 +645,7 @@ where
                 kind: ErrorKind::CompensationLookAhead {
                     max: MAX_HELD_ITEMS,
                 },
+                called_from: None,
             });
         }
         self.held.push(item);

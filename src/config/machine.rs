@@ -74,6 +74,8 @@ struct RawProgram {
     work_offsets_mm: std::collections::BTreeMap<String, Vec<f64>>,
     #[serde(default)]
     outside_corners: crate::compensation::OutsideCorners,
+    #[serde(default)]
+    subroutine_path: Vec<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -569,6 +571,11 @@ pub struct ProgramSetup {
     pub work_offsets_mm: [nalgebra::Vector3<f64>; 9],
     /// How cutter radius compensation (G41/G42) joins outside corners.
     pub compensation: crate::compensation::CompOptions,
+    /// Folders searched in order for subroutine files (`o<name> call` → `name.ngc`), as
+    /// written in `subroutine_path`, relative to the machine file's folder.
+    pub subroutine_path: Vec<PathBuf>,
+    /// The machine file's folder, which `subroutine_path` is relative to.
+    pub base_dir: PathBuf,
 }
 
 impl Machine {
@@ -580,6 +587,12 @@ impl Machine {
         setup.g28_mm = self.program.g28_mm;
         setup.g30_mm = self.program.g30_mm;
         setup.work_offsets_mm = self.program.work_offsets_mm;
+        setup.subroutine_path = self
+            .program
+            .subroutine_path
+            .iter()
+            .map(|dir| self.program.base_dir.join(dir))
+            .collect();
         setup
     }
 }
@@ -638,6 +651,26 @@ fn program_setup(ctx: &Ctx, raw: &RawProgram) -> Result<ProgramSetup, ConfigErro
         compensation: crate::compensation::CompOptions {
             outside_corners: raw.outside_corners,
         },
+        subroutine_path: raw
+            .subroutine_path
+            .iter()
+            .map(|dir| {
+                if dir.trim().is_empty() {
+                    Err(ctx.err(
+                        "program",
+                        "subroutine_path",
+                        "an empty folder name: give folders relative to the machine file, e.g. [\"subs\"]",
+                    ))
+                } else {
+                    Ok(PathBuf::from(dir))
+                }
+            })
+            .collect::<Result<_, _>>()?,
+        base_dir: ctx
+            .file
+            .parent()
+            .unwrap_or(Path::new(""))
+            .to_path_buf(),
     })
 }
 
@@ -719,6 +752,27 @@ fn planner_config(
     Ok(config)
 }
 
+/// Checks that every folder of the subroutine path is a folder (when the machine file is read
+/// from disk).
+fn check_subroutine_path(path: &Path, program: &ProgramSetup) -> Result<(), ConfigError> {
+    for dir in &program.subroutine_path {
+        let full = program.base_dir.join(dir);
+        if !full.is_dir() {
+            return Err(ConfigError::Invalid {
+                file: path.to_path_buf(),
+                table: "program".into(),
+                key: "subroutine_path".into(),
+                message: format!(
+                    "'{}' ({}) is not a folder: folders are relative to the machine file",
+                    dir.display(),
+                    full.display()
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Checks that the loaded tool is in the table (once the table is read).
 fn check_loaded_tool(path: &Path, program: &ProgramSetup) -> Result<(), ConfigError> {
     if program.loaded_tool != 0 && program.tools.get(program.loaded_tool).is_none() {
@@ -779,6 +833,7 @@ impl Machine {
             machine.program.tools = crate::gcode::ToolTable::load(&base.join(rel))?;
         }
         check_loaded_tool(path, &machine.program)?;
+        check_subroutine_path(path, &machine.program)?;
         Ok(machine)
     }
 

@@ -14,6 +14,7 @@ pub mod cycles;
 pub mod eds;
 pub mod gcode;
 pub mod machine;
+pub mod subroutines;
 
 /// A deterministic generator of fuzz inputs from seed files (xorshift64*; no dependency).
 #[derive(Debug, Clone)]

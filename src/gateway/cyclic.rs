@@ -1152,6 +1152,7 @@ mod tests {
                 setpoints_out: Some(file.clone()),
                 plot_out: None,
                 feed_override: None,
+                m99_restarts: 0,
             };
             crate::offline::plan_stream(&m, program.as_bytes(), "t.ngc", armed, &opts).unwrap();
             let text = std::fs::read_to_string(&file).unwrap();

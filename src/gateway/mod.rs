@@ -606,6 +606,7 @@ pub fn plan_program(
                         what: if stop.optional { "M1" } else { "M0" }.to_string(),
                         reason: "the gateway cannot pause a running program yet",
                     },
+                    called_from: None,
                 }));
             }
             _ => {}

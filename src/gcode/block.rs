@@ -58,6 +58,7 @@ enum Group {
     Spindle,
     Coolant,
     Override,
+    ModalState,
 }
 
 impl Group {
@@ -82,6 +83,7 @@ impl Group {
             Group::Spindle => "spindle",
             Group::Coolant => "coolant",
             Group::Override => "override switch",
+            Group::ModalState => "modal state save/restore",
         }
     }
 
@@ -90,7 +92,7 @@ impl Group {
     }
 }
 
-const GROUPS: usize = Group::Override as usize + 1;
+const GROUPS: usize = Group::ModalState as usize + 1;
 
 /// What a G code is: its group, or why it is not executed.
 enum Known {
@@ -105,7 +107,7 @@ fn classify_g(tenths: u32) -> Known {
         0 | 10 | 20 | 30 | 800 => In(Group::Motion),
         // Canned cycles (see `cycles.rs`).
         730 | 740 | 810..=860 | 890 => In(Group::Motion),
-        40 | 100 | 280 | 281 | 300 | 301 | 530 | 920..=923 => In(Group::NonModal),
+        40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920..=923 => In(Group::NonModal),
         170 | 180 | 190 => In(Group::Plane),
         900 | 910 => In(Group::Distance),
         901 | 911 => In(Group::ArcDistance),
@@ -120,7 +122,9 @@ fn classify_g(tenths: u32) -> Known {
         970 => In(Group::SpindleMode),
         50..=53 => Unsupported("splines (G5, G5.1, G5.2, G5.3) are not supported"),
         70 => Unsupported("lathe diameter mode is not supported"),
-        150 | 160 => Unsupported("polar coordinates are not supported"),
+        150 | 160 => Unsupported(
+            "Fanuc polar mode (G15/G16) is not supported: use LinuxCNC's polar words @ (distance) and ^ (angle)",
+        ),
         171 | 181 | 191 => Unsupported("the UVW planes are not supported: the machine has X, Y, Z"),
         330 | 331 | 760 => {
             Unsupported("spindle-synchronised motion (threading, rigid tapping) is not supported")
@@ -134,9 +138,7 @@ fn classify_g(tenths: u32) -> Known {
         ),
         950 => Unsupported("feed per revolution is spindle-synchronised: not supported"),
         960 => Unsupported("constant surface speed is spindle-synchronised: not supported"),
-        500 | 510 | 520 | 680 | 690 => {
-            Unsupported("scaling, local offsets and G68 rotation are not supported")
-        }
+        500 | 510 | 680 | 690 => Unsupported("scaling and G68 rotation are not supported"),
         _ => Unknown,
     }
 }
@@ -144,22 +146,22 @@ fn classify_g(tenths: u32) -> Known {
 fn classify_m(number: u32) -> Known {
     use Known::*;
     match number {
-        0 | 1 | 2 | 30 => In(Group::Stop),
+        0 | 1 | 2 | 30 | 98 | 99 => In(Group::Stop),
         6 | 61 => In(Group::ToolChange),
         3..=5 | 19 => In(Group::Spindle),
         7..=9 => In(Group::Coolant),
         48..=53 => In(Group::Override),
         60 => Unsupported("pallet change pause is not supported"),
         62..=68 => Unsupported("digital and analog I/O is not supported"),
-        70..=73 => Unsupported("saving and restoring modal state is not supported"),
+        70..=73 => In(Group::ModalState),
         100..=199 => Unsupported("user-defined M codes are not supported"),
         _ => Unknown,
     }
 }
 
 /// The letters a block may hold (besides G and M), in a fixed order for the word table.
-const LETTERS: [char; 16] = [
-    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N',
+const LETTERS: [char; 18] = [
+    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N', '@', '^',
 ];
 
 fn letter_index(letter: char) -> Option<usize> {
@@ -345,7 +347,16 @@ impl Block {
 
     /// The first axis word of the line (by column).
     pub fn first_axis(&self) -> Option<Word> {
-        self.axes().into_iter().flatten().min_by_key(|w| w.col)
+        self.axes()
+            .into_iter()
+            .chain(self.polar())
+            .flatten()
+            .min_by_key(|w| w.col)
+    }
+
+    /// The polar coordinate words: `@` (distance) and `^` (angle, degrees).
+    pub fn polar(&self) -> [Option<Word>; 2] {
+        [self.word('@'), self.word('^')]
     }
 
     /// G0, G1, G2, G3, G80 or a canned cycle (G73, G74, G81…G86, G89).
@@ -400,7 +411,7 @@ impl Block {
     pub fn spindle_mode(&self) -> Option<Code> {
         self.get(Group::SpindleMode)
     }
-    /// M0, M1, M2, M30.
+    /// M0, M1, M2, M30, M98, M99.
     pub fn stop(&self) -> Option<Code> {
         self.get(Group::Stop)
     }
@@ -420,14 +431,17 @@ impl Block {
     pub fn override_switch(&self) -> Option<Code> {
         self.get(Group::Override)
     }
+    /// M70 … M73.
+    pub fn modal_state(&self) -> Option<Code> {
+        self.get(Group::ModalState)
+    }
 }
 
 /// Value domains that hold whatever the codes on the line.
 fn check_domain(word: &Word) -> Result<(), BlockError> {
     match word.letter {
-        'N' if as_index(word.value).is_none() => {
-            Err(invalid(word, "a non-negative integer line number"))
-        }
+        // LinuxCNC reads fractional line numbers (N4567.789) too.
+        'N' if word.value < 0.0 => Err(invalid(word, "a non-negative line number")),
         'F' if word.value < 0.0 => Err(invalid(word, "a feed rate of 0 or more")),
         'S' if word.value < 0.0 => Err(invalid(word, "a non-negative spindle speed")),
         'T' | 'H' if as_index(word.value).is_none() => {

@@ -56,6 +56,9 @@ pub(super) struct Params {
     numbered: HashMap<u32, f64>,
     global: HashMap<String, f64>,
     scopes: Vec<Scope>,
+    /// The read-only system parameters kept (`#5070`, `#5220`, `#5420`…), as the interpreter
+    /// last set them.
+    system: HashMap<u32, f64>,
 }
 
 impl Default for Params {
@@ -64,6 +67,7 @@ impl Default for Params {
             numbered: HashMap::new(),
             global: HashMap::new(),
             scopes: vec![Scope::new()],
+            system: HashMap::new(),
         }
     }
 }
@@ -89,7 +93,11 @@ impl Params {
             ParamRef::Number(n) if *n <= MAX_USER_PARAMETER => {
                 Ok(self.numbered.get(n).copied().unwrap_or(0.0))
             }
-            ParamRef::Number(n) => Err(system_parameter(*n)),
+            ParamRef::Number(n) => self
+                .system
+                .get(n)
+                .copied()
+                .ok_or_else(|| system_parameter(*n)),
             ParamRef::Name(name) => {
                 let map = if name.starts_with('_') {
                     &self.global
@@ -101,6 +109,11 @@ impl Params {
                     .ok_or_else(|| ErrorKind::UndefinedParameter { name: name.clone() })
             }
         }
+    }
+
+    /// Sets the value a read-only system parameter reads as.
+    pub fn set_system(&mut self, n: u32, value: f64) {
+        self.system.insert(n, value);
     }
 
     /// Whether a named parameter is defined (`EXISTS`).
@@ -157,7 +170,7 @@ impl Params {
 fn system_parameter(n: u32) -> ErrorKind {
     ErrorKind::Unsupported {
         what: format!("system parameter #{n}"),
-        reason: "parameters #5000 and above (LinuxCNC's system parameters) are not kept",
+        reason: "of LinuxCNC's system parameters (#5000 and above), these are kept, read-only: #5070, #5161-#5163, #5181-#5183, #5210-#5213, #5220, #5221-#5223 and #5230 per work system (+20 each), #5399, #5400-#5403, #5410, #5420-#5422, #5599",
     }
 }
 

@@ -27,6 +27,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::f64::consts::FRAC_PI_2;
 use std::io::BufRead;
+use std::path::PathBuf;
 use std::rc::Rc;
 
 use nalgebra::Vector3;
@@ -34,9 +35,13 @@ use nalgebra::Vector3;
 use super::block::{Block, BlockError, Code, as_index};
 use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
 use super::expr::{ParamRef, Params};
-use super::lex::{Control, Keyword, Label, LineKind, Scanner, Word, peek_control};
+use super::lex::{
+    Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
+};
 use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
-use super::{Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop};
+use super::{
+    CallChain, CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop,
+};
 
 // The canned cycles live in their own file; as a child of this module they extend `State`.
 #[path = "cycles.rs"]
@@ -72,16 +77,27 @@ pub struct Setup {
     /// the tool in the spindle.
     pub loaded_tool: u32,
     /// Arc end-point check (centre format): the distances from the centre to the start and to
-    /// the end may differ by this much...
+    /// the end may differ by this much (2.54 times as much in an inch program, as LinuxCNC's
+    /// inch tolerance)...
     pub arc_tolerance_mm: f64,
-    /// ...or by this fraction of the radius, whichever is larger. Beyond, the arc would be a
-    /// spiral, which is reported as unsupported; within, the path spirals between the two radii.
+    /// ...or by this fraction of the larger radius, up to 100 times the absolute tolerance
+    /// (LinuxCNC's rule). Within, the path spirals between the two radii, the radius changing
+    /// in proportion to the angle, as LinuxCNC interpolates it; beyond, it is an error.
     pub arc_tolerance_rel: f64,
     /// Block delete switch: skip lines starting with `/` (LinuxCNC's default: on).
     pub block_delete: bool,
     /// Optional stop switch: M1 stops like M0 (LinuxCNC's default: on); off, M1 is noted
     /// and skipped.
     pub optional_stop: bool,
+    /// Folders searched in order for `name.ngc` when `o<name> call` (or `123.ngc` for
+    /// `o123 call`) names a subroutine the program has not defined: LinuxCNC's
+    /// SUBROUTINE_PATH. Empty (the default): no file is searched.
+    pub subroutine_path: Vec<PathBuf>,
+    /// How many times M99 in the main program restarts it from its first line (on a
+    /// controller, an endless program); after that, M99 ends it ([`ProgramEnd::M99`]).
+    /// Above 0, the main program's text is kept in memory, within [`MAX_STORED_BYTES`].
+    /// Default 0: M99 in the main program ends it.
+    pub m99_restarts: u32,
 }
 
 impl Setup {
@@ -103,6 +119,8 @@ impl Setup {
             arc_tolerance_rel: 0.001,
             block_delete: true,
             optional_stop: true,
+            subroutine_path: Vec::new(),
+            m99_restarts: 0,
         }
     }
 
@@ -139,6 +157,19 @@ impl Setup {
     }
 }
 
+/// What a line asks of the program flow besides its items.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Flow {
+    /// Go on with the next line.
+    Next,
+    /// The program ends.
+    End(ProgramEnd),
+    /// M98 P L: call numbered subprogram `number`, `count` times.
+    Call { number: u32, count: u32, col: usize },
+    /// M99: return from a numbered subprogram (or restart the main program).
+    Return { col: usize },
+}
+
 /// The motion mode (modal group 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Motion {
@@ -148,6 +179,31 @@ enum Motion {
     Ccw,
     /// A canned cycle (G73, G74, G81…G86, G89).
     Cycle(Cycle),
+}
+
+/// The modal state M70/M73 save and M72 restores (LinuxCNC's list, less what has no effect
+/// here: spindle speed mode, coolant, override switches; the motion mode is not saved).
+#[derive(Debug, Clone, PartialEq)]
+struct Modal {
+    inch: bool,
+    plane: Plane,
+    comp: CompState,
+    incremental: bool,
+    inverse_time: bool,
+    coord: usize,
+    tool_offset_mm: Vector3<f64>,
+    retract_to_r: bool,
+    arc_absolute: bool,
+    blend: BlendMode,
+    feed_mm_s: Option<f64>,
+    spindle: Spindle,
+}
+
+/// A saved modal state, and whether it comes back when its subroutine returns (M73).
+#[derive(Debug, Clone)]
+struct Saved {
+    modal: Modal,
+    auto_restore: bool,
 }
 
 /// Modal state and positions.
@@ -186,9 +242,11 @@ struct State {
     cycles: CycleState,
     /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
     used: u16,
+    /// The modal state saved by M70/M73 at each call level (0: the main program).
+    saved: Vec<Option<Saved>>,
 }
 
-const CHECKED: &str = "XYZIJKRPQDHL";
+const CHECKED: &str = "XYZIJKRPQDHL@^";
 
 fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
     if deg == 0.0 {
@@ -259,7 +317,154 @@ impl State {
             spindle: Spindle::Stopped,
             cycles: CycleState::default(),
             used: 0,
+            saved: vec![None],
         }
+    }
+
+    /// LinuxCNC's system parameters this interpreter keeps, read-only, lengths in the program's
+    /// units as they are now: #5070 (the last probe succeeded: none runs here, 0), #5161-#5163
+    /// and #5181-#5183 (the G28 and G30 positions), #5210 (G92 on), #5211-#5213 (the G92/G52
+    /// offsets), #5220 (the work system, 1 to 9), #5221-#5223 and #5230 for G54 and +20 for each
+    /// next system (its origin and rotation), #5399 (M66's result: none runs here, 0), #5400 (the
+    /// tool in the spindle), #5401-#5403 (the tool length offset in effect), #5410 (the tool's
+    /// diameter), #5420-#5422 (the current point in the work system), #5599 (DEBUG output on,
+    /// 1).
+    fn system_parameters(&self, params: &mut Params) {
+        let scale = self.scale();
+        let mut set3 = |first: u32, v: Vector3<f64>| {
+            for (i, c) in v.iter().enumerate() {
+                params.set_system(first + i as u32, c / scale);
+            }
+        };
+        set3(5161, self.g28_mm);
+        set3(5181, self.g30_mm);
+        set3(5211, self.g92_mm);
+        for (k, offset) in self.work_offsets_mm.iter().enumerate() {
+            set3(5221 + 20 * k as u32, *offset);
+        }
+        set3(5401, self.tool_offset_mm);
+        set3(5420, self.prog_mm);
+        for (k, r) in self.rotations_deg.iter().enumerate() {
+            params.set_system(5230 + 20 * k as u32, *r);
+        }
+        let diameter = self
+            .tools
+            .get(self.loaded_tool)
+            .map_or(0.0, |t| 2.0 * t.radius_mm / scale);
+        for (n, v) in [
+            (5070, 0.0),
+            (5210, if self.g92_on { 1.0 } else { 0.0 }),
+            (5220, (self.coord + 1) as f64),
+            (5399, 0.0),
+            (5400, f64::from(self.loaded_tool)),
+            (5410, diameter),
+            (5599, 1.0),
+        ] {
+            params.set_system(n, v);
+        }
+    }
+
+    fn modal(&self) -> Modal {
+        Modal {
+            inch: self.inch,
+            plane: self.plane,
+            comp: self.comp,
+            incremental: self.incremental,
+            inverse_time: self.inverse_time,
+            coord: self.coord,
+            tool_offset_mm: self.tool_offset_mm,
+            retract_to_r: self.retract_to_r,
+            arc_absolute: self.arc_absolute,
+            blend: self.blend,
+            feed_mm_s: self.feed_mm_s,
+            spindle: self.spindle,
+        }
+    }
+
+    /// M72 (or a return after M73): the saved modes come back. Cutter compensation cannot be
+    /// switched by a restore here (it needs its entry and exit moves): a restore that would
+    /// turn it on, off or change it is refused, as is a plane change under it.
+    fn restore(&mut self, m: &Modal, code: Code) -> Result<(), BlockError> {
+        if m.comp != self.comp || (self.comp != CompState::Off && m.plane != self.plane) {
+            return Err(err_at(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!("{code} changing cutter compensation or its plane"),
+                    reason: "turn cutter compensation on or off with G41/G42/G40 and their moves",
+                },
+            ));
+        }
+        self.inch = m.inch;
+        self.plane = m.plane;
+        self.incremental = m.incremental;
+        self.inverse_time = m.inverse_time;
+        self.coord = m.coord;
+        self.tool_offset_mm = m.tool_offset_mm;
+        self.retract_to_r = m.retract_to_r;
+        self.arc_absolute = m.arc_absolute;
+        self.blend = m.blend;
+        self.feed_mm_s = m.feed_mm_s;
+        self.spindle = m.spindle;
+        self.resync();
+        Ok(())
+    }
+
+    /// A subroutine call: a new call level with nothing saved.
+    fn enter_call(&mut self) {
+        self.saved.push(None);
+    }
+
+    /// A subroutine return: its level goes, restoring what M73 saved there.
+    fn leave_call(&mut self, line: usize, out: &mut VecDeque<Item>) -> Result<(), BlockError> {
+        if self.saved.len() > 1
+            && let Some(Some(saved)) = self.saved.pop()
+            && saved.auto_restore
+        {
+            let code = Code {
+                letter: 'M',
+                tenths: 730,
+                col: 0,
+            };
+            self.restore(&saved.modal, code)?;
+            out.push_back(Item::Note(Note {
+                line,
+                col: 0,
+                text: "M73: the modal state saved in the subroutine is restored on its return"
+                    .to_owned(),
+            }));
+        }
+        Ok(())
+    }
+
+    /// M70 … M73.
+    fn modal_state(&mut self, code: Code) -> Result<(), BlockError> {
+        let level = self.saved.len().saturating_sub(1);
+        match code.tenths {
+            700 | 730 => {
+                let saved = Saved {
+                    modal: self.modal(),
+                    auto_restore: code.tenths == 730 && level > 0,
+                };
+                if let Some(slot) = self.saved.last_mut() {
+                    *slot = Some(saved);
+                }
+            }
+            710 => {
+                if let Some(slot) = self.saved.last_mut() {
+                    *slot = None;
+                }
+            }
+            _ => {
+                let modal = self
+                    .saved
+                    .last()
+                    .and_then(|s| s.as_ref())
+                    .map(|s| s.modal.clone())
+                    .ok_or_else(|| err_at(code.col, ErrorKind::NoSavedModalState))?;
+                self.restore(&modal, code)?;
+            }
+        }
+        Ok(())
     }
 
     fn scale(&self) -> f64 {
@@ -320,6 +525,41 @@ impl State {
             }
         }
         p
+    }
+
+    /// The program-coordinate target of a G0/G1 line, polar words (`@` distance, `^` angle in
+    /// degrees) included, as LinuxCNC: under G90 about the work system's origin (the word
+    /// left out keeps the current point's distance or angle); under G91 both add to the
+    /// current point's distance and angle about the origin (so not from the origin itself).
+    fn prog_target_polar(&mut self, b: &Block) -> Result<Vector3<f64>, BlockError> {
+        let [d, a] = b.polar();
+        let Some(first) = d.or(a) else {
+            return Ok(self.prog_target(b));
+        };
+        if let Some(w) = b.word('X').or(b.word('Y')) {
+            return Err(err_at(w.col, ErrorKind::PolarWithXy { letter: w.letter }));
+        }
+        let (x0, y0) = (self.prog_mm.x, self.prog_mm.y);
+        let d_mm = self.take_mm(b, '@');
+        let a_deg = self.take(b, '^').map(|w| w.value);
+        let (r, theta) = if self.incremental {
+            if x0 == 0.0 && y0 == 0.0 {
+                return Err(err_at(first.col, ErrorKind::PolarFromOrigin));
+            }
+            (
+                x0.hypot(y0) + d_mm.unwrap_or(0.0),
+                y0.atan2(x0) + a_deg.unwrap_or(0.0).to_radians(),
+            )
+        } else {
+            (
+                d_mm.unwrap_or_else(|| x0.hypot(y0)),
+                a_deg.map_or_else(|| y0.atan2(x0), f64::to_radians),
+            )
+        };
+        let mut p = self.prog_target(b);
+        p.x = r * theta.cos();
+        p.y = r * theta.sin();
+        Ok(p)
     }
 
     /// The machine point of a program target; axes whose program coordinate does not change
@@ -388,13 +628,14 @@ impl State {
         }
     }
 
-    /// Executes one checked line; items go to `out`. Returns how the program ended, if it did.
+    /// Executes one checked line; items go to `out`. Returns what the line asks of the flow
+    /// (the end, an M98 call, an M99 return).
     fn execute(
         &mut self,
         b: &Block,
         line: usize,
         out: &mut VecDeque<Item>,
-    ) -> Result<Option<ProgramEnd>, BlockError> {
+    ) -> Result<Flow, BlockError> {
         self.used = 0;
         let note = |out: &mut VecDeque<Item>, col: usize, text: String| {
             out.push_back(Item::Note(Note { line, col, text }));
@@ -587,7 +828,7 @@ impl State {
 
         // Codes that take the axis words for themselves.
         let consumer = non_modal
-            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 920))
+            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 520 | 920))
             .or(b.tool_length().filter(|c| matches!(c.tenths, 431 | 432)));
         if let (Some(first), Some(motion)) = (consumer, b.motion().filter(|m| m.tenths != 800)) {
             return Err(err_at(
@@ -622,6 +863,19 @@ impl State {
                     self.g92_on = true;
                     self.resync();
                 }
+                // G52: a local offset, in the register G92 uses (as LinuxCNC): the given
+                // axes' offsets are the words themselves; G92.1 or G52 X0 Y0 Z0 clears it.
+                520 => {
+                    if b.first_axis().is_none() {
+                        return Err(missing(code.col, code, 'X', "at least one axis word"));
+                    }
+                    let base = self.g92();
+                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+                        self.g92_mm[i] = self.take_mm(b, letter).unwrap_or(base[i]);
+                    }
+                    self.g92_on = true;
+                    self.resync();
+                }
                 921 => {
                     self.g92_mm = Vector3::zeros();
                     self.g92_on = false;
@@ -651,8 +905,35 @@ impl State {
             )?;
         }
 
+        if let Some(code) = b.modal_state() {
+            self.modal_state(code)?;
+        }
+
+        let call = match b.stop() {
+            Some(code) if code.tenths == 980 => {
+                let p = self.take(b, 'P').ok_or_else(|| {
+                    missing(code.col, code, 'P', "the number of the subprogram to call")
+                })?;
+                let number = as_index(p.value)
+                    .ok_or_else(|| invalid(p, "a program number (a non-negative integer)"))?;
+                // The domain check made L a non-negative integer.
+                let count = self
+                    .take(b, 'L')
+                    .map_or(1, |l| as_index(l.value).unwrap_or(0));
+                Some(Flow::Call {
+                    number,
+                    count,
+                    col: code.col,
+                })
+            }
+            _ => None,
+        };
+
         self.check_unused(b)?;
 
+        if let Some(call) = call {
+            return Ok(call);
+        }
         Ok(match b.stop() {
             Some(code) if code.tenths == 0 || code.tenths == 10 => {
                 let optional = code.tenths == 10;
@@ -669,11 +950,12 @@ impl State {
                         optional,
                     }));
                 }
-                None
+                Flow::Next
             }
-            Some(code) if code.tenths == 20 => Some(ProgramEnd::M2 { line }),
-            Some(_) => Some(ProgramEnd::M30 { line }),
-            None => None,
+            Some(code) if code.tenths == 20 => Flow::End(ProgramEnd::M2 { line }),
+            Some(code) if code.tenths == 990 => Flow::Return { col: code.col },
+            Some(_) => Flow::End(ProgramEnd::M30 { line }),
+            None => Flow::Next,
         })
     }
 
@@ -758,7 +1040,7 @@ impl State {
     fn g10(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
         let l = self
             .take(b, 'L')
-            .ok_or_else(|| missing(code.col, code, 'L', "L1, L2 or L20"))?;
+            .ok_or_else(|| missing(code.col, code, 'L', "L1, L2, L10, L11 or L20"))?;
         let p = self
             .take(b, 'P')
             .ok_or_else(|| missing(code.col, code, 'P', "the tool or coordinate system number"))?;
@@ -843,16 +1125,55 @@ impl State {
                     self.resync();
                 }
             }
+            // Tool touch-off (LinuxCNC): the length (and R radius) of tool P such that, with
+            // its offset applied, the current point reads Z in the current work system (L10,
+            // G92 included) or in G59.3 (L11, without G92). Rotation is about Z: no effect.
             10 | 11 => {
-                return Err(err_at(
-                    l.col,
-                    ErrorKind::Unsupported {
-                        what: format!("G10 L{}", l.value),
-                        reason: "tool touch-off from the current position is not supported: use G10 L1",
-                    },
+                let n = as_index(p.value)
+                    .filter(|n| (1..=MAX_TOOL_NUMBER).contains(n))
+                    .ok_or_else(|| invalid(p, "a tool number from 1 to 99999"))?;
+                for letter in ['X', 'Y'] {
+                    if let Some(w) = b.word(letter) {
+                        return Err(err_at(
+                            w.col,
+                            ErrorKind::Unsupported {
+                                what: format!("G10 L{} with {letter}", l.value),
+                                reason: "lathe tool offsets are not supported: give Z (and R)",
+                            },
+                        ));
+                    }
+                }
+                let mut tool = self.tools.get(n).unwrap_or(Tool::NONE);
+                if let Some(z) = self.take(b, 'Z') {
+                    let (origin_z, g92_z) = if l.value as u32 == 10 {
+                        (self.work_offsets_mm[self.coord].z, self.g92().z)
+                    } else {
+                        (self.work_offsets_mm[8].z, 0.0)
+                    };
+                    let length_mm = self.pos_mm.z - origin_z - g92_z - z.value * scale;
+                    if length_mm.abs() > MAX_TOOL_SIZE_MM {
+                        return Err(invalid(
+                            z,
+                            "a touch-off giving a tool length of at most 10000 mm",
+                        ));
+                    }
+                    tool.length_mm = length_mm;
+                }
+                if let Some(r) = self.take(b, 'R') {
+                    let radius_mm = r.value * scale;
+                    if !(0.0..=MAX_TOOL_SIZE_MM).contains(&radius_mm) {
+                        return Err(invalid(r, "a tool radius from 0 to 10000 mm"));
+                    }
+                    tool.radius_mm = radius_mm;
+                }
+                self.tools.insert(n, tool);
+            }
+            _ => {
+                return Err(invalid(
+                    l,
+                    "L1, L10 or L11 (tool), L2 or L20 (coordinate system)",
                 ));
             }
-            _ => return Err(invalid(l, "L1 (tool), L2 or L20 (coordinate system)")),
         }
         Ok(())
     }
@@ -1032,7 +1353,7 @@ impl State {
             // G0/G1 alone only sets the mode.
             Motion::Rapid | Motion::Linear if first_axis.is_none() => {}
             Motion::Rapid | Motion::Linear => {
-                let prog = self.prog_target(b);
+                let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
                 self.check_position(col, &m)?;
                 let f = feed(self, (m - self.pos_mm).norm())?;
@@ -1054,6 +1375,15 @@ impl State {
 
     /// Builds the arc of a G2/G3 line and moves the current point to its end.
     fn arc(&mut self, b: &Block, line: usize, col: usize, cw: bool) -> Result<Element, BlockError> {
+        if let Some(w) = b.polar().into_iter().flatten().next() {
+            return Err(err_at(
+                w.col,
+                ErrorKind::Unsupported {
+                    what: format!("polar coordinate word '{}' on an arc", w.letter),
+                    reason: "polar coordinates are read on G0 and G1 moves only",
+                },
+            ));
+        }
         let (a, c, n) = self.plane.axes();
         let axis_letters = ['X', 'Y', 'Z'];
         let offset_letters = ['I', 'J', 'K'];
@@ -1120,10 +1450,19 @@ impl State {
                 if r1 < MIN_ARC_RADIUS_MM || r2 < MIN_ARC_RADIUS_MM {
                     return Err(err_at(col, ErrorKind::ArcZeroRadius));
                 }
-                let tolerance_mm = self
-                    .arc_tolerance_mm
-                    .max(self.arc_tolerance_rel * r1.max(r2));
-                if (r1 - r2).abs() > tolerance_mm {
+                // LinuxCNC's rule (interp_arc.cc): a spiral within the absolute tolerance, or
+                // within the relative one up to 100 times the absolute one; an inch program
+                // has the inch tolerance (0.002828 in: 2.54 times the metric 0.02828 mm).
+                let abs_mm = self.arc_tolerance_mm * if self.inch { 2.54 } else { 1.0 };
+                let error_mm = (r1 - r2).abs();
+                let relative_mm = abs_mm.max(self.arc_tolerance_rel * r1.max(r2));
+                // The tolerance broken: the relative one if it is, else the 100-times cap.
+                let tolerance_mm = if error_mm <= relative_mm && error_mm > 100.0 * abs_mm {
+                    100.0 * abs_mm
+                } else {
+                    relative_mm
+                };
+                if error_mm > tolerance_mm {
                     return Err(err_at(
                         col,
                         ErrorKind::ArcRadiusMismatch {
@@ -1213,6 +1552,10 @@ impl State {
             if let Some(w) = b.word(letter) {
                 let kind = match letter {
                     'X' | 'Y' | 'Z' => ErrorKind::AxisWithoutMotion,
+                    '@' | '^' => ErrorKind::Unsupported {
+                        what: format!("polar coordinate word '{letter}' here"),
+                        reason: "polar coordinates are read on G0 and G1 moves only",
+                    },
                     _ => ErrorKind::UnusedWord {
                         letter,
                         users: match letter {
@@ -1235,6 +1578,32 @@ impl State {
     }
 }
 
+/// Gives the items of a subroutine file's line the line and column of its call.
+fn relabel(item: &mut Item, line: usize, col: usize) {
+    let place = match item {
+        Item::Motion(e) => (&mut e.line, &mut e.col),
+        Item::Dwell(d) => (&mut d.line, &mut d.col),
+        Item::Stop(s) => (&mut s.line, &mut s.col),
+        Item::Note(n) => (&mut n.line, &mut n.col),
+        Item::End(end) => {
+            relabel_end(end, line);
+            return;
+        }
+    };
+    *place.0 = line;
+    *place.1 = col;
+}
+
+fn relabel_end(end: &mut ProgramEnd, to: usize) {
+    match end {
+        ProgramEnd::EndOfText => {}
+        ProgramEnd::M2 { line }
+        | ProgramEnd::M30 { line }
+        | ProgramEnd::Percent { line }
+        | ProgramEnd::M99 { line } => *line = to,
+    }
+}
+
 /// Deepest subroutine call nesting.
 pub const MAX_CALL_DEPTH: usize = 64;
 
@@ -1252,12 +1621,18 @@ pub const MAX_IDLE_LINES: usize = 1_000_000;
 struct Body {
     lines: Vec<(usize, String)>,
     controls: Vec<Option<(Label, Keyword)>>,
+    /// The file the lines are from (the program, or a subroutine file).
+    file: Rc<str>,
 }
 
 impl Body {
-    fn new(lines: Vec<(usize, String)>) -> Lines {
+    fn new(lines: Vec<(usize, String)>, file: Rc<str>) -> Lines {
         let controls = lines.iter().map(|(_, t)| peek_control(t)).collect();
-        Rc::new(Body { lines, controls })
+        Rc::new(Body {
+            lines,
+            controls,
+            file,
+        })
     }
 
     /// What the body counts against [`MAX_STORED_BYTES`]: its text and a fixed overhead per
@@ -1278,10 +1653,41 @@ struct Frame {
     lines: Lines,
     /// Index of the next line to run.
     pc: usize,
-    /// A subroutine call (it has its own parameter scope).
+    /// A subroutine call (an o-word call has its own parameter scope).
     sub: bool,
+    /// An M98 call: the passes left, this one included (M98 L). M98 subprograms share the
+    /// caller's parameters, as in LinuxCNC.
+    m98_passes: Option<u32>,
+    /// Where a subroutine was called from.
+    call: Option<CallAt>,
     /// Remaining passes of each running `repeat`, by the index of its line.
     repeats: HashMap<usize, u64>,
+}
+
+impl Frame {
+    fn new(lines: Lines, sub: bool) -> Frame {
+        Frame {
+            lines,
+            pc: 0,
+            sub,
+            m98_passes: None,
+            call: None,
+            repeats: HashMap::new(),
+        }
+    }
+
+    /// An o-word subroutine call, with its own parameter scope.
+    fn scoped(&self) -> bool {
+        self.sub && self.m98_passes.is_none()
+    }
+}
+
+/// The line that called a subroutine.
+#[derive(Debug, Clone)]
+struct CallAt {
+    file: Rc<str>,
+    line: usize,
+    col: usize,
 }
 
 /// The streaming interpreter of [`crate::gcode`]: lines in, [`Item`]s out, one line read per
@@ -1307,6 +1713,21 @@ pub struct Interpreter<R> {
     at: usize,
     frames: Vec<Frame>,
     subs: HashMap<Label, Lines>,
+    /// Numbered subprograms (`O100` ... `M99`), called by M98 only.
+    m98_subs: HashMap<u32, Lines>,
+    /// The program's name, shared by the bodies stored from it.
+    main_file: Rc<str>,
+    subroutine_path: Vec<PathBuf>,
+    /// Lines read from the source but not run yet: an M98 call read ahead to find its
+    /// subprogram. (Source line, text.)
+    ahead: VecDeque<(usize, Vec<u8>)>,
+    /// Every line read from the source, kept while M99 may restart the main program.
+    record: Option<Vec<Vec<u8>>>,
+    /// Index in `record` of the next line to read again after a restart.
+    replay_at: usize,
+    restarts_left: u32,
+    /// A program number (`O1`) was seen: later ones begin M98 subprograms.
+    program_number_seen: bool,
     stored_bytes: usize,
     /// The next control line was jumped to as the next branch of an `if`.
     branch_pending: bool,
@@ -1330,7 +1751,11 @@ impl<R: BufRead> Interpreter<R> {
             line: 0,
             col: 0,
             kind,
+            called_from: None,
         });
+        let main_file: Rc<str> = Rc::from(file.as_str());
+        let subroutine_path = setup.subroutine_path.clone();
+        let restarts_left = setup.m99_restarts;
         Interpreter {
             reader,
             file,
@@ -1346,6 +1771,14 @@ impl<R: BufRead> Interpreter<R> {
             at: 0,
             frames: Vec::new(),
             subs: HashMap::new(),
+            m98_subs: HashMap::new(),
+            main_file,
+            subroutine_path,
+            ahead: VecDeque::new(),
+            record: (restarts_left > 0).then(Vec::new),
+            replay_at: 0,
+            restarts_left,
+            program_number_seen: false,
             stored_bytes: 0,
             branch_pending: false,
             idle_lines: 0,
@@ -1388,18 +1821,55 @@ impl<R: BufRead> Interpreter<R> {
         self.state.inverse_time
     }
 
+    /// Whether the line read last is in a subroutine file (its items carry the line and
+    /// column of the call in the program).
+    pub fn in_subroutine_file(&self) -> bool {
+        self.file_call().is_some()
+    }
+
     /// The interpreter's tool table, with the G10 L1 changes made so far.
     pub fn tools(&self) -> &ToolTable {
         &self.state.tools
     }
 
+    /// An error at column `col` of the line being run, in the file it is from; inside a
+    /// subroutine file, with the calls that led there.
     fn error(&self, col: usize, kind: ErrorKind) -> Error {
+        let file = self
+            .frames
+            .last()
+            .map_or(&self.main_file, |f| &f.lines.file);
+        let called_from = (**file != *self.main_file).then(|| {
+            Box::new(CallChain(
+                self.frames
+                    .iter()
+                    .rev()
+                    .filter_map(|f| f.call.as_ref())
+                    .map(|c| CallSite {
+                        file: c.file.to_string(),
+                        line: c.line,
+                    })
+                    .collect(),
+            ))
+        });
         Error {
-            file: self.file.clone(),
+            file: file.to_string(),
             line: self.at,
             col,
             kind,
+            called_from,
         }
+    }
+
+    /// The call, in the program itself, of the outermost subroutine file being run: the items
+    /// of a subroutine file's lines carry that call's line and column, so that everything
+    /// downstream (planner messages, the feed optimiser, the resume point) refers to lines of
+    /// the program.
+    fn file_call(&self) -> Option<&CallAt> {
+        self.frames
+            .iter()
+            .find(|f| *f.lines.file != *self.main_file)
+            .and_then(|f| f.call.as_ref())
     }
 
     /// Reads one line into `buf` (terminator stripped); `false` at the end of the input.
@@ -1408,7 +1878,7 @@ impl<R: BufRead> Interpreter<R> {
     /// endings must not merge its lines into one (a retract and a traverse would become one
     /// diagonal move through the part). The `\n` of a `\r\n` may come in a later read than its
     /// `\r`; `cr_pending` carries that over, so each ending counts once.
-    fn read_line(&mut self) -> Result<bool, Error> {
+    fn read_raw_line(&mut self) -> Result<bool, Error> {
         self.buf.clear();
         let mut read_any = false;
         loop {
@@ -1424,6 +1894,7 @@ impl<R: BufRead> Interpreter<R> {
                             lines_read: self.line,
                             message: e.to_string(),
                         },
+                        called_from: None,
                     });
                 }
             };
@@ -1472,6 +1943,50 @@ impl<R: BufRead> Interpreter<R> {
         Ok(true)
     }
 
+    /// Reads the next line of the main program into `buf`: one read ahead before, else the
+    /// next line of the source. `at` is its line.
+    fn read_line(&mut self) -> Result<bool, Error> {
+        if let Some((line, bytes)) = self.ahead.pop_front() {
+            self.stored_bytes = self.stored_bytes.saturating_sub(bytes.len() + 16);
+            self.buf = bytes;
+            self.at = line;
+            return Ok(true);
+        }
+        self.pull_line()
+    }
+
+    /// The next line of the source into `buf`: again from the record after an M99 restart,
+    /// else from the reader (recorded while a restart may come).
+    fn pull_line(&mut self) -> Result<bool, Error> {
+        if let Some(bytes) = self.record.as_ref().and_then(|r| r.get(self.replay_at)) {
+            self.buf.clear();
+            self.buf.extend_from_slice(bytes);
+            self.replay_at += 1;
+            self.line += 1;
+            self.at = self.line;
+            return Ok(true);
+        }
+        if !self.read_raw_line()? {
+            return Ok(false);
+        }
+        if self.record.is_some() {
+            self.stored_bytes += self.buf.len() + 16;
+            if self.stored_bytes > MAX_STORED_BYTES {
+                return Err(self.error(
+                    1,
+                    ErrorKind::StoredTooLarge {
+                        max_bytes: MAX_STORED_BYTES,
+                    },
+                ));
+            }
+        }
+        if let Some(record) = &mut self.record {
+            record.push(self.buf.clone());
+            self.replay_at = record.len();
+        }
+        Ok(true)
+    }
+
     /// The text of the line in `buf`.
     fn buf_text(&self) -> String {
         String::from_utf8_lossy(&self.buf).into_owned()
@@ -1496,11 +2011,22 @@ impl<R: BufRead> Interpreter<R> {
             }
             // The end of a body: a subroutine returns, a loop of the main stream is done (and
             // its lines are let go).
+            if let Some(frame) = self.frames.last_mut()
+                && let Some(passes) = frame.m98_passes
+                && passes > 1
+            {
+                frame.m98_passes = Some(passes - 1);
+                frame.pc = 0;
+                return Ok(());
+            }
             if let Some(f) = self.frames.pop() {
-                if f.sub {
+                if f.scoped() {
                     self.params.pop_scope();
-                } else {
+                } else if !f.sub {
                     self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
+                }
+                if f.sub {
+                    self.leave_call(f.call)?;
                 }
             }
             return Ok(());
@@ -1511,11 +2037,14 @@ impl<R: BufRead> Interpreter<R> {
             return Ok(());
         }
         let text = self.buf_text();
-        self.run_line(self.line, &text, false)
+        self.run_line(self.at, &text, false)
     }
 
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
         self.at = line;
+        if text.contains('#') {
+            self.state.system_parameters(&mut self.params);
+        }
         let kind = self
             .scanner
             .scan(text, self.block_delete, &self.params)
@@ -1529,7 +2058,18 @@ impl<R: BufRead> Interpreter<R> {
         }
         let pending = std::mem::take(&mut self.branch_pending);
         match kind {
-            LineKind::Blank | LineKind::Skipped | LineKind::ProgramNumber => {}
+            LineKind::Blank | LineKind::Skipped => {}
+            LineKind::ProgramNumber => {
+                let label = self.scanner.program.take();
+                match label {
+                    // The program's own number comes first; a later one begins a numbered
+                    // subprogram, which runs only when M98 calls it.
+                    Some(Label::Number(number)) if self.code_seen || self.program_number_seen => {
+                        self.define_m98(number, in_frame)?;
+                    }
+                    _ => self.program_number_seen = true,
+                }
+            }
             LineKind::Percent => {
                 if in_frame {
                     return Err(self.error(1, ErrorKind::MisplacedPercent));
@@ -1544,21 +2084,37 @@ impl<R: BufRead> Interpreter<R> {
             }
             LineKind::Words => {
                 self.code_seen = true;
+                let mut flow = Flow::Next;
                 if !self.scanner.words.is_empty() {
                     let block =
                         Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
-                    let end = self
+                    let first_item = self.queue.len();
+                    flow = self
                         .state
                         .execute(&block, line, &mut self.queue)
                         .map_err(|(col, k)| self.error(col, k))?;
-                    if let Some(end) = end {
-                        self.queue.push_back(Item::End(end));
-                        self.done = true;
+                    if let Some(call) = self.file_call() {
+                        let (line, col) = (call.line, call.col);
+                        for item in self.queue.iter_mut().skip(first_item) {
+                            relabel(item, line, col);
+                        }
+                        if let Flow::End(end) = &mut flow {
+                            relabel_end(end, line);
+                        }
                     }
                 }
                 let col = self.scanner.words.first().map_or(1, |w| w.col);
                 for (r, value) in std::mem::take(&mut self.scanner.assignments) {
                     self.params.set(&r, value).map_err(|k| self.error(col, k))?;
+                }
+                match flow {
+                    Flow::Next => {}
+                    Flow::End(end) => {
+                        self.queue.push_back(Item::End(end));
+                        self.done = true;
+                    }
+                    Flow::Call { number, count, col } => self.call_m98(number, count, col)?,
+                    Flow::Return { col } => self.m99(line, col)?,
                 }
             }
             LineKind::Control => {
@@ -1614,7 +2170,7 @@ impl<R: BufRead> Interpreter<R> {
             }
             let text = self.buf_text();
             let found = peek_control(&text).is_some_and(|(l, k)| l == *label && k == end);
-            self.store(lines, self.line, text, col)?;
+            self.store(lines, self.at, text, col)?;
             if found {
                 self.at = start;
                 return Ok(());
@@ -1660,6 +2216,321 @@ impl<R: BufRead> Interpreter<R> {
         )
     }
 
+    /// A subroutine called from `call` returned: the modal state M73 saved in it comes back
+    /// (a note on the call's line, in the program).
+    fn leave_call(&mut self, call: Option<CallAt>) -> Result<(), Error> {
+        let line = match self.file_call() {
+            Some(outer) => outer.line,
+            None => call.map_or(self.at, |c| c.line),
+        };
+        self.state
+            .leave_call(line, &mut self.queue)
+            .map_err(|(col, k)| self.error(col, k))
+    }
+
+    /// The line being run as a call site.
+    fn call_here(&self, line: usize, col: usize) -> CallAt {
+        let file = self
+            .frames
+            .last()
+            .map_or(&self.main_file, |f| &f.lines.file)
+            .clone();
+        CallAt { file, line, col }
+    }
+
+    /// Finds `name.ngc` (`123.ngc` for `o123`) in the first folder of the subroutine path that
+    /// has it, and stores the subroutine it defines (the lines between its `sub` and `endsub`;
+    /// the rest of the file is not run). Errors are at the calling line.
+    fn load_sub_file(&mut self, label: &Label, col: usize) -> Result<Lines, Error> {
+        let name = match label {
+            Label::Name(name) => name.clone(),
+            Label::Number(n) => n.to_string(),
+        };
+        if !name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-' || c == '_')
+        {
+            return Err(self.error(
+                col,
+                ErrorKind::SubroutineName {
+                    label: label.to_string(),
+                },
+            ));
+        }
+        let file_name = format!("{name}.ngc");
+        let Some(path) = self
+            .subroutine_path
+            .iter()
+            .map(|dir| dir.join(&file_name))
+            .find(|p| p.is_file())
+        else {
+            return Err(self.error(
+                col,
+                ErrorKind::UndefinedSubroutine {
+                    label: label.to_string(),
+                    file_name,
+                    searched: self
+                        .subroutine_path
+                        .iter()
+                        .map(|d| d.display().to_string())
+                        .collect(),
+                },
+            ));
+        };
+        let shown = path.display().to_string();
+        let room = MAX_STORED_BYTES.saturating_sub(self.stored_bytes) as u64;
+        let bytes = crate::files::read_bounded(&path, room).map_err(|e| {
+            self.error(
+                col,
+                ErrorKind::SubroutineFile {
+                    path: shown.clone(),
+                    message: e.to_string(),
+                },
+            )
+        })?;
+        let lines: Vec<(usize, String)> = super::split_lines_inclusive(&bytes)
+            .map(|l| {
+                let end = l
+                    .iter()
+                    .rposition(|b| *b != b'\n' && *b != b'\r')
+                    .map_or(0, |i| i + 1);
+                String::from_utf8_lossy(&l[..end]).into_owned()
+            })
+            .enumerate()
+            .map(|(i, t)| (i + 1, t))
+            .collect();
+        let is =
+            |t: &str, k: Keyword| peek_control(t).is_some_and(|(l, kw)| l == *label && kw == k);
+        let start = lines.iter().position(|(_, t)| is(t, Keyword::Sub));
+        let end = start.and_then(|s| {
+            lines
+                .iter()
+                .skip(s + 1)
+                .position(|(_, t)| is(t, Keyword::EndSub))
+                .map(|k| s + 1 + k)
+        });
+        let (Some(start), Some(end)) = (start, end) else {
+            return Err(self.error(
+                col,
+                ErrorKind::SubroutineFileWithoutSub {
+                    path: shown,
+                    label: label.to_string(),
+                },
+            ));
+        };
+        let body: Vec<(usize, String)> = lines[start + 1..end].to_vec();
+        let body = Body::new(body, Rc::from(shown.as_str()));
+        self.stored_bytes += body.bytes();
+        if self.stored_bytes > MAX_STORED_BYTES {
+            return Err(self.error(
+                col,
+                ErrorKind::StoredTooLarge {
+                    max_bytes: MAX_STORED_BYTES,
+                },
+            ));
+        }
+        self.subs.insert(label.clone(), body.clone());
+        Ok(body)
+    }
+
+    /// `O<number>` after the program started: stores the lines up to and including the next
+    /// line with M99 as subprogram `number` and goes on after them.
+    fn define_m98(&mut self, number: u32, in_frame: bool) -> Result<(), Error> {
+        let label = Label::Number(number);
+        let mut body = Vec::new();
+        let file;
+        if in_frame {
+            let here = self.frames.last().map_or(0, |f| f.pc.saturating_sub(1));
+            let Some(frame) = self.frames.last() else {
+                return Ok(());
+            };
+            let end = frame
+                .lines
+                .lines
+                .iter()
+                .skip(here + 1)
+                .position(|(_, t)| has_m99(t))
+                .map(|k| here + 1 + k)
+                .ok_or_else(|| {
+                    self.error(
+                        1,
+                        ErrorKind::UnclosedControl {
+                            label: label.to_string(),
+                            end: "M99",
+                        },
+                    )
+                })?;
+            body = frame.lines.lines[here + 1..=end].to_vec();
+            file = frame.lines.file.clone();
+            self.stored_bytes += body.iter().map(|(_, t)| t.len() + 16).sum::<usize>();
+            self.jump(end + 1);
+        } else {
+            let start = self.at;
+            loop {
+                if !self.read_line()? {
+                    self.at = start;
+                    return Err(self.error(
+                        1,
+                        ErrorKind::UnclosedControl {
+                            label: label.to_string(),
+                            end: "M99",
+                        },
+                    ));
+                }
+                let text = self.buf_text();
+                let done = has_m99(&text);
+                self.store(&mut body, self.at, text, 1)?;
+                if done {
+                    break;
+                }
+            }
+            self.at = start;
+            file = self.main_file.clone();
+        }
+        self.stored_bytes += BODY_OVERHEAD;
+        if self.stored_bytes > MAX_STORED_BYTES {
+            return Err(self.error(
+                1,
+                ErrorKind::StoredTooLarge {
+                    max_bytes: MAX_STORED_BYTES,
+                },
+            ));
+        }
+        if let Some(old) = self.m98_subs.insert(number, Body::new(body, file)) {
+            self.stored_bytes = self.stored_bytes.saturating_sub(old.bytes());
+        }
+        Ok(())
+    }
+
+    /// M98 P`number` L`count`: runs the subprogram `count` times. One not defined yet is
+    /// looked for further on in the program (LinuxCNC: it follows the call), reading ahead;
+    /// the lines read on the way run afterwards, as the program goes on.
+    fn call_m98(&mut self, number: u32, count: u32, col: usize) -> Result<(), Error> {
+        if count == 0 {
+            return Ok(());
+        }
+        let body = match self.m98_subs.get(&number) {
+            Some(body) => body.clone(),
+            None => self.find_m98(number, col)?,
+        };
+        if self.frames.iter().filter(|f| f.sub).count() >= MAX_CALL_DEPTH {
+            return Err(self.error(
+                col,
+                ErrorKind::CallTooDeep {
+                    max: MAX_CALL_DEPTH,
+                },
+            ));
+        }
+        self.state.enter_call();
+        let mut frame = Frame::new(body, true);
+        frame.m98_passes = Some(count);
+        frame.call = Some(self.call_here(self.at, col));
+        self.frames.push(frame);
+        Ok(())
+    }
+
+    /// Reads ahead (keeping the lines in `ahead`) to the subprogram `O<number>` ... `M99` and
+    /// stores it.
+    fn find_m98(&mut self, number: u32, col: usize) -> Result<Lines, Error> {
+        let at = self.at;
+        let mut start: Option<usize> = None;
+        let mut i = 0;
+        loop {
+            while let Some((_, bytes)) = self.ahead.get(i) {
+                let text = String::from_utf8_lossy(bytes);
+                match start {
+                    None if peek_program_number(&text) == Some(Label::Number(number)) => {
+                        start = Some(i);
+                    }
+                    Some(s) if has_m99(&text) => {
+                        let lines: Vec<(usize, String)> = self
+                            .ahead
+                            .drain(s..=i)
+                            .map(|(n, b)| (n, String::from_utf8_lossy(&b).into_owned()))
+                            .collect();
+                        // The O line is not part of the body; the lines stay counted, as
+                        // the body's.
+                        let body: Vec<(usize, String)> = lines.into_iter().skip(1).collect();
+                        let body = Body::new(body, self.main_file.clone());
+                        self.stored_bytes += BODY_OVERHEAD;
+                        self.m98_subs.insert(number, body.clone());
+                        self.at = at;
+                        return Ok(body);
+                    }
+                    _ => {}
+                }
+                i += 1;
+            }
+            let more = self.pull_line().inspect_err(|_| self.at = at)?;
+            let line = self.at;
+            self.at = at;
+            if !more {
+                return Err(self.error(col, ErrorKind::SubprogramNotFound { number }));
+            }
+            self.stored_bytes += self.buf.len() + 16;
+            if self.stored_bytes > MAX_STORED_BYTES {
+                return Err(self.error(
+                    col,
+                    ErrorKind::StoredTooLarge {
+                        max_bytes: MAX_STORED_BYTES,
+                    },
+                ));
+            }
+            let bytes = std::mem::take(&mut self.buf);
+            self.ahead.push_back((line, bytes));
+        }
+    }
+
+    /// M99: the end of an M98 subprogram's pass; in the main program, a restart (within
+    /// [`Setup::m99_restarts`]) or the end.
+    fn m99(&mut self, line: usize, col: usize) -> Result<(), Error> {
+        match self.frames.iter().rposition(|f| f.sub) {
+            Some(i) if self.frames[i].m98_passes.is_some() => {
+                self.frames.truncate(i + 1);
+                if let Some(frame) = self.frames.last_mut() {
+                    // The end of the body passes or pops it.
+                    frame.pc = frame.lines.lines.len();
+                }
+                Ok(())
+            }
+            Some(_) => Err(self.error(
+                col,
+                ErrorKind::ControlMismatch {
+                    what: "M99".to_owned(),
+                    expected: "to end an M98 subprogram (an o-word subroutine ends with endsub)",
+                },
+            )),
+            None if self.restarts_left > 0 && self.record.is_some() => {
+                self.restarts_left -= 1;
+                for f in std::mem::take(&mut self.frames) {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(f.lines.bytes());
+                }
+                for (_, bytes) in std::mem::take(&mut self.ahead) {
+                    self.stored_bytes = self.stored_bytes.saturating_sub(bytes.len() + 16);
+                }
+                self.replay_at = 0;
+                self.line = 0;
+                self.opened = false;
+                self.code_seen = false;
+                self.program_number_seen = false;
+                self.queue.push_back(Item::Note(Note {
+                    line,
+                    col,
+                    text: format!(
+                        "M99: the program restarts from its first line ({} restart(s) left)",
+                        self.restarts_left
+                    ),
+                }));
+                Ok(())
+            }
+            None => {
+                self.queue.push_back(Item::End(ProgramEnd::M99 { line }));
+                self.done = true;
+                Ok(())
+            }
+        }
+    }
+
     /// Runs an O-word control line.
     fn control(
         &mut self,
@@ -1676,6 +2547,7 @@ impl<R: BufRead> Interpreter<R> {
         match c.keyword {
             Sub => {
                 let mut body = Vec::new();
+                let mut file = self.main_file.clone();
                 if in_frame {
                     let end = self
                         .find_control(&c.label, &[EndSub], here + 1, true)
@@ -1688,6 +2560,7 @@ impl<R: BufRead> Interpreter<R> {
                             .get(here + 1..end)
                             .unwrap_or_default()
                             .to_vec();
+                        file = frame.lines.file.clone();
                     }
                     let bytes: usize = body.iter().map(|(_, t)| t.len() + 16).sum();
                     self.stored_bytes += bytes + BODY_OVERHEAD;
@@ -1709,19 +2582,15 @@ impl<R: BufRead> Interpreter<R> {
                     }
                 }
                 // A redefinition frees what the old body held.
-                if let Some(old) = self.subs.insert(c.label, Body::new(body)) {
+                if let Some(old) = self.subs.insert(c.label, Body::new(body, file)) {
                     self.stored_bytes = self.stored_bytes.saturating_sub(old.bytes());
                 }
             }
             Call => {
-                let body = self.subs.get(&c.label).cloned().ok_or_else(|| {
-                    self.error(
-                        c.col,
-                        ErrorKind::UndefinedSubroutine {
-                            label: c.label.to_string(),
-                        },
-                    )
-                })?;
+                let body = match self.subs.get(&c.label) {
+                    Some(body) => body.clone(),
+                    None => self.load_sub_file(&c.label, c.col)?,
+                };
                 if self.frames.iter().filter(|f| f.sub).count() >= MAX_CALL_DEPTH {
                     return Err(self.error(
                         c.col,
@@ -1731,23 +2600,31 @@ impl<R: BufRead> Interpreter<R> {
                     ));
                 }
                 self.params.push_scope(&c.values);
-                self.frames.push(Frame {
-                    lines: body,
-                    pc: 0,
-                    sub: true,
-                    repeats: HashMap::new(),
-                });
+                self.state.enter_call();
+                let mut frame = Frame::new(body, true);
+                frame.call = Some(self.call_here(line, c.col));
+                self.frames.push(frame);
             }
             Return | EndSub => {
-                if !self.frames.iter().any(|f| f.sub) {
-                    return Err(self.mismatch(&c, "to be inside a subroutine"));
+                match self.frames.iter().rev().find(|f| f.sub) {
+                    None => return Err(self.mismatch(&c, "to be inside a subroutine")),
+                    Some(f) if !f.scoped() => {
+                        return Err(self.mismatch(
+                            &c,
+                            "to be inside an o-word subroutine (an M98 subprogram ends with M99)",
+                        ));
+                    }
+                    Some(_) => {}
                 }
+                let mut call = None;
                 while let Some(f) = self.frames.pop() {
                     if f.sub {
                         self.params.pop_scope();
+                        call = f.call;
                         break;
                     }
                 }
+                self.leave_call(call)?;
                 if let Some(v) = c.values.first() {
                     self.params
                         .set(&ParamRef::Name("_value".into()), *v)
@@ -1766,12 +2643,8 @@ impl<R: BufRead> Interpreter<R> {
                 self.store(&mut lines, line, text.to_owned(), c.col)?;
                 self.capture(&c.label, end, c.col, &mut lines)?;
                 self.stored_bytes += BODY_OVERHEAD;
-                self.frames.push(Frame {
-                    lines: Body::new(lines),
-                    pc: 0,
-                    sub: false,
-                    repeats: HashMap::new(),
-                });
+                self.frames
+                    .push(Frame::new(Body::new(lines, self.main_file.clone()), false));
             }
             _ if !in_frame => return Err(self.mismatch(&c, "to follow its opening line")),
             If => {

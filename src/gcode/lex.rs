@@ -166,6 +166,8 @@ pub(super) struct Scanner {
     pub assignments: Vec<(ParamRef, f64)>,
     /// The O-word of the last line if it was a control line.
     pub control: Option<Control>,
+    /// The label of the last line if it was a program number (`O1234` alone).
+    pub program: Option<Label>,
 }
 
 fn unsupported(what: impl Into<String>, reason: &'static str) -> ErrorKind {
@@ -190,6 +192,7 @@ impl Scanner {
         self.message = None;
         self.assignments.clear();
         self.control = None;
+        self.program = None;
         let chars: &[char] = &self.chars;
         let mut i = 0;
         while chars.get(i).is_some_and(|c| c.is_whitespace()) {
@@ -250,14 +253,19 @@ impl Scanner {
                     let value = real_value(chars, &mut i, params, 0, '=')?;
                     self.assignments.push((r, value));
                 }
+                // Polar coordinates: @ distance, ^ angle (degrees).
                 '@' | '^' => {
-                    return Err((
-                        col,
-                        unsupported(
-                            format!("polar coordinate word '{c}'"),
-                            "polar coordinates are not supported",
-                        ),
-                    ));
+                    let letter = c;
+                    i += 1;
+                    let value =
+                        real_value(chars, &mut i, params, 0, letter).map_err(|(c, k)| match k {
+                            ErrorKind::ExpectedNumber { letter: l } if l == letter => (col, k),
+                            _ => (c, k),
+                        })?;
+                    if value.abs() > MAX_ABS_VALUE {
+                        return Err((col, ErrorKind::NumberOutOfRange { letter, value }));
+                    }
+                    self.words.push(Word { letter, value, col });
                 }
                 c if c.is_ascii_alphabetic() => {
                     let letter = c.to_ascii_uppercase();
@@ -291,11 +299,14 @@ impl Scanner {
                             let control = scan_o_word(chars, i, params)?;
                             self.words.clear();
                             return Ok(match control {
-                                Some(control) => {
+                                OWord::Control(control) => {
                                     self.control = Some(control);
                                     LineKind::Control
                                 }
-                                None => LineKind::ProgramNumber,
+                                OWord::Program(label) => {
+                                    self.program = Some(label);
+                                    LineKind::ProgramNumber
+                                }
                             });
                         }
                         'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
@@ -383,12 +394,12 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
         i += 1;
         skip_blanks(&mut i);
     }
-    // An N word may precede the O-word.
+    // An N word (fractional too) may precede the O-word.
     if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
         i += 1;
         while chars
             .get(i)
-            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace())
+            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace() || *c == '.')
         {
             i += 1;
         }
@@ -396,7 +407,7 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
     if !chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'o')) {
         return None;
     }
-    let (label, mut k) = o_label(&chars, i).ok()?;
+    let (label, mut k) = o_label(&chars, i, None).ok()?;
     skip_blanks(&mut k);
     let start = k;
     while chars.get(k).is_some_and(|c| c.is_ascii_alphabetic()) {
@@ -406,8 +417,82 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
     Some((label, Keyword::parse(&word)?))
 }
 
-/// The label at `at` (on the O) and the index after it.
-fn o_label(chars: &[char], at: usize) -> Result<(Label, usize), LexError> {
+/// The program number of a line that is only `O1234` (or `O<name>`), comments and an `N` word
+/// aside, read without evaluating anything (an M98 call looks ahead for its subprogram).
+pub(super) fn peek_program_number(line: &str) -> Option<Label> {
+    let chars: Vec<char> = line.chars().take(256).collect();
+    let mut i = 0;
+    let skip_blanks = |i: &mut usize| {
+        while chars.get(*i).is_some_and(|c| c.is_whitespace()) {
+            *i += 1;
+        }
+    };
+    skip_blanks(&mut i);
+    if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
+        i += 1;
+        while chars
+            .get(i)
+            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace() || *c == '.')
+        {
+            i += 1;
+        }
+    }
+    if !chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'o')) {
+        return None;
+    }
+    let (label, mut k) = o_label(&chars, i, None).ok()?;
+    skip_blanks(&mut k);
+    match chars.get(k) {
+        None | Some('(' | ';') => Some(label),
+        _ => None,
+    }
+}
+
+/// Whether a line holds the word M99 (comments and `#<names>` aside), read without evaluating
+/// anything: the end of a numbered subprogram (`O100` ... `M99`).
+pub(super) fn has_m99(line: &str) -> bool {
+    let chars: Vec<char> = line.chars().filter(|c| !c.is_whitespace()).collect();
+    let mut i = 0;
+    while let Some(&c) = chars.get(i) {
+        i += 1;
+        match c {
+            '(' => {
+                while chars.get(i).is_some_and(|c| *c != ')') {
+                    i += 1;
+                }
+            }
+            ';' => return false,
+            '<' => {
+                while chars.get(i).is_some_and(|c| *c != '>') {
+                    i += 1;
+                }
+            }
+            'm' | 'M' => {
+                let start = i;
+                while chars.get(i).is_some_and(char::is_ascii_digit) {
+                    i += 1;
+                }
+                let digits: String = chars.get(start..i).unwrap_or_default().iter().collect();
+                let point_zero = chars.get(i) != Some(&'.')
+                    || chars
+                        .get(i + 1..)
+                        .unwrap_or_default()
+                        .iter()
+                        .take_while(|c| c.is_ascii_digit())
+                        .all(|c| *c == '0');
+                if digits.parse::<u32>() == Ok(99) && point_zero {
+                    return true;
+                }
+            }
+            _ => {}
+        }
+    }
+    false
+}
+
+/// The label at `at` (on the O) and the index after it. With `params`, a computed label
+/// (`o#1`, `o[#1+2]`) is evaluated to a number; without, it is an error.
+fn o_label(chars: &[char], at: usize, params: Option<&Params>) -> Result<(Label, usize), LexError> {
     let col = at + 1;
     let mut j = at + 1;
     while chars.get(j).is_some_and(|c| *c == ' ' || *c == '\t') {
@@ -440,13 +525,17 @@ fn o_label(chars: &[char], at: usize) -> Result<(Label, usize), LexError> {
     let digits: String = chars.get(start..j).unwrap_or_default().iter().collect();
     match digits.parse::<u32>() {
         Ok(n) => Ok((Label::Number(n), j)),
-        Err(_) if matches!(chars.get(start), Some('#' | '[')) => Err((
-            start + 1,
-            unsupported(
-                "computed O-word label",
-                "O-word labels must be numbers or <names>",
-            ),
-        )),
+        Err(_) if matches!(chars.get(start), Some('#' | '[')) => {
+            let Some(params) = params else {
+                return Err((start + 1, ErrorKind::MalformedOWord));
+            };
+            let mut k = start;
+            let value = real_value(chars, &mut k, params, 0, 'O')?;
+            let n = (value >= 0.0 && value.fract() == 0.0 && value <= f64::from(u32::MAX))
+                .then_some(value as u32)
+                .ok_or((start + 1, ErrorKind::ComputedLabel { value }))?;
+            Ok((Label::Number(n), k))
+        }
         Err(_) => Err((col, ErrorKind::MalformedOWord)),
     }
 }
@@ -464,11 +553,24 @@ fn comment_end(chars: &[char], open: usize) -> Result<usize, LexError> {
     }
 }
 
-/// Reads an O-word at `at` (on the O). Alone on its line (comments aside) it is a program number
-/// (`None`); followed by a keyword it is a control line, whose bracketed values are evaluated.
-fn scan_o_word(chars: &[char], at: usize, params: &Params) -> Result<Option<Control>, LexError> {
+/// An O-word line: a program number alone, or a control line.
+enum OWord {
+    Program(Label),
+    Control(Control),
+}
+
+/// Reads an O-word at `at` (on the O). Alone on its line (comments aside) it is a program number;
+/// followed by a keyword it is a control line, whose bracketed values are evaluated.
+fn scan_o_word(chars: &[char], at: usize, params: &Params) -> Result<OWord, LexError> {
     let col = at + 1;
-    let (label, next) = o_label(chars, at)?;
+    let computed = {
+        let mut j = at + 1;
+        while chars.get(j).is_some_and(|c| *c == ' ' || *c == '\t') {
+            j += 1;
+        }
+        matches!(chars.get(j), Some('#' | '['))
+    };
+    let (label, next) = o_label(chars, at, Some(params))?;
     let mut k = next;
     let mut keyword = None;
     let mut values = Vec::new();
@@ -502,8 +604,21 @@ fn scan_o_word(chars: &[char], at: usize, params: &Params) -> Result<Option<Cont
         }
     }
     let Some(keyword) = keyword else {
-        return Ok(None);
+        if computed {
+            return Err((col, ErrorKind::MalformedOWord));
+        }
+        return Ok(OWord::Program(label));
     };
+    if computed && keyword != Keyword::Call {
+        // Loops, ifs and definitions are matched with their ends before anything is evaluated.
+        return Err((
+            col,
+            unsupported(
+                format!("computed O-word label on '{}'", keyword.name()),
+                "only a call may compute its label: loops, ifs and subroutine definitions need a written number or <name>",
+            ),
+        ));
+    }
     let count_ok = match keyword {
         Keyword::If | Keyword::ElseIf | Keyword::While | Keyword::Repeat => values.len() == 1,
         Keyword::Return | Keyword::EndSub => values.len() <= 1,
@@ -518,7 +633,7 @@ fn scan_o_word(chars: &[char], at: usize, params: &Params) -> Result<Option<Cont
             },
         ));
     }
-    Ok(Some(Control {
+    Ok(OWord::Control(Control {
         label,
         keyword,
         col,

@@ -26,27 +26,38 @@
 //!   G89 with R Q P L and G98/G99 (expanded into lines and dwells: `cycles.rs`). G53
 //!   (non-modal: G0/G1 in machine
 //!   coordinates), G28/G30 (rapid to the stored position, via the axis words' point if any),
-//!   G28.1/G30.1 (store the current position).
+//!   G28.1/G30.1 (store the current position). Polar words on G0/G1: `@` distance, `^` angle
+//!   (degrees) about the work system's origin (G91: added to the current distance and angle).
+//!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
 //!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D,
 //!   G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
-//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L2/L20 P X Y Z R (work offsets and
-//!   rotation), G92/G92.1/G92.2/G92.3.
+//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off),
+//!   G10 L2/L20 P X Y Z R (work offsets and rotation), G52 (local offset, in the G92 register),
+//!   G92/G92.1/G92.2/G92.3; line numbers `N`, fractional too.
 //! - M0/M1 (program stops), M2/M30 (end: nothing after them is read), M6 and M61 Q (set the
-//!   tool in the spindle), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97 accepted:
+//!   tool in the spindle), M70/M71/M72/M73 (save, invalidate, restore, auto-restore the modal
+//!   state, per call level), and F, S, T, M3/M4/M5/M19, M7/M8/M9, M48…M53, G97 accepted:
 //!   the ones without a motion effect leave a [`Note`].
 //!
 //! - Parameters `#1`…`#4999` and `#<name>` (local to a call, global when the name starts with
-//!   `_`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
+//!   `_`), LinuxCNC's system parameters #5070, #5161…, #5220, #5420… (read-only, see
+//!   `State::system_parameters`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
 //!   LinuxCNC's operators and functions, and O-word flow control: `sub`/`endsub`/`call`/`return`,
 //!   `if`/`elseif`/`else`/`endif`, `while`/`endwhile`, `do`/`while`, `repeat`/`endrepeat`,
-//!   `break`, `continue`. Subroutine bodies, and a loop or `if` of the main program while it
-//!   runs, are kept in memory (at most [`MAX_STORED_BYTES`]); everything else streams.
+//!   `break`, `continue`; computed call labels (`o[#1+2] call`); subroutine files
+//!   (`o<name> call` loads `name.ngc` from [`Setup::subroutine_path`], errors inside name that
+//!   file and the calls that led there: [`Error::called_from`]); Fanuc-style `O100` ... `M99`
+//!   subprograms called by `M98 P L` (read ahead when they follow the call), and M99 in the
+//!   main program (restarts it [`Setup::m99_restarts`] times, then ends it). Subroutine bodies,
+//!   lines read ahead, and a loop or `if` of the main program while it runs, are kept in memory
+//!   (at most [`MAX_STORED_BYTES`]); everything else streams.
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
 //! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
-//! polar coordinates, A/B/C/U/V/W axes, system parameters (`#5000` and up), subroutine files
-//! are [`ErrorKind::Unsupported`] (or [`ErrorKind::UndefinedSubroutine`]).
+//! G7, polar words on arcs, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
+//! tolerance, computed labels on anything but `call` are [`ErrorKind::Unsupported`]; a
+//! subroutine neither defined nor found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
 //! Every number of a line is read in the units in force *after* that line's G20/G21, and a feed
 //! keeps its physical speed when the units change later.
@@ -170,6 +181,12 @@ pub enum ProgramEnd {
         /// 1-based line.
         line: usize,
     },
+    /// M99 in the main program on this line, after the restarts [`Setup::m99_restarts`]
+    /// allows (on a controller, M99 there restarts the program endlessly).
+    M99 {
+        /// 1-based line.
+        line: usize,
+    },
 }
 
 /// A whole program, interpreted before any motion starts (see [`parse_program`]).
@@ -237,10 +254,13 @@ pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Progra
 /// An error: where it is and what is wrong. Displays as `file:line:col: message`, or
 /// `file:line: message` with no column, or `file: message` when it concerns no line (a read
 /// error, a bad setup).
+///
+/// An error inside a subroutine file names that file and its line, then the calls that led
+/// there: `sub.ngc:3:5: message (called from main.ngc:12)`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}{kind}", Place { file, line: *line, col: *col })]
+#[error("{}{kind}{}", Place { file, line: *line, col: *col }, Calls(called_from.as_deref()))]
 pub struct Error {
-    /// Name of the source.
+    /// Name of the source (the subroutine file's path when the line is in one).
     pub file: String,
     /// 1-based line (0 for errors that concern no line: a bad setup, a read error).
     pub line: usize,
@@ -248,6 +268,39 @@ pub struct Error {
     pub col: usize,
     /// What is wrong.
     pub kind: ErrorKind,
+    /// When `file` is a subroutine file: the call lines that led to it (`None` otherwise;
+    /// boxed, to keep errors small).
+    pub called_from: Option<Box<CallChain>>,
+}
+
+/// The lines that called the subroutines an error is in, innermost first.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CallChain(pub Vec<CallSite>);
+
+/// A line that called a subroutine.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CallSite {
+    /// The file of the calling line.
+    pub file: String,
+    /// Its 1-based line.
+    pub line: usize,
+}
+
+/// ` (called from a:3, from b:12)`, or nothing.
+struct Calls<'a>(Option<&'a CallChain>);
+
+impl fmt::Display for Calls<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let sites = self.0.map_or(&[][..], |c| c.0.as_slice());
+        for (i, site) in sites.iter().enumerate() {
+            let sep = if i == 0 { " (called from " } else { ", from " };
+            write!(f, "{sep}{}:{}", site.file, site.line)?;
+        }
+        if !sites.is_empty() {
+            f.write_str(")")?;
+        }
+        Ok(())
+    }
 }
 
 /// `file:line:col: `, without the parts that are 0 (unknown).
@@ -264,6 +317,18 @@ impl fmt::Display for Place<'_> {
             (line, 0) => write!(f, "{}:{line}: ", self.file),
             (line, col) => write!(f, "{}:{line}:{col}: ", self.file),
         }
+    }
+}
+
+/// The folders searched for a subroutine file, or `none`.
+struct Searched<'a>(&'a [String]);
+
+impl fmt::Display for Searched<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.0.is_empty() {
+            return f.write_str("no subroutine_path is set");
+        }
+        f.write_str(&self.0.join(", "))
     }
 }
 
@@ -433,13 +498,77 @@ pub enum ErrorKind {
         /// The keyword that closes it.
         end: &'static str,
     },
-    /// A call of a subroutine not defined before.
+    /// A call of a subroutine neither defined before nor found as a file on the subroutine
+    /// path.
     #[error(
-        "subroutine {label} is not defined (define it with 'sub' before the call; subroutine files are not searched)"
+        "subroutine {label} is not defined: define it with 'sub' before the call, or put {file_name} in a folder of the machine file's [program] subroutine_path (searched: {})",
+        Searched(searched)
     )]
     UndefinedSubroutine {
         /// The label.
         label: String,
+        /// The file that was looked for, e.g. `probe.ngc`.
+        file_name: String,
+        /// The folders searched, in order (empty: no subroutine path is set).
+        searched: Vec<String>,
+    },
+    /// A called subroutine's name that cannot name a file.
+    #[error(
+        "subroutine {label} cannot be looked up as a file: file names of subroutines hold only lowercase letters, digits, '-' and '_' (as in LinuxCNC)"
+    )]
+    SubroutineName {
+        /// The label.
+        label: String,
+    },
+    /// A subroutine file that could not be read.
+    #[error("cannot read subroutine file {path}: {message}")]
+    SubroutineFile {
+        /// The file.
+        path: String,
+        /// Why.
+        message: String,
+    },
+    /// A subroutine file without the definition of its subroutine.
+    #[error(
+        "subroutine file {path} does not define {label}: it needs a '{label} sub' line and a '{label} endsub' line after it"
+    )]
+    SubroutineFileWithoutSub {
+        /// The file.
+        path: String,
+        /// The label.
+        label: String,
+    },
+    /// Polar coordinates and X or Y on one line.
+    #[error(
+        "polar coordinates (@ distance, ^ angle) and {letter} on one line: give the point one way"
+    )]
+    PolarWithXy {
+        /// X or Y.
+        letter: char,
+    },
+    /// Incremental polar coordinates from the origin, where no angle is defined.
+    #[error(
+        "incremental polar coordinates (G91 @ ^) from the origin of the work system: the angle there is undefined"
+    )]
+    PolarFromOrigin,
+    /// M72 with no modal state saved at this call level.
+    #[error(
+        "M72: no modal state to restore at this call level (save it with M70 or M73 first; M71 and the end of the subroutine that saved it discard it)"
+    )]
+    NoSavedModalState,
+    /// `M98 P<n>` with no `O<n>` ... `M99` subprogram after the call.
+    #[error(
+        "M98 P{number}: no subprogram O{number} (an 'O{number}' line, its lines, then M99) follows in the program"
+    )]
+    SubprogramNotFound {
+        /// The program number.
+        number: u32,
+    },
+    /// A computed O-word label (`o[#1+2] call`) that is no label number.
+    #[error("computed O-word label {value} is not a non-negative integer")]
+    ComputedLabel {
+        /// The value computed.
+        value: f64,
     },
     /// Calls nested too deeply.
     #[error("subroutine calls nested more than {max} deep")]
@@ -545,7 +674,7 @@ pub enum ErrorKind {
         /// The second code, e.g. `G1`.
         second: String,
     },
-    /// A value that is not valid for its letter (G1.23, M-1, N1.5, F0, S-5, T2.5).
+    /// A value that is not valid for its letter (G1.23, M-1, N-5, F0, S-5, T2.5).
     #[error("invalid {word}: expected {expected}")]
     InvalidValue {
         /// The word as written, e.g. `F0`.
