@@ -105,8 +105,9 @@
 //! ([`profile::max_start_speed`], 003's path-length constraint for S-curves); a forward pass
 //! then limits each end speed to what the element can reach from its start
 //! ([`profile::max_end_speed`]). An element is settled once its end speed can no longer change:
-//! the forward pass binds it, or the backward pass reached the junction's own limit (more
-//! elements can only raise the backward bound, never beyond that limit). Settled elements leave
+//! the forward pass binds it, or its backward bound comes from a junction's own limit, at its
+//! end or at any junction further on that the backward pass reached (more elements can only
+//! raise the bound from the window's end, never beyond such a limit). Settled elements leave
 //! the window as segments and are never planned again, so the work per element is bounded; if
 //! too few are settled (a ramp longer than the window), the first quarter of the window is
 //! settled with the speeds it has, which are always safe.
@@ -791,6 +792,10 @@ pub struct Planner {
     v_settled_mm_s: f64,
     /// Backward-pass speeds, scratch.
     back_mm_s: Vec<f64>,
+    /// Whether each backward speed comes from a junction's own cap (reached through elements
+    /// whose lengths bind) rather than from the stop at the window's end: such a speed no
+    /// longer changes as elements come. Scratch, like `back_mm_s`.
+    back_anchored: Vec<bool>,
     ready: VecDeque<Segment>,
     finished: bool,
     /// Elements that could not be stretched to whole periods (see
@@ -828,6 +833,7 @@ impl Planner {
             window: VecDeque::with_capacity(config.lookahead.min(1 << 16) + 1),
             v_settled_mm_s: 0.0,
             back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
+            back_anchored: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             ready: VecDeque::new(),
             finished: false,
             off_grid: 0,
@@ -1020,7 +1026,10 @@ impl Planner {
         // can still stop at its end.
         self.back_mm_s.clear();
         self.back_mm_s.resize(n + 1, 0.0);
+        self.back_anchored.clear();
+        self.back_anchored.resize(n + 1, all);
         let mut v_next = 0.0;
+        let mut anchored = all;
         for i in (0..n).rev() {
             let p = &self.window[i];
             let cap = if i == 0 {
@@ -1029,7 +1038,9 @@ impl Planner {
                 p.cap_start_mm_s
             };
             v_next = start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits);
+            anchored = anchored || v_next >= cap;
             self.back_mm_s[i] = v_next;
+            self.back_anchored[i] = anchored;
         }
         // Forward: settle the prefix whose end speeds can no longer change.
         let quarter = (n / 4).max(1);
@@ -1049,8 +1060,10 @@ impl Planner {
             };
             let v1 = fwd.min(back);
             let last = i + 1 == n;
+            // More elements can only raise the backward bound from the window's end; one that
+            // comes from a junction's own cap stays.
             let fixed = all
-                || (!last && (fwd <= back || back >= self.window[i + 1].cap_start_mm_s))
+                || (!last && (fwd <= back || self.back_anchored[i + 1]))
                 || (!last && settled < quarter && n >= self.config.lookahead);
             if !fixed {
                 break;
