@@ -174,6 +174,7 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
                 max_jerk_mm_s3: Vector3::new(200_000.0, 200_000.0, 100_000.0),
                 profile,
                 chord_tol_mm: 0.001,
+                default_tolerance_mm: 0.01,
                 lookahead: 1000,
                 integer_periods: false,
             };

@@ -252,3 +252,52 @@ proptest! {
         setpoints::limits_hold(plan, &limits(), &cfg).map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
     }
 }
+
+/// Issue 11, item 2: a bare `G64` (LinuxCNC's "no limit") allows the machine's
+/// `default_tolerance_mm` in the jerk-limited mode, never more: there the axis filters may round
+/// a small circle by up to half of it, so it runs faster than under `G64 P0`, whose
+/// deviation stays within `chord_tol_mm`. Trapezoids plan both alike.
+#[test]
+fn bare_g64_deviates_within_the_default_tolerance() {
+    let run = |g64: &str, profile: ProfileKind| {
+        let text = format!("G21 G90 G17 {g64}\nG2 X0 Y0 I2 J0 F9000\nM2\n");
+        let prog = parse_program(&text, "circle.ngc", Vector3::zeros()).unwrap();
+        let cfg = PlannerConfig {
+            default_tolerance_mm: 0.02,
+            ..config(profile)
+        };
+        let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+        let centre = Vector3::new(2.0, 0.0, 0.0);
+        let mut interp = Interpolator::new(plan.clone(), T).unwrap();
+        let mut q = Vector3::zeros();
+        let mut worst: f64 = 0.0;
+        while !interp.is_finished() {
+            interp.update(&mut q);
+            worst = worst.max(((q - centre).norm() - 2.0).abs());
+        }
+        setpoints::limits_hold(plan.clone(), &limits(), &cfg).unwrap();
+        (worst, plan.duration_s())
+    };
+    let (bare_mm, bare_s) = run("G64", ProfileKind::SCurve);
+    let (exact_mm, exact_s) = run("G64 P0", ProfileKind::SCurve);
+    let chord_tol_mm = config(ProfileKind::SCurve).chord_tol_mm;
+    assert!(bare_mm <= 0.01 + 1e-9, "{bare_mm} mm off the circle");
+    assert!(
+        exact_mm <= chord_tol_mm + 1e-9,
+        "{exact_mm} mm off the circle"
+    );
+    assert!(
+        bare_mm > chord_tol_mm,
+        "bare G64 used its tolerance: {bare_mm} mm"
+    );
+    assert!(
+        bare_s < exact_s,
+        "bare G64 {bare_s} s against G64 P0 {exact_s} s"
+    );
+    let (_, bare_s) = run("G64", ProfileKind::Trapezoid);
+    let (_, exact_s) = run("G64 P0", ProfileKind::Trapezoid);
+    assert_eq!(
+        bare_s, exact_s,
+        "trapezoids plan a bare G64 as G64 P0 for now"
+    );
+}

@@ -56,6 +56,7 @@ struct RawPlanner {
     path_acc_share: Option<f64>,
     path_acc_mm_s2: Option<f64>,
     chord_tol_mm: Option<f64>,
+    default_tolerance_mm: Option<f64>,
     lookahead: Option<usize>,
     #[serde(default)]
     integer_periods: bool,
@@ -733,6 +734,13 @@ fn planner_config(
             DEFAULT_CHORD_TOL_MM,
             &|v| (0.0..=1.0).contains(&v),
             "must be in 0..=1 mm (0: no limit)",
+        )?,
+        default_tolerance_mm: number(
+            "default_tolerance_mm",
+            raw.default_tolerance_mm,
+            crate::planner::DEFAULT_TOLERANCE_MM,
+            &|v| v > 0.0 && v <= 1.0,
+            "must be in (0, 1] mm: bare G64 never deviates without limit",
         )?,
         lookahead: match raw.lookahead.unwrap_or(DEFAULT_LOOKAHEAD) {
             n @ 2..=1_000_000 => n,

@@ -54,8 +54,9 @@ pub enum BlendMode {
     /// G64: blending allowed, within the tolerances.
     Blend {
         /// P: largest deviation from the programmed corner, where the planner may round a
-        /// corner between two lines with a tangent arc; 0 (also G64 without P) keeps every
-        /// corner exact (LinuxCNC would then deviate without limit).
+        /// corner between two lines with a tangent arc; 0 keeps every corner exact. A G64
+        /// without P gives infinity, LinuxCNC's "no limit", which the planner caps at the
+        /// machine's `default_tolerance_mm` (jerk-limited mode) or keeps exact (trapezoids).
         p_mm: f64,
         /// Q: naive-CAM tolerance (collinear short segments within it may be merged); 0
         /// disables the detector. Without Q it equals P, as in LinuxCNC.

@@ -809,7 +809,8 @@ impl State {
                             return Err(invalid(w, "a tolerance of 0 or more"));
                         }
                         Some(w) => w.value * scale,
-                        None => 0.0,
+                        // LinuxCNC: no limit; the planner caps it (`default_tolerance_mm`).
+                        None => f64::INFINITY,
                     };
                     let q = self.take(b, 'Q').map_or(p, |w| w.value * scale);
                     BlendMode::Blend { p_mm: p, q_mm: q }

@@ -173,6 +173,10 @@ pub enum ProfileKind {
 /// filter, see the module documentation), rounded up to whole periods (at least 2).
 pub const AXIS_FILTER_S: f64 = 0.008;
 
+/// Default of [`PlannerConfig::default_tolerance_mm`]: 0.01 mm, the deviation a bare `G64`
+/// allows in the jerk-limited mode.
+pub const DEFAULT_TOLERANCE_MM: f64 = 0.01;
+
 /// Longest time-law filter: past it the tangential acceleration is lowered instead
 /// (`a ≤ J·T_f/2`).
 pub const MAX_TIME_LAW_FILTER_S: f64 = 1.0;
@@ -250,6 +254,10 @@ pub struct PlannerConfig {
     pub profile: ProfileKind,
     /// Largest chord (bow-height) error of one period's step on an arc; 0 for no limit.
     pub chord_tol_mm: f64,
+    /// The tolerance of a bare `G64` (no P; LinuxCNC's "no limit") in the jerk-limited mode:
+    /// its blends and axis filters stay within it. The trapezoid mode keeps such corners exact
+    /// for now.
+    pub default_tolerance_mm: f64,
     /// Elements in the look-ahead window (at least 2).
     pub lookahead: usize,
     /// 000's option: every moving element lasts a whole number of periods, its end point on a
@@ -269,6 +277,7 @@ impl PlannerConfig {
             max_jerk_mm_s3: Vector3::repeat(f64::INFINITY),
             profile: ProfileKind::Trapezoid,
             chord_tol_mm: 0.0,
+            default_tolerance_mm: DEFAULT_TOLERANCE_MM,
             lookahead: 1000,
             integer_periods: false,
         }
@@ -276,7 +285,7 @@ impl PlannerConfig {
 
     /// Checks every value's range.
     pub fn validate(&self) -> Result<(), PlanError> {
-        let checks: [(&'static str, f64, bool); 5] = [
+        let checks: [(&'static str, f64, bool); 6] = [
             (
                 "period_s",
                 self.period_s,
@@ -301,6 +310,11 @@ impl PlannerConfig {
                 "chord_tol_mm",
                 self.chord_tol_mm,
                 (0.0..=1.0e3).contains(&self.chord_tol_mm),
+            ),
+            (
+                "default_tolerance_mm",
+                self.default_tolerance_mm,
+                self.default_tolerance_mm > 0.0 && self.default_tolerance_mm <= 1.0e3,
             ),
         ];
         for (name, value, ok) in checks {
@@ -1307,9 +1321,26 @@ impl Planner {
     /// The deviation from the path the axis filters may take under `blend`: half the G64 P
     /// tolerance (the corner blends take the other half), else `chord_tol_mm` (0: no limit).
     fn filter_tolerance_mm(&self, blend: BlendMode) -> f64 {
-        match blend {
-            BlendMode::Blend { p_mm, .. } if p_mm > 0.0 => 0.5 * p_mm,
+        match self.blend_tolerance_mm(blend) {
+            p_mm if p_mm > 0.0 => 0.5 * p_mm,
             _ => self.config.chord_tol_mm,
+        }
+    }
+
+    /// The tolerance of a G64 corner: P, or for a bare G64 (P infinite, LinuxCNC's "no limit")
+    /// `default_tolerance_mm` in the jerk-limited mode and 0 (an exact corner) otherwise; 0
+    /// under G61 and G61.1.
+    fn blend_tolerance_mm(&self, blend: BlendMode) -> f64 {
+        match blend {
+            BlendMode::Blend { p_mm, .. } if p_mm == f64::INFINITY => {
+                if self.smoothing.is_some() {
+                    self.config.default_tolerance_mm
+                } else {
+                    0.0
+                }
+            }
+            BlendMode::Blend { p_mm, .. } if p_mm > 0.0 => p_mm,
+            _ => 0.0,
         }
     }
 
@@ -1327,9 +1358,10 @@ impl Planner {
     /// `r_need = r_max · (v_target/v_arc(r_max))^1.5`. On the arc every axis's centripetal
     /// acceleration and jerk stay within its share ([`arc_limits`]).
     fn blend_arc(&self, a: &Pending, b: &Pending) -> Result<Option<Blend>, PlanError> {
-        let BlendMode::Blend { p_mm: tol_mm, .. } = a.blend else {
+        let BlendMode::Blend { .. } = a.blend else {
             return Ok(None);
         };
+        let tol_mm = self.blend_tolerance_mm(a.blend);
         let (SegmentPath::Line { direction: u1 }, SegmentPath::Line { direction: u2 }) =
             (a.seg.path, b.seg.path)
         else {

@@ -26,6 +26,7 @@ pub fn config(profile: ProfileKind) -> PlannerConfig {
         max_jerk_mm_s3: Vector3::new(50_000.0, 40_000.0, 20_000.0),
         profile,
         chord_tol_mm: 0.001,
+        default_tolerance_mm: 0.01,
         lookahead: 64,
         integer_periods: false,
     }
