@@ -311,12 +311,15 @@ fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError>
         j += 1;
     }
     *i = j;
-    if digits > 0 && dots <= 1 && signs == 0 && exact {
-        if let Some(power) = POWERS_OF_TEN.get(decimals) {
-            // Exact: the mantissa is at most 2^53.
-            let value = mantissa as f64 / power;
-            return Ok(if negative { -value } else { value });
-        }
+    if digits > 0
+        && dots <= 1
+        && signs == 0
+        && exact
+        && let Some(power) = POWERS_OF_TEN.get(decimals)
+    {
+        // Exact: the mantissa is at most 2^53.
+        let value = mantissa as f64 / power;
+        return Ok(if negative { -value } else { value });
     }
     let text: String = chars.get(start..j).unwrap_or_default().iter().collect();
     if digits == 0 || dots > 1 || signs > 0 {

@@ -2042,7 +2042,10 @@ impl<R: BufRead> Interpreter<R> {
         }
         let mut text = std::mem::take(&mut self.line_text);
         text.clear();
-        text.push_str(&String::from_utf8_lossy(&self.buf));
+        match std::str::from_utf8(&self.buf) {
+            Ok(valid) => text.push_str(valid),
+            Err(_) => text.push_str(&String::from_utf8_lossy(&self.buf)),
+        }
         let run = self.run_line(self.at, &text, false);
         self.line_text = text;
         run
