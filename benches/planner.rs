@@ -9,6 +9,9 @@
 //! Each program's duration is printed first, for the ratio of the time it runs to the time the
 //! pipeline takes.
 //!
+//! The front end alone (parse + compensate, no planning) is timed too, in source lines per
+//! second.
+//!
 //! `cargo bench --bench planner`
 
 use std::hint::black_box;
@@ -118,6 +121,19 @@ fn front_end(text: &str, machine: &Machine, config: &PlannerConfig, sample: bool
     plan_all(items, machine, config, sample)
 }
 
+/// Parse and compensate the whole text, without planning; returns the number of items.
+fn parse_compensate(text: &str) -> usize {
+    let interp = Interpreter::new(
+        BufReader::new(text.as_bytes()),
+        "bench.ngc",
+        canmotion::gcode::Setup::new(Vector3::zeros()),
+    );
+    Compensator::new(interp, "bench.ngc", CompOptions::default()).fold(0, |n, i| {
+        black_box(i.unwrap());
+        n + 1
+    })
+}
+
 fn bench(c: &mut Criterion) {
     let machine = Machine::demo();
     let mut programs = vec![("tiny-1M".to_string(), tiny_segments(1_000_000))];
@@ -131,6 +147,12 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for (name, text) in &programs {
         let its = items(text);
+        // Throughput in source lines: the front end's own measure, independent of the profile.
+        let lines = text.lines().count();
+        g.throughput(Throughput::Elements(lines as u64));
+        g.bench_function(format!("parse+compensate {name} ({lines} lines)"), |b| {
+            b.iter(|| parse_compensate(black_box(text)))
+        });
         for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
             let config = PlannerConfig {
                 profile,

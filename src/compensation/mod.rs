@@ -676,15 +676,30 @@ where
 
     /// Queues an output element (a line of no length is left out) and moves the current point.
     fn push(&mut self, e: Element) -> Result<(), Error> {
+        if let Some(e) = self.output(e)? {
+            self.out.push_back(Ok(Item::Motion(e)));
+        }
+        Ok(())
+    }
+
+    /// What [`Self::push`] queues (`None` for a line of no length), with the current point
+    /// moved: for the caller that hands it out directly.
+    fn output(&mut self, e: Element) -> Result<Option<Element>, Error> {
         if !finite(&e.start_mm) || !finite(&e.end_mm) {
             return Err(self.geometry_error(&e, "a coordinate is not finite"));
         }
         if e.kind == ElementKind::Line && e.start_mm == e.end_mm {
-            return Ok(());
+            return Ok(None);
         }
         self.pos_mm = Some(e.end_mm);
-        self.out.push_back(Ok(Item::Motion(e)));
-        Ok(())
+        Ok(Some(e))
+    }
+
+    /// An element with no compensation open nor asked for: what [`Self::motion`] does with it,
+    /// handed back rather than queued.
+    fn pass(&mut self, e: Element) -> Result<Option<Element>, Error> {
+        let start_mm = *self.pos_mm.get_or_insert(e.start_mm);
+        self.output(Element { start_mm, ..e })
     }
 }
 
@@ -708,6 +723,19 @@ where
                     self.finish()
                 }
                 Some(Err(e)) => Err(e),
+                // Most programs run without compensation: their elements go straight out,
+                // not through the queue (a copy each way per element).
+                Some(Ok(Item::Motion(e)))
+                    if self.open.is_none()
+                        && self.out.is_empty()
+                        && matches!(e.comp, CompState::Off) =>
+                {
+                    match self.pass(e) {
+                        Ok(Some(e)) => return Some(Ok(Item::Motion(e))),
+                        Ok(None) => Ok(()),
+                        Err(e) => Err(e),
+                    }
+                }
                 Some(Ok(item)) => self.accept(item),
             };
             if let Err(e) = step {

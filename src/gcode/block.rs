@@ -164,8 +164,31 @@ const LETTERS: [char; 18] = [
     'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N', '@', '^',
 ];
 
+/// The index of `letter` in [`LETTERS`] (a `match`, not a search: it runs for every word).
 fn letter_index(letter: char) -> Option<usize> {
-    LETTERS.iter().position(|l| *l == letter)
+    let k = match letter {
+        'X' => 0,
+        'Y' => 1,
+        'Z' => 2,
+        'I' => 3,
+        'J' => 4,
+        'K' => 5,
+        'R' => 6,
+        'P' => 7,
+        'Q' => 8,
+        'F' => 9,
+        'S' => 10,
+        'T' => 11,
+        'D' => 12,
+        'H' => 13,
+        'L' => 14,
+        'N' => 15,
+        '@' => 16,
+        '^' => 17,
+        _ => return None,
+    };
+    debug_assert_eq!(LETTERS.get(k), Some(&letter));
+    Some(k)
 }
 
 /// The words of one line, checked and sorted into modal groups.
@@ -347,9 +370,9 @@ impl Block {
 
     /// The first axis word of the line (by column).
     pub fn first_axis(&self) -> Option<Word> {
-        self.axes()
+        let ([x, y, z], [distance, angle]) = (self.axes(), self.polar());
+        [x, y, z, distance, angle]
             .into_iter()
-            .chain(self.polar())
             .flatten()
             .min_by_key(|w| w.col)
     }
@@ -463,6 +486,14 @@ mod tests {
         s.scan(line, false, &crate::gcode::expr::Params::default())
             .expect("scans");
         Block::read(&s.words)
+    }
+
+    #[test]
+    fn every_letter_has_its_own_slot() {
+        for (k, l) in LETTERS.iter().enumerate() {
+            assert_eq!(letter_index(*l), Some(k));
+        }
+        assert_eq!(letter_index('G'), None);
     }
 
     #[test]

@@ -1705,6 +1705,9 @@ pub struct Interpreter<R> {
     params: Params,
     scanner: Scanner,
     buf: Vec<u8>,
+    /// The text of the main program's line being run, kept from line to line so that a line
+    /// costs no allocation.
+    line_text: String,
     /// The last line ended with `\r`: a `\n` next belongs to it.
     cr_pending: bool,
     queue: VecDeque<Item>,
@@ -1766,6 +1769,7 @@ impl<R: BufRead> Interpreter<R> {
             params: Params::default(),
             scanner: Scanner::default(),
             buf: Vec::new(),
+            line_text: String::new(),
             cr_pending: false,
             queue: VecDeque::new(),
             line: 0,
@@ -2037,8 +2041,15 @@ impl<R: BufRead> Interpreter<R> {
             self.done = true;
             return Ok(());
         }
-        let text = self.buf_text();
-        self.run_line(self.at, &text, false)
+        let mut text = std::mem::take(&mut self.line_text);
+        text.clear();
+        match std::str::from_utf8(&self.buf) {
+            Ok(valid) => text.push_str(valid),
+            Err(_) => text.push_str(&String::from_utf8_lossy(&self.buf)),
+        }
+        let run = self.run_line(self.at, &text, false);
+        self.line_text = text;
+        run
     }
 
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {

@@ -187,7 +187,12 @@ impl Scanner {
         params: &Params,
     ) -> Result<LineKind, LexError> {
         self.chars.clear();
-        self.chars.extend(line.chars());
+        if line.is_ascii() {
+            // Most lines: one char per byte, copied as a run of known length.
+            self.chars.extend(line.bytes().map(char::from));
+        } else {
+            self.chars.extend(line.chars());
+        }
         self.words.clear();
         self.message = None;
         self.assignments.clear();
