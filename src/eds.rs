@@ -66,9 +66,8 @@ use std::path::{Path, PathBuf};
 
 use canopen_rs::DataType;
 
+use crate::canopen::dictionary::{DriveDictionary, type_name};
 use crate::canopen::index;
-use crate::config::DriveDictionary;
-use crate::config::dictionary::type_name;
 
 /// Longest string value the dictionary format holds ([`crate::canopen::MAX_OBJECT_BYTES`]).
 const MAX_STRING: usize = crate::canopen::MAX_OBJECT_BYTES;
@@ -2535,7 +2534,7 @@ mod tests {
         assert_eq!(s.name, "Lower");
         assert_eq!(
             s.default,
-            crate::config::dictionary::DefaultValue::Fixed(canopen_rs::Value::Unsigned8(10))
+            crate::canopen::dictionary::DefaultValue::Fixed(canopen_rs::Value::Unsigned8(10))
         );
     }
 
@@ -2548,7 +2547,7 @@ mod tests {
         let i = import(&text).unwrap();
         let o = &i.dictionary.objects[&0x3004];
         assert_eq!(o.subs.len(), 4);
-        use crate::config::dictionary::DefaultValue::Fixed;
+        use crate::canopen::dictionary::DefaultValue::Fixed;
         use canopen_rs::Value::*;
         assert_eq!(o.subs[&0].default, Fixed(Unsigned8(3)));
         assert_eq!(o.subs[&1].name, "Status 1");
@@ -2630,7 +2629,7 @@ mod tests {
         let s = d.sub(0x2003, 0).unwrap();
         assert_eq!(
             s.default,
-            crate::config::dictionary::DefaultValue::Fixed(canopen_rs::Value::Unsigned8(2))
+            crate::canopen::dictionary::DefaultValue::Fixed(canopen_rs::Value::Unsigned8(2))
         );
         let s = d.sub(0x2004, 0).unwrap();
         assert_eq!(s.data_type, DataType::Integer32);
@@ -2716,7 +2715,7 @@ mod tests {
         let i = import(&text).unwrap();
         assert_eq!(
             i.dictionary.sub(0x6060, 0).unwrap().default,
-            crate::config::dictionary::DefaultValue::Fixed(canopen_rs::Value::Integer8(7))
+            crate::canopen::dictionary::DefaultValue::Fixed(canopen_rs::Value::Integer8(7))
         );
         assert!(i.toml.contains("ParameterValue; DefaultValue 0"));
     }
