@@ -1,4 +1,5 @@
-//! Tool table: tool number → radius and length, loaded from TOML.
+//! Tool table: tool number → radius and length. [`crate::config::tool_table`] loads it from
+//! TOML:
 //!
 //! ```toml
 //! [[tool]]
@@ -8,15 +9,7 @@
 //! description = "4 mm flat end mill"   # optional
 //! ```
 //!
-//! Loading is strict like every configuration file: unknown keys are errors, and every error
-//! names the file, the table (`tool 3`) and the key.
-
 use std::collections::BTreeMap;
-use std::path::Path;
-
-use serde::Deserialize;
-
-use crate::config::{ConfigError, parse_toml};
 
 /// Largest tool number (LinuxCNC's limit).
 pub const MAX_TOOL_NUMBER: u32 = 99_999;
@@ -47,94 +40,10 @@ pub struct ToolTable {
     tools: BTreeMap<u32, Tool>,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct File {
-    #[serde(default)]
-    tool: Vec<ToolEntry>,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ToolEntry {
-    number: i64,
-    radius_mm: f64,
-    length_mm: f64,
-    #[serde(default)]
-    #[allow(dead_code)]
-    description: Option<String>,
-}
-
 impl ToolTable {
     /// An empty table.
     pub fn new() -> ToolTable {
         ToolTable::default()
-    }
-
-    /// Reads and checks a tool table file.
-    pub fn load(path: &Path) -> Result<ToolTable, ConfigError> {
-        let text = crate::files::read_text(path, crate::files::MAX_CONFIG_BYTES)?;
-        ToolTable::parse(path, &text)
-    }
-
-    /// Checks a tool table given as text; `path` names it in errors.
-    pub fn parse(path: &Path, text: &str) -> Result<ToolTable, ConfigError> {
-        let file: File = parse_toml(path, text)?;
-        let mut table = ToolTable::new();
-        for (index, entry) in file.tool.iter().enumerate() {
-            let invalid = |table: String, key: &str, message: String| ConfigError::Invalid {
-                file: path.to_path_buf(),
-                table,
-                key: key.to_owned(),
-                message,
-            };
-            let number = u32::try_from(entry.number)
-                .ok()
-                .filter(|n| (1..=MAX_TOOL_NUMBER).contains(n))
-                .ok_or_else(|| {
-                    invalid(
-                        format!("tool #{}", index + 1),
-                        "number",
-                        format!(
-                            "{} must be an integer from 1 to {MAX_TOOL_NUMBER} (0 is \"no tool\")",
-                            entry.number
-                        ),
-                    )
-                })?;
-            let name = format!("tool {number}");
-            if !(entry.radius_mm >= 0.0 && entry.radius_mm <= MAX_TOOL_SIZE_MM) {
-                return Err(invalid(
-                    name,
-                    "radius_mm",
-                    format!(
-                        "{} must be from 0 to {MAX_TOOL_SIZE_MM} mm",
-                        entry.radius_mm
-                    ),
-                ));
-            }
-            if !(-MAX_TOOL_SIZE_MM..=MAX_TOOL_SIZE_MM).contains(&entry.length_mm) {
-                return Err(invalid(
-                    name,
-                    "length_mm",
-                    format!(
-                        "{} must be from -{MAX_TOOL_SIZE_MM} to {MAX_TOOL_SIZE_MM} mm",
-                        entry.length_mm
-                    ),
-                ));
-            }
-            let tool = Tool {
-                radius_mm: entry.radius_mm,
-                length_mm: entry.length_mm,
-            };
-            if table.tools.insert(number, tool).is_some() {
-                return Err(invalid(
-                    name,
-                    "number",
-                    format!("tool {number} is listed twice"),
-                ));
-            }
-        }
-        Ok(table)
     }
 
     /// The tool with this number: [`Tool::NONE`] for 0, `None` if it is not in the table.
@@ -174,63 +83,9 @@ impl ToolTable {
 mod tests {
     use super::*;
 
-    fn parse(text: &str) -> Result<ToolTable, ConfigError> {
-        ToolTable::parse(Path::new("t.toml"), text)
-    }
-
-    #[test]
-    fn the_demo_table_loads() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries/tools/demo-tools.toml");
-        let t = ToolTable::load(&path).unwrap();
-        assert_eq!(
-            t.get(1),
-            Some(Tool {
-                radius_mm: 2.0,
-                length_mm: 50.0
-            })
-        );
-        assert!(t.len() >= 3);
-        assert_eq!(t.get(0), Some(Tool::NONE));
-        assert_eq!(t.get(999), None);
-    }
-
-    #[test]
-    fn errors_name_file_table_and_key() {
-        let cases = [
-            (
-                "[[tool]]\nnumber = 1\nradius_mm = -1\nlength_mm = 5\n",
-                "t.toml: [tool 1] radius_mm: -1 must be from 0 to 10000 mm",
-            ),
-            (
-                "[[tool]]\nnumber = 0\nradius_mm = 1\nlength_mm = 5\n",
-                "t.toml: [tool #1] number: 0 must be an integer from 1 to 99999 (0 is \"no tool\")",
-            ),
-            (
-                "[[tool]]\nnumber = 2\nradius_mm = 1\nlength_mm = nan\n",
-                "t.toml: [tool 2] length_mm: NaN must be from -10000 to 10000 mm",
-            ),
-            (
-                "[[tool]]\nnumber = 2\nradius_mm = 1\nlength_mm = 1\n[[tool]]\nnumber = 2\nradius_mm = 1\nlength_mm = 1\n",
-                "t.toml: [tool 2] number: tool 2 is listed twice",
-            ),
-        ];
-        for (text, message) in cases {
-            assert_eq!(parse(text).unwrap_err().to_string(), message, "{text}");
-        }
-        let e = parse("[[tool]]\nnumber = 1\nradius_mm = 1\nlength_mm = 1\ndiameter_mm = 2\n")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.starts_with("t.toml: ") && e.contains("diameter_mm"),
-            "{e}"
-        );
-        let e = parse("[tools]\n").unwrap_err().to_string();
-        assert!(e.contains("tools"), "{e}");
-    }
-
     #[test]
     fn insert_replaces_and_ignores_tool_zero() {
-        let mut t = parse("").unwrap();
+        let mut t = ToolTable::new();
         assert!(t.is_empty());
         let tool = Tool {
             radius_mm: 1.0,
