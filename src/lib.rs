@@ -24,9 +24,9 @@
 //!    profile (trapezoid or S-curve) from its start to its end speed, limited by the feed and by
 //!    each axis's limits projected on the move's direction; this single move starts and ends at
 //!    rest, and a junction with a next move would keep the speed its velocity jump allows.
-//! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
+//! 4. [`interpolator::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
 //!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
-//!    `filter` in the machine file passes its samples through [`interp::filter::AxisFilter`]
+//!    `filter` in the machine file passes its samples through [`interpolator::filter::AxisFilter`]
 //!    (moving average or first-order lag after interpolation), which ends exactly there too.
 //! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
 //!    SCHED_FIFO where permitted; no allocation, even when it stops on a
@@ -50,7 +50,7 @@
 //!
 //! ## Layers
 //!
-//! Data flows one way: `gcode → compensation → planner → interp → gateway::cyclic →
+//! Data flows one way: `gcode → compensation → planner → interpolator → gateway::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
 //! takes time as an argument. [`files`] is how the command line and the loaders open their
@@ -60,6 +60,7 @@
 pub mod bus;
 pub mod canopen;
 pub mod cia402;
+pub mod commands;
 pub mod compensation;
 pub mod config;
 pub mod eds;
@@ -68,11 +69,10 @@ pub mod files;
 pub mod fuzzing;
 pub mod gateway;
 pub mod gcode;
-pub mod interp;
+pub mod interpolator;
 pub mod offline;
 pub mod optimize;
 pub mod planner;
 pub mod plot;
 pub mod rt;
 pub mod sim;
-pub mod tools;

@@ -13,7 +13,7 @@ use serde::Deserialize;
 use super::{ConfigError, parse_toml};
 use crate::canopen::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use crate::canopen::index;
-use crate::interp::filter::{AxisFilter, FilterKind, FilterSpec};
+use crate::interpolator::filter::{AxisFilter, FilterKind, FilterSpec};
 use crate::planner::MAX_LIMIT;
 
 /// The most axes a machine may have.

@@ -38,7 +38,7 @@ use super::expr::{ParamRef, Params};
 use super::lex::{
     Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
 };
-use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
+use super::tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 use super::{
     CallChain, CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop,
 };
