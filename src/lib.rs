@@ -53,9 +53,34 @@
 //! Data flows one way: `gcode → compensation → planner → interpolator → gateway::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
-//! takes time as an argument. [`files`] is how the command line and the loaders open their
-//! inputs (regular files only, bounded) and write their outputs (atomically, or in place through
-//! a symlink or to a device).
+//! takes time as an argument.
+//!
+//! Imports go down only. The layers, lowest first (a module may import its own layer and the
+//! ones before it; `tests/layers.rs` holds the same list and fails on an import of a higher
+//! layer):
+//!
+//! 1. [`files`]: how the command line and the loaders open their inputs (regular files only,
+//!    bounded) and write their outputs (atomically, or in place through a symlink or to a
+//!    device);
+//! 2. [`bus`]: frames, SocketCAN and the in-process bus;
+//! 3. [`canopen`]: codecs, SDO, EMCY, the named object indices and the drive dictionary model
+//!    ([`canopen::dictionary`]);
+//! 4. [`cia402`]: the drive state machine;
+//! 5. [`gcode`]: the interpreter ([`gcode::Interpreter`]) and the tool table
+//!    ([`gcode::ToolTable`]);
+//! 6. [`compensation`];
+//! 7. [`planner`];
+//! 8. [`interpolator`];
+//! 9. [`config`]: machine files (which configure the layers above), and the loading of drive
+//!    dictionaries and tool tables;
+//! 10. [`eds`]: EDS/DCF import into a drive dictionary;
+//! 11. [`rt`]: the cyclic thread's timing;
+//! 12. [`sim`]: the simulated drive;
+//! 13. [`gateway`]: start-up, the cyclic master, supervision, resume, the control socket;
+//! 14. [`plot`] and [`optimize`];
+//! 15. [`offline`], the `plan` command;
+//! 16. [`commands`]: the bus utilities (`scan`, `sdo`, `nmt`, `reset`, `monitor`, `candump`),
+//!     then `main.rs`, the command line.
 
 pub mod bus;
 pub mod canopen;

@@ -49,8 +49,9 @@ mod cycles;
 pub use cycles::MAX_CYCLE_ITEMS;
 use cycles::{Cycle, CycleState, Spindle};
 
-/// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory.
-pub const MAX_LINE_BYTES: usize = 64 * 1024;
+/// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory. The
+/// bound of every file read line by line ([`crate::files::MAX_LINE_BYTES`]).
+pub const MAX_LINE_BYTES: usize = crate::files::MAX_LINE_BYTES;
 
 /// Largest machine coordinate magnitude the interpreter produces; beyond it a program is in
 /// error (G91 accumulating, huge offsets).
