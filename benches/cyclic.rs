@@ -16,8 +16,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use canmotion::config::Machine;
-use canmotion::interp::filter::{AxisFilter, FilterKind, FilterSpec};
-use canmotion::interp::{Interpolator, OverrideRamp};
+use canmotion::interpolator::filter::{AxisFilter, FilterKind, FilterSpec};
+use canmotion::interpolator::{Interpolator, OverrideRamp};
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::Vector3;
 
@@ -179,7 +179,7 @@ fn bench_override(c: &mut Criterion) {
                         }
                         black_box(&counts);
                         done += 1;
-                        if status == canmotion::interp::Status::Finished {
+                        if status == canmotion::interpolator::Status::Finished {
                             break;
                         }
                     }

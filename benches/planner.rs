@@ -22,7 +22,7 @@ use canmotion::compensation::{CompOptions, Compensator};
 use canmotion::config::Machine;
 use canmotion::gateway::limits;
 use canmotion::gcode::{Interpreter, Item};
-use canmotion::interp::{Interpolator, Status};
+use canmotion::interpolator::{Interpolator, Status};
 use canmotion::planner::{Planner, PlannerConfig, ProfileKind};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use nalgebra::Vector3;

@@ -30,7 +30,7 @@ use canmotion::compensation::Compensator;
 use canmotion::config::Machine;
 use canmotion::gateway::limits;
 use canmotion::gcode::{Interpreter, Item, Setup, Tool, ToolTable};
-use canmotion::interp::{Interpolator, Status};
+use canmotion::interpolator::{Interpolator, Status};
 use canmotion::planner::bounds::{curvature_bound_s, exact_stops, reference_time_s};
 use canmotion::planner::{Plan, plan_items_with};
 use nalgebra::Vector3;

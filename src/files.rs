@@ -22,9 +22,9 @@ use std::path::{Path, PathBuf};
 /// file, EDS file, program given to `optimize`): 16 MiB, far beyond any real one.
 pub const MAX_CONFIG_BYTES: u64 = 16 * 1024 * 1024;
 
-/// Longest line of a file read line by line (a candump log), terminator excluded: 64 KiB, as
-/// for G-code ([`crate::gcode::MAX_LINE_BYTES`]).
-pub const MAX_LINE_BYTES: usize = crate::gcode::MAX_LINE_BYTES;
+/// Longest line of a file read line by line (a candump log, a G-code program: G-code's
+/// `MAX_LINE_BYTES` is this one), terminator excluded: 64 KiB.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
 
 /// What a path that is not a regular file is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -24,9 +24,9 @@
 //!    profile (trapezoid or S-curve) from its start to its end speed, limited by the feed and by
 //!    each axis's limits projected on the move's direction; this single move starts and ends at
 //!    rest, and a junction with a next move would keep the speed its velocity jump allows.
-//! 4. [`interp::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
+//! 4. [`interpolator::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
 //!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
-//!    `filter` in the machine file passes its samples through [`interp::filter::AxisFilter`]
+//!    `filter` in the machine file passes its samples through [`interpolator::filter::AxisFilter`]
 //!    (moving average or first-order lag after interpolation), which ends exactly there too.
 //! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
 //!    SCHED_FIFO where permitted; no allocation, even when it stops on a
@@ -50,16 +50,42 @@
 //!
 //! ## Layers
 //!
-//! Data flows one way: `gcode → compensation → planner → interp → gateway::cyclic →
+//! Data flows one way: `gcode → compensation → planner → interpolator → gateway::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
-//! takes time as an argument. [`files`] is how the command line and the loaders open their
-//! inputs (regular files only, bounded) and write their outputs (atomically, or in place through
-//! a symlink or to a device).
+//! takes time as an argument.
+//!
+//! Imports go down only. The layers, lowest first (a module may import its own layer and the
+//! ones before it; `tests/layers.rs` holds the same list and fails on an import of a higher
+//! layer):
+//!
+//! 1. [`files`]: how the command line and the loaders open their inputs (regular files only,
+//!    bounded) and write their outputs (atomically, or in place through a symlink or to a
+//!    device);
+//! 2. [`bus`]: frames, SocketCAN and the in-process bus;
+//! 3. [`canopen`]: codecs, SDO, EMCY, the named object indices and the drive dictionary model
+//!    ([`canopen::dictionary`]);
+//! 4. [`cia402`]: the drive state machine;
+//! 5. [`gcode`]: the interpreter ([`gcode::Interpreter`]) and the tool table
+//!    ([`gcode::ToolTable`]);
+//! 6. [`compensation`];
+//! 7. [`planner`];
+//! 8. [`interpolator`];
+//! 9. [`config`]: machine files (which configure the layers above), and the loading of drive
+//!    dictionaries and tool tables;
+//! 10. [`eds`]: EDS/DCF import into a drive dictionary;
+//! 11. [`rt`]: the cyclic thread's timing;
+//! 12. [`sim`]: the simulated drive;
+//! 13. [`gateway`]: start-up, the cyclic master, supervision, resume, the control socket;
+//! 14. [`plot`] and [`optimize`];
+//! 15. [`offline`], the `plan` command;
+//! 16. [`commands`]: the bus utilities (`scan`, `sdo`, `nmt`, `reset`, `monitor`, `candump`),
+//!     then `main.rs`, the command line.
 
 pub mod bus;
 pub mod canopen;
 pub mod cia402;
+pub mod commands;
 pub mod compensation;
 pub mod config;
 pub mod eds;
@@ -68,11 +94,10 @@ pub mod files;
 pub mod fuzzing;
 pub mod gateway;
 pub mod gcode;
-pub mod interp;
+pub mod interpolator;
 pub mod offline;
 pub mod optimize;
 pub mod planner;
 pub mod plot;
 pub mod rt;
 pub mod sim;
-pub mod tools;

@@ -93,7 +93,7 @@ enum Command {
         iface: String,
         /// Node id 1-127, or `all` (every CiA 402 drive a scan finds).
         #[arg(value_name = "NODE|all")]
-        target: canmotion::tools::NmtTarget,
+        target: canmotion::commands::NmtTarget,
         /// How long the drive has to leave Fault after the reset.
         #[arg(long, value_name = "MS", default_value_t = 1000)]
         timeout_ms: u64,
@@ -190,10 +190,10 @@ enum Command {
         iface: String,
         /// start | stop | preop | reset | reset-comm.
         #[arg(value_name = "COMMAND")]
-        command: canmotion::tools::NmtCommand,
+        command: canmotion::commands::NmtCommand,
         /// Node id 1-127, or `all`.
         #[arg(value_name = "NODE|all")]
-        target: canmotion::tools::NmtTarget,
+        target: canmotion::commands::NmtTarget,
     },
     /// List the CANopen nodes on a bus: node id, NMT state, device type, identity, name.
     Scan {
@@ -237,13 +237,13 @@ enum SdoOp {
         /// SocketCAN interface (vcan0, can0).
         iface: String,
         /// Node id 1-127.
-        node: canmotion::tools::Node,
+        node: canmotion::commands::Node,
         /// Object, hex: 0x6040:00, 1018:4.
         #[arg(value_name = "INDEX[:SUB]")]
-        address: canmotion::tools::ObjectAddress,
+        address: canmotion::commands::ObjectAddress,
         /// u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
         #[arg(value_name = "TYPE")]
-        data_type: Option<canmotion::tools::SdoType>,
+        data_type: Option<canmotion::commands::SdoType>,
         /// Ask for a block upload (CiA 301 §7.2.4.3.9; a node without it may answer with a
         /// normal upload, which is followed).
         #[arg(long)]
@@ -254,13 +254,13 @@ enum SdoOp {
         /// SocketCAN interface (vcan0, can0).
         iface: String,
         /// Node id 1-127.
-        node: canmotion::tools::Node,
+        node: canmotion::commands::Node,
         /// Object, hex: 0x6040:00, 1018:4.
         #[arg(value_name = "INDEX[:SUB]")]
-        address: canmotion::tools::ObjectAddress,
+        address: canmotion::commands::ObjectAddress,
         /// u8 u16 u32 u64 i8 i16 i32 i64 f32 f64 string.
         #[arg(value_name = "TYPE")]
-        data_type: canmotion::tools::SdoType,
+        data_type: canmotion::commands::SdoType,
         /// The value (decimal, 0x hex, negative for signed types; text for string).
         #[arg(allow_hyphen_values = true)]
         value: String,
@@ -661,11 +661,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             timeout_ms,
             observe_ms,
         } => {
-            use canmotion::tools::reset;
+            use canmotion::commands::reset;
             let bus = Bus::from_arg(&iface);
             let nodes = match target {
-                canmotion::tools::NmtTarget::Node(n) => vec![n.0],
-                canmotion::tools::NmtTarget::All => {
+                canmotion::commands::NmtTarget::Node(n) => vec![n.0],
+                canmotion::commands::NmtTarget::All => {
                     let found = reset::drives_on(&bus)?;
                     if found.is_empty() {
                         return Err(format!("no CiA 402 drive answered on {}", bus.name()).into());
@@ -735,7 +735,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             replay,
             count,
         } => {
-            use canmotion::tools::{DecodeContext, monitor};
+            use canmotion::commands::{DecodeContext, monitor};
             let ctx = match machine {
                 Some(p) => DecodeContext::from_machine(&Machine::load(&p)?),
                 None => DecodeContext::new(),
@@ -768,7 +768,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 canmotion::canopen::sdo_client::Mode::Segmented
             };
-            let v = canmotion::tools::sdo::read(
+            let v = canmotion::commands::sdo::read(
                 &Bus::from_arg(&iface),
                 node,
                 address,
@@ -789,8 +789,8 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 },
         } => {
             let bus = Bus::from_arg(&iface);
-            let v = canmotion::tools::sdo::write_text(&bus, node, address, data_type, &value)?;
-            let v = canmotion::tools::args::format_value(&v);
+            let v = canmotion::commands::sdo::write_text(&bus, node, address, data_type, &value)?;
+            let v = canmotion::commands::args::format_value(&v);
             outln!("node {node}: {address} = {v} written");
             Ok(())
         }
@@ -799,12 +799,12 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             command,
             target,
         } => {
-            let f = canmotion::tools::nmt::send(&Bus::from_arg(&iface), command, target)?;
+            let f = canmotion::commands::nmt::send(&Bus::from_arg(&iface), command, target)?;
             outln!("NMT {command}: {target} ({f})");
             Ok(())
         }
         Command::Scan { iface, timeout_ms } => {
-            use canmotion::tools::scan;
+            use canmotion::commands::scan;
             let bus = Bus::from_arg(&iface);
             let opts = scan::ScanOptions {
                 timeout: std::time::Duration::from_millis(timeout_ms),

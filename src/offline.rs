@@ -17,8 +17,8 @@ use crate::compensation::Compensator;
 use crate::config::Machine;
 use crate::gateway::{GatewayError, check_element, limits};
 use crate::gcode::{Element, ElementKind, Interpreter, Item};
-use crate::interp::filter::AxisFilter;
-use crate::interp::{Interpolator, Status};
+use crate::interpolator::filter::AxisFilter;
+use crate::interpolator::{Interpolator, Status};
 use crate::planner::{Planner, Segment, SegmentPath};
 use crate::plot::PlotRecorder;
 
@@ -128,7 +128,7 @@ pub enum OfflineError {
         /// Program file.
         file: String,
         /// Why.
-        source: crate::interp::InterpError,
+        source: crate::interpolator::InterpError,
     },
 }
 

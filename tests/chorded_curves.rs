@@ -12,7 +12,7 @@ mod common;
 use canmotion::config::Machine;
 use canmotion::gateway::limits;
 use canmotion::gcode::{Interpreter, Item, Setup};
-use canmotion::interp::{Interpolator, Status};
+use canmotion::interpolator::{Interpolator, Status};
 use canmotion::planner::bounds::curvature_bound_s;
 use canmotion::planner::{Limits, PlannerConfig, plan_items_with};
 use chorded::ChordedCurve;

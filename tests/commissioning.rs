@@ -14,14 +14,14 @@ use canmotion::bus::inproc::InProcBus;
 use canmotion::bus::{Bus, Filter};
 use canmotion::canopen::NmtState;
 use canmotion::canopen::sdo_client::Mode;
-use canmotion::config::{DriveDictionary, Machine};
-use canmotion::sim::{SimDrive, runner};
-use canmotion::tools::monitor::{self, MonitorOptions};
-use canmotion::tools::scan::{self, ScanOptions};
-use canmotion::tools::sdo::{self, ReadValue};
-use canmotion::tools::{
+use canmotion::commands::monitor::{self, MonitorOptions};
+use canmotion::commands::scan::{self, ScanOptions};
+use canmotion::commands::sdo::{self, ReadValue};
+use canmotion::commands::{
     DecodeContext, NmtCommand, NmtTarget, Node, ObjectAddress, SdoType, ToolError, nmt,
 };
+use canmotion::config::{DriveDictionary, Machine};
+use canmotion::sim::{SimDrive, runner};
 
 fn dict() -> Arc<DriveDictionary> {
     Arc::new(

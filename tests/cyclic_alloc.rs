@@ -17,7 +17,7 @@ use canmotion::cia402::{PowerStateMachine, controlword as cwb, statusword as swb
 use canmotion::config::Machine;
 use canmotion::gateway::alarm::Alarm;
 use canmotion::gateway::cyclic::{CyclicMaster, Phase};
-use canmotion::interp::Interpolator;
+use canmotion::interpolator::Interpolator;
 
 struct Counting;
 

@@ -7,7 +7,7 @@
 //! end point.
 
 use canmotion::gcode::parse_program;
-use canmotion::interp::{Interpolator, MAX_OVERRIDE, OverrideRamp, Status};
+use canmotion::interpolator::{Interpolator, MAX_OVERRIDE, OverrideRamp, Status};
 use canmotion::planner::{Plan, PlannerConfig, ProfileKind, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;

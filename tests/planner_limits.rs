@@ -5,7 +5,7 @@
 //! Seeded random programs (proptest), trapezoid and S-curve modes.
 
 use canmotion::gcode::parse_program;
-use canmotion::interp::Interpolator;
+use canmotion::interpolator::Interpolator;
 use canmotion::planner::{PlannerConfig, ProfileKind, SegmentPath, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;

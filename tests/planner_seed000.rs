@@ -7,7 +7,7 @@ use std::path::Path;
 
 use canmotion::config::Machine;
 use canmotion::gateway::plan_program;
-use canmotion::interp::Interpolator;
+use canmotion::interpolator::Interpolator;
 use canmotion::planner::PlannerConfig;
 use nalgebra::Vector3;
 

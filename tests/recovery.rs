@@ -9,12 +9,12 @@ use std::time::{Duration, Instant};
 
 use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
+use canmotion::commands::reset::{self, ResetOutcome};
 use canmotion::config::Machine;
 use canmotion::gateway::alarm::{Alarm, Failure};
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState, RunOutcome};
 use canmotion::gateway::{GatewayError, RunOptions};
 use canmotion::sim::{Inject, SimDrive, runner};
-use canmotion::tools::reset::{self, ResetOutcome};
 use common::*;
 
 /// Three lines, so that a stop in the third has a completed line before it.

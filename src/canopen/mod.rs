@@ -6,6 +6,7 @@
 //! by `tests/canopen_rs_gaps.rs`.
 
 pub mod abort;
+pub mod dictionary;
 pub mod emcy;
 pub mod index;
 pub mod od;

@@ -8,8 +8,7 @@ use std::sync::Arc;
 use canopen_rs::{DataType, Value};
 
 use super::abort::AbortCode;
-use crate::config::DriveDictionary;
-use crate::config::dictionary::{SubDef, value_as_f64, value_as_i128};
+use super::dictionary::{DriveDictionary, SubDef, value_as_f64, value_as_i128};
 
 /// The value of one entry: a number, or the bytes of a byte string of any length.
 #[derive(Debug, Clone, PartialEq)]

@@ -10,10 +10,10 @@ use std::sync::Arc;
 use canopen_rs::Value;
 use serde::Deserialize;
 
-use super::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use super::{ConfigError, parse_toml};
+use crate::canopen::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use crate::canopen::index;
-use crate::interp::filter::{AxisFilter, FilterKind, FilterSpec};
+use crate::interpolator::filter::{AxisFilter, FilterKind, FilterSpec};
 use crate::planner::MAX_LIMIT;
 
 /// The most axes a machine may have.
@@ -1045,7 +1045,7 @@ impl Machine {
             let supported = dict
                 .sub(index::SUPPORTED_MODES, 0)
                 .and_then(|s| match &s.default {
-                    super::dictionary::DefaultValue::Fixed(v) => value_as_i128(v),
+                    crate::canopen::dictionary::DefaultValue::Fixed(v) => value_as_i128(v),
                     _ => None,
                 })
                 .unwrap_or(0);
@@ -1173,7 +1173,7 @@ impl Machine {
                         ),
                     )
                 })?;
-                if let Some(x) = super::dictionary::value_as_f64(&value)
+                if let Some(x) = crate::canopen::dictionary::value_as_f64(&value)
                     && (def.min.is_some_and(|lo| x < lo) || def.max.is_some_and(|hi| x > hi))
                 {
                     return Err(ctx.err(

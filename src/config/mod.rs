@@ -6,6 +6,7 @@
 
 pub mod dictionary;
 pub mod machine;
+pub mod tool_table;
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};

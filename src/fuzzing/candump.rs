@@ -2,7 +2,7 @@
 //! never panic, and read lines in bounded memory; a record it reads re-formats to a line that
 //! reads back as the same record (what `monitor --log` writes, `monitor --replay` reads).
 
-use crate::tools::candump::{LogReader, parse_line};
+use crate::commands::candump::{LogReader, parse_line};
 
 /// The log reader on `data` as a log, and each record through its line and back.
 pub fn log(data: &[u8]) {

@@ -2,7 +2,7 @@
 //! never panic; and a dictionary they produce is one the loader reads back (the importer
 //! renders TOML, the loader must accept it as it is, whatever the input was).
 
-use crate::config::DriveDictionary;
+use crate::canopen::dictionary::DriveDictionary;
 use crate::eds::{ImportOptions, import_bytes};
 use std::path::Path;
 

@@ -272,7 +272,7 @@ pub enum Alarm {
     PlanningFailed,
     /// The plan could not be made into a motion.
     #[error("{0}")]
-    Interpolator(#[from] crate::interp::InterpError),
+    Interpolator(#[from] crate::interpolator::InterpError),
     /// The port failed.
     #[error("bus error: {error}")]
     Bus {

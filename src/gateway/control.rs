@@ -4,12 +4,12 @@
 //! into the wanted state, a requested override and a hold flag, and publishes it with plain
 //! atomic stores and a generation count; the cyclic thread polls the generation once per cycle
 //! ([`Control::poll`]: two loads, no lock, no allocation) and hands a change to the
-//! interpolator, where it takes effect from the next sample (see [`crate::interp`]). One run at
+//! interpolator, where it takes effect from the next sample (see [`crate::interpolator`]). One run at
 //! a time per process, as for [`super::progress::PROGRESS`]: the state lives in one static,
 //! [`CONTROL`], reset when a run starts.
 //!
 //! Commands, one per line: `override P` (P in percent, 0 to 200; above 100 % the motion goes
-//! faster where the plan and the machine leave room, see [`crate::interp`]), `hold`, `resume`,
+//! faster where the plan and the machine leave room, see [`crate::interpolator`]), `hold`, `resume`,
 //! `status`; or a line of keys, each applied in turn: `+` / `-` (10 % up or down, within 0 to
 //! 200 %), `0` to `9` (0 to 90 %), `f` (100 %), space or `h` (hold / resume).
 
@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Highest override accepted at run time, 200 %.
-pub const MAX_REQUEST: f64 = crate::interp::MAX_OVERRIDE;
+pub const MAX_REQUEST: f64 = crate::interpolator::MAX_OVERRIDE;
 
 /// Why a command line was refused (it changes nothing).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -31,8 +31,8 @@ use crate::canopen::index;
 use crate::cia402::{Action, Enabler, State, Target, controlword as cwb, statusword as swb};
 use crate::config::machine::MAX_AXES;
 use crate::config::{AxisConfig, AxisMode, Machine};
-use crate::interp::filter::AxisFilter;
-use crate::interp::{Interpolator, Status};
+use crate::interpolator::filter::AxisFilter;
+use crate::interpolator::{Interpolator, Status};
 
 /// How long the drives may take to reach Switch on disabled at the end. (Reaching Operation
 /// enabled, and answering bit 4 with bit 12, have each axis's `enable_timeout_ms`.)
@@ -1108,7 +1108,7 @@ mod tests {
 
     #[test]
     fn filtered_setpoints_end_exactly_at_the_program_end_and_agree_with_plan() {
-        use crate::interp::filter::{FilterKind, FilterSpec};
+        use crate::interpolator::filter::{FilterKind, FilterSpec};
         for (kind, time_s) in [
             (FilterKind::Linear, 0.024),
             (FilterKind::Exponential, 0.008),
@@ -1178,7 +1178,7 @@ mod tests {
         let from = r.master.armed_mm().unwrap();
         let to = Vector3::new(150.0, 80.0, from[2]);
         let ramp =
-            crate::interp::OverrideRamp::for_machine(&crate::gateway::limits(&m), &m.planner)
+            crate::interpolator::OverrideRamp::for_machine(&crate::gateway::limits(&m), &m.planner)
                 .unwrap();
         r.master
             .supply_motion(motion(from, "G90 G1 X150 Y80 F12000\n").with_override_ramp(ramp));

@@ -20,7 +20,7 @@ use nalgebra::Vector3;
 use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
-use crate::interp::{Interpolator, OverrideRamp};
+use crate::interpolator::{Interpolator, OverrideRamp};
 use crate::planner::{Limits, Plan, PlanError};
 use crate::rt::{self, Ticker, Timing};
 use alarm::{Alarm, Failure, SharedBusError, axis_letter};

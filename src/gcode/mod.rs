@@ -65,9 +65,9 @@
 mod block;
 mod element;
 mod expr;
-mod interp;
+mod interpreter;
 mod lex;
-mod tools;
+mod tool_table;
 
 use std::fmt;
 use std::io::BufRead;
@@ -78,12 +78,12 @@ pub use element::{
     ArcGeometry, BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane,
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
-pub use interp::{
+pub use interpreter::{
     Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM,
     MAX_STORED_BYTES, MIN_ARC_RADIUS_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
-pub use tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
+pub use tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 
 /// The lines of `text` as the [`Interpreter`] reads them, each with its terminator: a line ends
 /// at `\n`, `\r\n` or a lone `\r`. Line `k` of the interpreter's errors is item `k − 1`.

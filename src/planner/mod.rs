@@ -62,7 +62,7 @@
 //! made whole programs 2–14 times slower than their trapezoid plans. The `s-curve` mode
 //! instead keeps the trapezoid look-ahead, which carries speed and acceleration through
 //! junctions, and makes its output jerk-limited with filters the plan is made for
-//! ([`Smoothing`], applied by [`crate::interp`]); FIR interpolation in the sense of Tajima &
+//! ([`Smoothing`], applied by [`crate::interpolator`]); FIR interpolation in the sense of Tajima &
 //! Sencer and Biagiotti & Melchiorri, with the filter on the time law rather than on the axes
 //! for the long part:
 //!
@@ -456,7 +456,7 @@ pub struct Segment {
     pub v_end_mm_s: f64,
     /// Highest path speed the machine allows on this element whatever the programmed feed
     /// (max feed, each axis's speed, and on arcs the centripetal, chord and jerk limits): the
-    /// ceiling of a feed override above 100 % ([`crate::interp`]). 0 for dwells and stops.
+    /// ceiling of a feed override above 100 % ([`crate::interpolator`]). 0 for dwells and stops.
     pub v_limit_mm_s: f64,
     /// Highest path speed the machine allows through the junction at the start, whatever the
     /// programmed feeds (0 where the motion stops there).
@@ -1934,7 +1934,7 @@ fn arc_limits(
         && tol_mm > 0.0
     {
         // The two axis filters of `T_k` pull the circle in by about `2·v²·T_k²/(24·κ⁻¹)`
-        // (`crate::interp::filter`), held within the tolerance.
+        // (`crate::interpolator::filter`), held within the tolerance.
         let tk = smoothing.axis_s(cfg.period_s);
         v_max_mm_s = v_max_mm_s.min((12.0 * tol_mm / curvature_per_mm).sqrt() / tk);
     }

@@ -21,13 +21,13 @@ use std::time::Duration;
 use canopen_rs::Value;
 
 use crate::bus::Frame;
+use crate::canopen::dictionary::DriveDictionary;
 use crate::canopen::emcy::{Emcy, code as emcy_code};
 use crate::canopen::index;
 use crate::canopen::od::Od;
 use crate::canopen::sdo_server::{SdoServer, SdoTarget};
 use crate::canopen::{AbortCode, NmtState, cob, nmt};
 use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
-use crate::config::DriveDictionary;
 use crate::config::machine::MapEntry;
 pub use inject::{Inject, Targeted};
 
@@ -1130,7 +1130,7 @@ impl SimDrive {
 
     /// Device rules on a decoded SDO write, before it is stored.
     fn check_device_rules(&self, index: u16, sub: u8, v: &Value) -> Result<(), AbortCode> {
-        let x = crate::config::dictionary::value_as_i128(v).unwrap_or(0);
+        let x = crate::canopen::dictionary::value_as_i128(v).unwrap_or(0);
         if let Some((n, rx, is_map)) = Self::pdo_of(index) {
             let valid = self.pdo_valid(n, rx);
             if is_map {

@@ -13,11 +13,10 @@ use canopen_rs::{Address, ByteString, DataType, NodeId, Value};
 
 use super::{EMCY_PARAMETER, FaultCause, SimDrive};
 use crate::bus::Frame;
+use crate::canopen::dictionary::{DriveDictionary, int_value, value_as_i128};
 use crate::canopen::emcy::{Emcy, code as emcy};
 use crate::canopen::{AbortCode, NmtState, cob, nmt};
 use crate::cia402::{State, statusword as sw};
-use crate::config::DriveDictionary;
-use crate::config::dictionary::{int_value, value_as_i128};
 use crate::config::machine::DEMO_DRIVE;
 
 /// The node under test.

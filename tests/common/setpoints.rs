@@ -2,7 +2,7 @@
 //! streams it, with every axis's velocity, acceleration and (for S-curves) jerk computed by
 //! finite differences, as a drive sees them.
 
-use canmotion::interp::Interpolator;
+use canmotion::interpolator::Interpolator;
 use canmotion::planner::{Limits, Plan, PlannerConfig, ProfileKind};
 use nalgebra::Vector3;
 

@@ -289,7 +289,7 @@ mod tests {
             "{text}"
         );
         let logged = std::fs::read_to_string(&log).unwrap();
-        let recs = crate::tools::candump::parse_log("bus.log", &logged).unwrap();
+        let recs = crate::commands::candump::parse_log("bus.log", &logged).unwrap();
         assert_eq!(
             recs.iter().map(|r| r.frame).collect::<Vec<_>>(),
             vec![

@@ -24,7 +24,7 @@ pub fn send(bus: &Bus, command: NmtCommand, target: NmtTarget) -> Result<Frame, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tools::Node;
+    use crate::commands::Node;
 
     #[test]
     fn frames_follow_the_checklist() {

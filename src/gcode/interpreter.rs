@@ -38,7 +38,7 @@ use super::expr::{ParamRef, Params};
 use super::lex::{
     Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
 };
-use super::tools::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
+use super::tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 use super::{
     CallChain, CallSite, Dwell, Error, ErrorKind, Item, MM_PER_INCH, Note, ProgramEnd, Stop,
 };
@@ -49,8 +49,9 @@ mod cycles;
 pub use cycles::MAX_CYCLE_ITEMS;
 use cycles::{Cycle, CycleState, Spindle};
 
-/// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory.
-pub const MAX_LINE_BYTES: usize = 64 * 1024;
+/// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory. The
+/// bound of every file read line by line ([`crate::files::MAX_LINE_BYTES`]).
+pub const MAX_LINE_BYTES: usize = crate::files::MAX_LINE_BYTES;
 
 /// Largest machine coordinate magnitude the interpreter produces; beyond it a program is in
 /// error (G91 accumulating, huge offsets).

@@ -7,8 +7,8 @@ use std::str::FromStr;
 use canopen_rs::{ByteString, DataType, Value};
 
 use super::hex_bytes;
+use crate::canopen::dictionary::int_value;
 use crate::canopen::nmt;
-use crate::config::dictionary::int_value;
 
 /// Parse an integer: decimal, or hexadecimal with `0x`; an optional sign; `_` separators.
 pub fn parse_int(s: &str) -> Option<i128> {

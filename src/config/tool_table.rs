@@ -1,4 +1,4 @@
-//! Tool table: tool number → radius and length, loaded from TOML.
+//! Loading a tool table ([`ToolTable`]) from TOML:
 //!
 //! ```toml
 //! [[tool]]
@@ -9,43 +9,15 @@
 //! ```
 //!
 //! Loading is strict like every configuration file: unknown keys are errors, and every error
-//! names the file, the table (`tool 3`) and the key.
+//! names the file, the table (`tool 3`) and the key. The table itself is G-code's
+//! ([`crate::gcode::ToolTable`]); only the reading is here, so that `gcode` needs no `config`.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::config::{ConfigError, parse_toml};
-
-/// Largest tool number (LinuxCNC's limit).
-pub const MAX_TOOL_NUMBER: u32 = 99_999;
-
-/// Largest tool radius or length magnitude accepted, mm.
-pub const MAX_TOOL_SIZE_MM: f64 = 10_000.0;
-
-/// One tool's offsets.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Tool {
-    /// Radius for cutter compensation, ≥ 0.
-    pub radius_mm: f64,
-    /// Length along the tool axis for length compensation (may be negative).
-    pub length_mm: f64,
-}
-
-impl Tool {
-    /// Tool 0, "no tool": radius and length 0.
-    pub const NONE: Tool = Tool {
-        radius_mm: 0.0,
-        length_mm: 0.0,
-    };
-}
-
-/// Tool number → offsets. Tool 0 is always "no tool" ([`Tool::NONE`]).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct ToolTable {
-    tools: BTreeMap<u32, Tool>,
-}
+use super::{ConfigError, parse_toml};
+use crate::gcode::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -66,11 +38,6 @@ struct ToolEntry {
 }
 
 impl ToolTable {
-    /// An empty table.
-    pub fn new() -> ToolTable {
-        ToolTable::default()
-    }
-
     /// Reads and checks a tool table file.
     pub fn load(path: &Path) -> Result<ToolTable, ConfigError> {
         let text = crate::files::read_text(path, crate::files::MAX_CONFIG_BYTES)?;
@@ -126,7 +93,7 @@ impl ToolTable {
                 radius_mm: entry.radius_mm,
                 length_mm: entry.length_mm,
             };
-            if table.tools.insert(number, tool).is_some() {
+            if table.insert(number, tool).is_some() {
                 return Err(invalid(
                     name,
                     "number",
@@ -135,38 +102,6 @@ impl ToolTable {
             }
         }
         Ok(table)
-    }
-
-    /// The tool with this number: [`Tool::NONE`] for 0, `None` if it is not in the table.
-    pub fn get(&self, number: u32) -> Option<Tool> {
-        if number == 0 {
-            return Some(Tool::NONE);
-        }
-        self.tools.get(&number).copied()
-    }
-
-    /// Adds or replaces a tool (number 0 is ignored: it is always "no tool"); returns the
-    /// previous entry.
-    pub fn insert(&mut self, number: u32, tool: Tool) -> Option<Tool> {
-        if number == 0 {
-            return None;
-        }
-        self.tools.insert(number, tool)
-    }
-
-    /// The listed tools in number order (tool 0 is not listed).
-    pub fn iter(&self) -> impl Iterator<Item = (u32, Tool)> + '_ {
-        self.tools.iter().map(|(n, t)| (*n, *t))
-    }
-
-    /// Number of listed tools.
-    pub fn len(&self) -> usize {
-        self.tools.len()
-    }
-
-    /// Whether no tool is listed.
-    pub fn is_empty(&self) -> bool {
-        self.tools.is_empty()
     }
 }
 
@@ -226,19 +161,5 @@ mod tests {
         );
         let e = parse("[tools]\n").unwrap_err().to_string();
         assert!(e.contains("tools"), "{e}");
-    }
-
-    #[test]
-    fn insert_replaces_and_ignores_tool_zero() {
-        let mut t = parse("").unwrap();
-        assert!(t.is_empty());
-        let tool = Tool {
-            radius_mm: 1.0,
-            length_mm: 2.0,
-        };
-        assert_eq!(t.insert(5, tool), None);
-        assert_eq!(t.insert(0, tool), None);
-        assert_eq!(t.get(0), Some(Tool::NONE));
-        assert_eq!(t.iter().collect::<Vec<_>>(), vec![(5, tool)]);
     }
 }

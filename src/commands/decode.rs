@@ -1002,7 +1002,7 @@ impl fmt::Display for Decoded {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tools::candump::parse_frame;
+    use crate::commands::candump::parse_frame;
 
     fn d(frame: &str) -> String {
         decode(&parse_frame(frame).unwrap(), &DecodeContext::new()).to_string()
