@@ -1,6 +1,6 @@
 //! Offline planning, `canmotion plan`: the whole pipeline up to the setpoints, with no bus.
 //!
-//! The program streams through the stages (`gcode → compensation → planner → interp`) one item
+//! The program streams through the stages (`gcode → compensation → planner → interpolator`) one item
 //! at a time, so memory is bounded by the look-ahead windows whatever the file's size. What
 //! comes out is a [`PlanSummary`] and, on request, the tool-centre path (JSON Lines) and the
 //! setpoints `run` would stream (CSV, one row per cycle).

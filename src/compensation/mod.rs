@@ -1,6 +1,6 @@
 //! Cutter radius compensation (G41/G42, C-type): the programmed path into the tool-centre path.
 //!
-//! Second stage of the pipeline (`gcode → compensation → planner → interp`). A [`Compensator`]
+//! Second stage of the pipeline (`gcode → compensation → planner → interpolator`). A [`Compensator`]
 //! wraps the interpreter's item stream and yields the same kind of stream, with every element
 //! under G41/G42 moved to the tool centre: one tool radius left (G41) or right (G42) of the
 //! programmed path, looking along the direction of travel in the compensation plane (G17 XY,

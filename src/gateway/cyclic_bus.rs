@@ -473,7 +473,7 @@ impl CyclicBus {
         }
     }
 
-    /// Read the SYNC tap (after sending), every [`TAP_READ_EVERY`] calls: the timestamps are
+    /// Read the SYNC tap (after sending), every `TAP_READ_EVERY` calls: the timestamps are
     /// the kernel's, so reading late costs nothing but buffer, and each read is a system call
     /// or two.
     pub fn measure(&mut self) {

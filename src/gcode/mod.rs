@@ -1,7 +1,7 @@
 //! G-code front end: a streaming reader and modal interpreter of the LinuxCNC / RS274/NGC
 //! dialect, from program text to path [`Element`]s in machine millimetres.
 //!
-//! First stage of the motion pipeline (`gcode → compensation → planner → interp`). Downstream
+//! First stage of the motion pipeline (`gcode → compensation → planner → interpolator`). Downstream
 //! code never sees G-code: it gets [`Item`]s (lines, arcs and helices, dwells, program stops,
 //! notes, the end) from an [`Interpreter`] over any [`std::io::BufRead`], one line read at a
 //! time, so memory stays bounded whatever the file size. [`parse_program`] collects a whole

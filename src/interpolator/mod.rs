@@ -1,7 +1,7 @@
 //! Cyclic interpolator: samples planned segments once per control period (the CANopen SYNC
 //! period).
 //!
-//! Third stage of the pipeline (`gcode → planner → interp → setpoints`). Shaped like Ruckig:
+//! Third stage of the pipeline (`gcode → planner → interpolator → setpoints`). Shaped like Ruckig:
 //! constructed with the cycle time, then [`Interpolator::update`] once per cycle, which never
 //! allocates, blocks or panics and answers with a [`Status`]. Sample `k` (k = 1, 2, ...) is the
 //! plan's position at `t = k · period_s`, computed from `k` (not by adding periods) so there is

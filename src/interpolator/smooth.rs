@@ -13,7 +13,7 @@
 //!   which spread a step of an axis's velocity (a corner, a chord's vertex) over `2·T_k` and
 //!   keep the end exact (their position-error accumulator).
 //!
-//! All memory is taken at construction; [`Smoother::sample`] never allocates.
+//! All memory is taken at construction; [`Smoother::filter_distance`] and [`Smoother::filter_point`] never allocate.
 
 use nalgebra::Vector3;
 

@@ -1,6 +1,6 @@
 //! Motion planner: path elements into time-parameterised segments, with look-ahead.
 //!
-//! Third stage of the pipeline (`gcode → compensation → planner → interp`). Pure: no clock, no
+//! Third stage of the pipeline (`gcode → compensation → planner → interpolator`). Pure: no clock, no
 //! I/O; the output is a stream of [`Segment`]s (or a whole [`Plan`]) whose only question
 //! downstream is the position at a time (as in Klipper, the sampler knows nothing about G-code
 //! or limits).
