@@ -1332,14 +1332,10 @@ impl Planner {
     /// under G61 and G61.1.
     fn blend_tolerance_mm(&self, blend: BlendMode) -> f64 {
         match blend {
-            BlendMode::Blend { p_mm, .. } if p_mm == f64::INFINITY => {
-                if self.smoothing.is_some() {
-                    self.config.default_tolerance_mm
-                } else {
-                    0.0
-                }
+            BlendMode::Blend { p_mm, .. } if p_mm == f64::INFINITY && self.smoothing.is_some() => {
+                self.config.default_tolerance_mm
             }
-            BlendMode::Blend { p_mm, .. } if p_mm > 0.0 => p_mm,
+            BlendMode::Blend { p_mm, .. } if p_mm > 0.0 && p_mm.is_finite() => p_mm,
             _ => 0.0,
         }
     }
