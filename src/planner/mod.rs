@@ -1209,16 +1209,7 @@ impl Planner {
         // within one period, so each jump is held to the budget divided by that count; for
         // S-curves also v³·|Δuᵢ|·|Δu| ≤ L²·budget (the jerk v³κ² of that curve).
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
-        // The largest v with v·d·(1 + v·T/L) ≤ c.
-        let shared = |c: f64, d: f64| {
-            let k = t / l_mm;
-            let c = c.max(0.0) / d;
-            if k * c < 1e-12 {
-                c
-            } else {
-                (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
-            }
-        };
+        let shared = |c: f64, d: f64| shared_jump_mm_s(c, d, t / l_mm);
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1278,16 +1269,7 @@ impl Planner {
         let dk_vertex = discrete_curvature(a, b) - a.kink_in;
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
-        // The largest v with v·d·(1 + v·T_k/L) ≤ c.
-        let shared = |c: f64, d: f64| {
-            let k = tk / l_mm;
-            let c = c.max(0.0) / d;
-            if k * c < 1e-12 {
-                c
-            } else {
-                (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
-            }
-        };
+        let shared = |c: f64, d: f64| shared_jump_mm_s(c, d, tk / l_mm);
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1752,6 +1734,17 @@ fn profile_limits(
         ProfileKind::Smooth => ProfileLimits::new(v, a, clamp(jerk_mm_s3), JerkShape::RaisedCosine),
     };
     limits.ok_or(PlanError::Overflow { line })
+}
+
+/// The largest `v` with `v·d·(1 + v·k) ≤ c`: a velocity jump `v·d` shared among the
+/// `1 + v·T/L` junctions of elements of length `L` that fall within a time `T` (`k = T/L`).
+fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
+    let c = c.max(0.0) / d;
+    if k * c < 1e-12 {
+        c
+    } else {
+        (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
+    }
 }
 
 /// Under the time-law filter the acceleration of one element reaches the next through a
