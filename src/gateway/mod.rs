@@ -328,7 +328,9 @@ impl StopPoint {
         }
         // The latest sample is the plan's point at that time (its end once finished).
         // Plan time, not wall time: an override or a hold makes them differ.
-        let plan_time_s = interp.plan_time_s().min(interp.duration_s());
+        // The jerk-limited mode's filters lag behind the plan: the plan time their output has
+        // reached, so that a resume from here never skips any of the path.
+        let plan_time_s = interp.reached_plan_time_s().min(interp.duration_s());
         Some(StopPoint {
             plan_time_s,
             path_mm: interp.last_mm(),

@@ -1031,6 +1031,7 @@ impl Interpolator {
                     if seg.length_mm > 0.0 && seg.time_law != smoother.time_law() {
                         smoother.set_time_law(seg.time_law, self.starts_mm[self.raw]);
                     }
+                    smoother.note_plan_time(t_s);
                     let raw_mm = self.starts_mm[self.raw] + seg.distance_at(local_s);
                     self.smooth(raw_mm)
                 } else {
@@ -1054,7 +1055,8 @@ impl Interpolator {
             self.samples = n;
             self.last_k = k;
             self.last_tau_s = t_s.min(self.queued_end_s);
-            if self.smoother.is_some() {
+            if let Some(smoother) = self.smoother.as_mut() {
+                smoother.note_plan_time(self.last_tau_s);
                 // The end of the raw plan: the filters catch up (the planner keeps still for
                 // that long at the end, so this only happens for plans made otherwise).
                 self.last_mm = self.smooth(self.queued_end_dist_mm);
@@ -1138,6 +1140,16 @@ impl Interpolator {
     /// override, at most the plan's duration once finished).
     pub fn plan_time_s(&self) -> f64 {
         self.last_tau_s
+    }
+
+    /// A plan time whose point the latest sample has reached along the path: the plan time
+    /// itself without smoothing; with it, that of the sample one settling time earlier (the
+    /// filters lag behind the plan). A resume point taken here never skips any of the path.
+    pub fn reached_plan_time_s(&self) -> f64 {
+        match &self.smoother {
+            Some(s) if !self.finished => s.reached_plan_time_s().min(self.last_tau_s),
+            _ => self.last_tau_s,
+        }
     }
 
     /// Whether the final point has been produced.
@@ -1252,6 +1264,39 @@ mod tests {
                 return out;
             }
         }
+    }
+
+    /// With the jerk-limited mode's filters the output lags behind the plan time; the plan
+    /// time it is said to have reached (the resume point's) is never ahead of it on the path.
+    #[test]
+    fn the_reached_plan_time_is_never_ahead_of_the_filtered_output() {
+        let program = crate::gcode::parse_program(
+            "G21 G90 G64 G1 X50 F6000\nG1 X120 F3000\nM2\n",
+            "line.ngc",
+            Vector3::zeros(),
+        )
+        .unwrap();
+        let cfg = PlannerConfig {
+            period_s: 0.001,
+            corner_acc_mm_s2: 1000.0,
+            path_acc_share: 0.75,
+            max_jerk_mm_s3: v(20_000.0, 20_000.0, 10_000.0),
+            profile: ProfileKind::SCurve,
+            ..PlannerConfig::exact_stop()
+        };
+        let plan = crate::planner::plan_with(&program, &limits(), &cfg).unwrap();
+        assert!(plan.smoothing().is_some());
+        let mut interp = Interpolator::new(plan.clone(), cfg.period_s).unwrap();
+        let mut p = Vector3::zeros();
+        let mut lagged = false;
+        while interp.update(&mut p) != Status::Finished {
+            let reached = plan.position_at(interp.reached_plan_time_s());
+            assert!(reached.x <= p.x + 1e-9, "{} ahead of {}", reached.x, p.x);
+            lagged |= plan.position_at(interp.plan_time_s()).x > p.x + 1e-3;
+        }
+        assert!(lagged, "the filters lag behind the plan");
+        assert_eq!(interp.reached_plan_time_s(), plan.duration_s());
+        assert_eq!(p, Vector3::new(120.0, 0.0, 0.0));
     }
 
     #[test]

@@ -34,6 +34,10 @@ pub struct Smoother {
     time_law: bool,
     /// The two filters of each axis, in order.
     axes: [[AxisFilter; 3]; 2],
+    /// The plan times of the last `settle_periods + 1` samples, a ring (`next_tau` next):
+    /// the oldest is a plan time whose point the output has certainly reached.
+    taus: Box<[f64]>,
+    next_tau: usize,
 }
 
 impl Smoother {
@@ -65,6 +69,8 @@ impl Smoother {
             still: n_f,
             time_law: true,
             axes,
+            taus: vec![0.0; spec.settle_periods() + 1].into_boxed_slice(),
+            next_tau: 0,
         }
     }
 
@@ -107,6 +113,19 @@ impl Smoother {
         // Relative to the newest value: the sum stays small and precise on a long path.
         let sum: f64 = self.ring.iter().map(|s| s - raw_mm).sum();
         (raw_mm + sum / n as f64).min(raw_mm)
+    }
+
+    /// Records the plan time of this sample (see [`Smoother::reached_plan_time_s`]).
+    pub fn note_plan_time(&mut self, tau_s: f64) {
+        self.taus[self.next_tau] = tau_s;
+        self.next_tau = (self.next_tau + 1) % self.taus.len();
+    }
+
+    /// A plan time whose point the filtered output has reached: the plan time of the sample
+    /// one settling time ago (the filters put the output at a mean of the points since, on a
+    /// path that only moves forward).
+    pub fn reached_plan_time_s(&self) -> f64 {
+        self.taus[self.next_tau]
     }
 
     /// Passes the point on the path through the axis filters.
