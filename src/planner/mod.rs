@@ -1374,6 +1374,12 @@ impl Planner {
         let line = b.seg.line;
         let rapid = a.seg.rapid && b.seg.rapid;
         let feed_mm_s = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
+        // An arc runs at most at the feed: where the sharp corner already does, nothing to gain
+        // (and no arc to build, on a path of tiny segments).
+        let v_sharp = self.junction_mm_s(a, b);
+        if v_sharp >= feed_mm_s {
+            return Ok(None);
+        }
         let arc_at = |r: f64| -> Result<Option<(Pending, f64)>, PlanError> {
             let tangent_mm = r * tan_h;
             let p1 = corner - u1 * tangent_mm;
@@ -1403,7 +1409,6 @@ impl Planner {
         // Round the corner only where it is faster: the arc is run at a constant speed, which
         // the chord tolerance and the centripetal limit may keep low, so a small arc can take
         // longer than slowing down for the sharp corner (see `corner_cost_s`).
-        let v_sharp = self.junction_mm_s(a, b);
         let (acc, jerk) = (
             a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
             a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
