@@ -384,22 +384,21 @@ fn o_for_zero(
     Some(ErrorKind::LetterOForZero { written, suggested })
 }
 
-/// The label and keyword of an O-word line, read without evaluating anything (to find the end
-/// of a subroutine or loop while storing its lines). `None` if the line is no control line.
-pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
-    let chars: Vec<char> = line.chars().take(256).collect();
-    let mut i = 0;
-    let skip_blanks = |i: &mut usize| {
-        while chars.get(*i).is_some_and(|c| c.is_whitespace()) {
-            *i += 1;
-        }
-    };
-    skip_blanks(&mut i);
-    if chars.get(i) == Some(&'/') {
-        i += 1;
-        skip_blanks(&mut i);
+fn skip_blanks(chars: &[char], i: &mut usize) {
+    while chars.get(*i).is_some_and(|c| c.is_whitespace()) {
+        *i += 1;
     }
-    // An N word (fractional too) may precede the O-word.
+}
+
+/// Where a line's O-word starts, past blanks, a block delete `/` (if `slash`) and an N word
+/// (fractional too); `None` if the line does not start with one.
+fn o_word_start(chars: &[char], slash: bool) -> Option<usize> {
+    let mut i = 0;
+    skip_blanks(chars, &mut i);
+    if slash && chars.get(i) == Some(&'/') {
+        i += 1;
+        skip_blanks(chars, &mut i);
+    }
     if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
         i += 1;
         while chars
@@ -409,11 +408,19 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
             i += 1;
         }
     }
-    if !chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'o')) {
-        return None;
-    }
+    chars
+        .get(i)
+        .is_some_and(|c| c.eq_ignore_ascii_case(&'o'))
+        .then_some(i)
+}
+
+/// The label and keyword of an O-word line, read without evaluating anything (to find the end
+/// of a subroutine or loop while storing its lines). `None` if the line is no control line.
+pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
+    let chars: Vec<char> = line.chars().take(256).collect();
+    let i = o_word_start(&chars, true)?;
     let (label, mut k) = o_label(&chars, i, None).ok()?;
-    skip_blanks(&mut k);
+    skip_blanks(&chars, &mut k);
     let start = k;
     while chars.get(k).is_some_and(|c| c.is_ascii_alphabetic()) {
         k += 1;
@@ -426,27 +433,9 @@ pub(super) fn peek_control(line: &str) -> Option<(Label, Keyword)> {
 /// aside, read without evaluating anything (an M98 call looks ahead for its subprogram).
 pub(super) fn peek_program_number(line: &str) -> Option<Label> {
     let chars: Vec<char> = line.chars().take(256).collect();
-    let mut i = 0;
-    let skip_blanks = |i: &mut usize| {
-        while chars.get(*i).is_some_and(|c| c.is_whitespace()) {
-            *i += 1;
-        }
-    };
-    skip_blanks(&mut i);
-    if chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'n')) {
-        i += 1;
-        while chars
-            .get(i)
-            .is_some_and(|c| c.is_ascii_digit() || c.is_whitespace() || *c == '.')
-        {
-            i += 1;
-        }
-    }
-    if !chars.get(i).is_some_and(|c| c.eq_ignore_ascii_case(&'o')) {
-        return None;
-    }
+    let i = o_word_start(&chars, false)?;
     let (label, mut k) = o_label(&chars, i, None).ok()?;
-    skip_blanks(&mut k);
+    skip_blanks(&chars, &mut k);
     match chars.get(k) {
         None | Some('(' | ';') => Some(label),
         _ => None,
