@@ -9,7 +9,6 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use canmotion::bus::Frame;
 use canmotion::canopen::index;
@@ -21,21 +20,22 @@ use canmotion::interpolator::Interpolator;
 
 struct Counting;
 
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-
 thread_local! {
     /// Whether this thread's allocations are counted (the test harness's own threads are not).
     static COUNTING: Cell<bool> = const { Cell::new(false) };
+    /// This thread's count. Per thread, so that tests running in parallel (one of them
+    /// allocates on purpose, to show that the counter counts) never see each other's counts.
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
 }
 
 fn note() {
     if COUNTING.with(Cell::get) {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        ALLOCS.with(|a| a.set(a.get() + 1));
     }
 }
 
 // SAFETY: every call is forwarded unchanged to the system allocator; counting only reads a
-// thread-local flag and bumps an atomic, neither of which allocates.
+// thread-local flag and bumps a thread-local counter, neither of which allocates.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         note();
@@ -63,11 +63,11 @@ static GLOBAL: Counting = Counting;
 
 /// Run `f` with this thread's allocations counted; returns its result and the count.
 fn counted<T>(f: impl FnOnce() -> T) -> (T, u64) {
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = ALLOCS.with(Cell::get);
     COUNTING.with(|c| c.set(true));
     let r = f();
     COUNTING.with(|c| c.set(false));
-    (r, ALLOCS.load(Ordering::Relaxed) - before)
+    (r, ALLOCS.with(Cell::get) - before)
 }
 
 struct FakeDrive {
