@@ -113,7 +113,7 @@ use std::collections::VecDeque;
 use nalgebra::Vector3;
 
 use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment, SegmentPath, Smoothing};
-use smooth::Smoother;
+use smooth::{Smoother, precompensation};
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
 /// that rounding in `k · period_s` never adds one extra period of standing still.
@@ -556,6 +556,13 @@ pub struct Interpolator {
     raw: usize,
     /// Index in `queue` of the segment of the filtered point.
     geo: usize,
+    /// Indices in `queue` of the segments of the contour pre-compensation's window ends
+    /// (`floor ≤ behind ≤ geo ≤ ahead`; see [`smooth`]).
+    behind: usize,
+    ahead: usize,
+    /// Index in `queue` of the first segment after the latest stop the filtered point has
+    /// passed: the window reaches no further back.
+    floor: usize,
     /// The jerk-limited mode's filters ([`crate::planner::Smoothing`]), if the plan has them.
     smoother: Option<Smoother>,
     period_s: f64,
@@ -622,6 +629,9 @@ impl Interpolator {
             queued_end_dist_mm: 0.0,
             raw: 0,
             geo: 0,
+            behind: 0,
+            ahead: 0,
+            floor: 0,
             smoother: None,
             period_s,
             queued_end_mm: start_mm,
@@ -985,9 +995,18 @@ impl Interpolator {
 
     /// Whether the next sample's time lies beyond the queued segments of an open queue: the
     /// producer must push (or close) before the next [`update`](Self::update).
+    ///
+    /// With the jerk-limited mode's filters the queue must also reach beyond the next sample's
+    /// plan time by the filters' look-ahead: the contour pre-compensation's window reaches
+    /// `PRECOMP_REACH·v·T_k` past the filtered point, which trails the raw one.
     pub fn needs_segments(&self) -> bool {
+        let ahead_s = self.smoother.as_ref().map_or(0.0, |sm| {
+            let spec = sm.spec();
+            spec.time_law_s(self.period_s)
+                + 2.0 * smooth::PRECOMP_REACH * spec.axis_s(self.period_s)
+        });
         !self.closed
-            && self.tau_at(self.samples.saturating_add(1))
+            && self.tau_at(self.samples.saturating_add(1)) + ahead_s
                 >= self.queued_end_s - END_SNAP_PERIODS * self.period_s
     }
 
@@ -1079,14 +1098,25 @@ impl Interpolator {
 
     /// The filtered sample for the raw path distance `raw_mm` (see [`smooth`]).
     fn smooth(&mut self, raw_mm: f64) -> Vector3<f64> {
+        let period_s = self.period_s;
         let Some(smoother) = self.smoother.as_mut() else {
             return self.last_mm;
         };
         let s_mm = smoother.filter_distance(raw_mm);
+        let v_mm_s = smoother.speed(s_mm, period_s);
+        let reach_mm = smoother.reach_mm(v_mm_s, period_s);
+        let n_k = smoother.spec().axis_periods;
         let last = self.queue.len().saturating_sub(1);
         while self.geo < last.min(self.raw)
             && self.starts_mm[self.geo] + self.queue[self.geo].length_mm < s_mm
         {
+            let seg = &self.queue[self.geo];
+            if seg.length_mm == 0.0
+                || seg.v_end_mm_s == 0.0
+                || self.queue[self.geo + 1].length_mm == 0.0
+            {
+                self.floor = self.geo + 1;
+            }
             self.geo += 1;
         }
         let point = match self.queue.get(self.geo) {
@@ -1101,13 +1131,69 @@ impl Interpolator {
             }
             None => self.queued_end_mm,
         };
-        smoother.filter_point(point)
+        self.behind = self.behind.clamp(self.floor, self.geo);
+        self.ahead = self.ahead.max(self.geo);
+        let offset = if reach_mm > 0.0 && !self.queue.is_empty() {
+            let behind = self.window_behind(s_mm - reach_mm);
+            let ahead = self.window_ahead(s_mm + reach_mm);
+            precompensation(behind - point, ahead - point, v_mm_s, n_k, period_s)
+        } else {
+            Vector3::zeros()
+        };
+        let Some(smoother) = self.smoother.as_mut() else {
+            return self.last_mm;
+        };
+        smoother.filter_point(point + offset)
     }
 
-    /// Drops the segments both cursors have passed.
+    /// The point at path distance `x_mm ≥` the filtered point's, for the window of the contour
+    /// pre-compensation: on the queued path, but not beyond a stop (a segment ending at rest,
+    /// or a dwell or stop) after the filtered point's segment, nor beyond the queue's end.
+    fn window_ahead(&mut self, x_mm: f64) -> Vector3<f64> {
+        let last = self.queue.len() - 1;
+        let mut i = self.ahead.clamp(self.geo, last);
+        while i > self.geo && x_mm < self.starts_mm[i] {
+            i -= 1;
+        }
+        loop {
+            let seg = &self.queue[i];
+            let start_mm = self.starts_mm[i];
+            if x_mm <= start_mm + seg.length_mm {
+                self.ahead = i;
+                return seg.point_at_distance(x_mm - start_mm);
+            }
+            let stops = seg.length_mm == 0.0
+                || seg.v_end_mm_s == 0.0
+                || i == last
+                || self.queue[i + 1].length_mm == 0.0;
+            if stops {
+                self.ahead = i;
+                return seg.end_mm;
+            }
+            i += 1;
+        }
+    }
+
+    /// The point at path distance `x_mm ≤` the filtered point's, for the window of the contour
+    /// pre-compensation: on the queued path, but not before the latest stop the filtered point
+    /// has passed (`floor`).
+    fn window_behind(&mut self, x_mm: f64) -> Vector3<f64> {
+        let mut i = self.behind;
+        while i < self.geo && x_mm > self.starts_mm[i] + self.queue[i].length_mm {
+            i += 1;
+        }
+        while i > self.floor && x_mm < self.starts_mm[i] {
+            i -= 1;
+        }
+        self.behind = i;
+        let seg = &self.queue[i];
+        seg.point_at_distance(x_mm - self.starts_mm[i])
+    }
+
+    /// Drops the segments every cursor has passed.
     fn trim(&mut self) {
         let passed = if self.smoother.is_some() {
-            self.geo.min(self.raw)
+            self.geo.min(self.raw).min(self.behind)
         } else {
             self.raw
         };
@@ -1117,6 +1203,9 @@ impl Interpolator {
         }
         self.raw -= passed;
         self.geo -= passed.min(self.geo);
+        self.behind -= passed.min(self.behind);
+        self.ahead -= passed.min(self.ahead);
+        self.floor -= passed.min(self.floor);
     }
 
     /// Source line of the segment of the latest sample (the first segment's before any

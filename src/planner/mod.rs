@@ -173,6 +173,17 @@ pub enum ProfileKind {
 /// filter, see the module documentation), rounded up to whole periods (at least 2).
 pub const AXIS_FILTER_S: f64 = 0.008;
 
+/// Share of an arc's pull towards its centre (`v²·κ·σ²/2`) that the axis filters still take
+/// where the curvature steps by `Δκ` at speed, with the interpolator's contour
+/// pre-compensation (`crate::interpolator::smooth`): 0.28 measured for a tangent line into an
+/// arc at filter lengths of 8 to 24 periods, so `0.3·v²·|Δκ|·T_k²/12` is held within the
+/// tolerance.
+pub const PRECOMP_STEP_RESIDUAL: f64 = 0.3;
+
+/// Factor on the jerk of a curvature step through the axis filters that their pre-compensation
+/// adds (measured 1.013 at most against `v²·|Δκ|/T_k`, in the same cases).
+pub const PRECOMP_JERK: f64 = 1.05;
+
 /// Default of [`PlannerConfig::default_tolerance_mm`]: 0.01 mm, the deviation a bare `G64`
 /// allows in the jerk-limited mode.
 pub const DEFAULT_TOLERANCE_MM: f64 = 0.01;
@@ -1247,9 +1258,11 @@ impl Planner {
     ///   through the change of the discrete curvature `Δu/L̄` from one vertex to the next,
     ///   held like a step of an arc's curvature;
     /// - a step of the curvature vector (an arc's end, or between vertices):
-    ///   `v²·|Δκᵢ| ≤ T_k·(J_i − used_i)/2`;
-    /// - contour: the filters cut the corner by at most `v·|Δu|·2·T_k/8`, held within the
-    ///   tolerance ([`Planner::filter_tolerance_mm`]).
+    ///   `v²·|Δκᵢ|·`[`PRECOMP_JERK`]` ≤ T_k·(J_i − used_i)/2`;
+    /// - contour: the filters cut the corner by at most `v·|Δu|·2·T_k/8`, and where the
+    ///   curvature steps they leave [`PRECOMP_STEP_RESIDUAL`] of an arc's pull,
+    ///   `v²·|Δκ|·T_k²/12`, uncompensated; both are held within the tolerance
+    ///   ([`Planner::filter_tolerance_mm`]). Along an arc the pull is pre-compensated.
     fn smoothed_junction_limit_mm_s(&self, a: &Pending, b: &Pending, smoothing: &Smoothing) -> f64 {
         let cfg = &self.config;
         let tk = smoothing.axis_s(cfg.period_s);
@@ -1264,6 +1277,13 @@ impl Planner {
             }
         }
         let dk = b.curvature_start - a.curvature_end;
+        let dk_norm = dk.norm();
+        let tol_mm = self.filter_tolerance_mm(a.blend);
+        if tol_mm > 0.0 && dk_norm > 0.0 {
+            // Where the curvature steps, the pre-compensated filters still leave
+            // `c·v²·|Δκ|·T_k²/12` of the pull they would take on a whole arc.
+            v = v.min((12.0 * tol_mm / (PRECOMP_STEP_RESIDUAL * tk * tk * dk_norm)).sqrt());
+        }
         // A polyline's curvature sits at its vertices: a change of it from one vertex to the
         // next is a step of the acceleration, as at an arc's end.
         let dk_vertex = discrete_curvature(a, b) - a.kink_in;
@@ -1290,7 +1310,7 @@ impl Planner {
             }
             let k = dk[i].abs();
             if k > 0.0 {
-                v = v.min((tk * jerk_budget / k).sqrt());
+                v = v.min((tk * jerk_budget / (PRECOMP_JERK * k)).sqrt());
             }
             let k = dk_vertex[i].abs();
             if k > 0.0 && noise_mm_s3(k) > jerk_budget {
@@ -1444,10 +1464,7 @@ impl Planner {
         if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
             return Err(PlanError::Overflow { line });
         }
-        let filter = self
-            .smoothing
-            .map(|sm| (sm, self.filter_tolerance_mm(blend)));
-        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg, filter);
+        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg);
         let curvature = |s: f64| {
             let at = arc.point_at(s);
             let rel = at - arc.center_mm;
@@ -1869,7 +1886,6 @@ fn arc_limits(
     feed_mm_s: f64,
     limits: &Limits,
     cfg: &PlannerConfig,
-    filter: Option<(Smoothing, f64)>,
 ) -> ArcLimits {
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
@@ -1887,9 +1903,11 @@ fn arc_limits(
             v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / speed_share);
         }
         acc_share[i] = (p_i + n_i * sin_a).min(1.0);
-        // The jerk of a helix also has a binormal part (torsion), whose share along the helix
-        // axis is cos α.
-        jerk_share[i] = (p_i + n_i * (sin_a + cos_a)).min(1.0);
+        // Along the helix axis, the jerk of a helix has three parts: the tangential jerk's
+        // share `sin α`, and from following the curve (whose jerk is `v³·κ·√(κ² + τ²)` at
+        // constant speed) the normal part `v³κ²·T` and the binormal (torsion) part
+        // `v³κτ·B`, each `sin α·cos α` of it along the axis. A plane arc (α = 0) has none.
+        jerk_share[i] = (p_i + n_i * (2.0 * sin_a).min(1.0)).min(1.0);
         if acc_share[i] > 0.0 {
             acc_budget_mm_s2 = acc_budget_mm_s2.min(share * limits.max_acc_mm_s2[i] / acc_share[i]);
         }
@@ -1924,14 +1942,10 @@ fn arc_limits(
         v_max_mm_s =
             v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt() / cos_a);
     }
-    if let Some((smoothing, tol_mm)) = filter
-        && tol_mm > 0.0
-    {
-        // The two axis filters of `T_k` pull the circle in by about `2·v²·T_k²/(24·κ⁻¹)`
-        // (`crate::interpolator::filter`), held within the tolerance.
-        let tk = smoothing.axis_s(cfg.period_s);
-        v_max_mm_s = v_max_mm_s.min((12.0 * tol_mm / curvature_per_mm).sqrt() / tk);
-    }
+    // The two axis filters of the jerk-limited mode would pull the circle in by about
+    // `2·v²·T_k²/(24·κ⁻¹)`; the interpolator's contour pre-compensation
+    // (`crate::interpolator::smooth`) moves their input out by exactly that, so the arc itself
+    // has no speed limit from them (its ends have one, `Planner::smoothed_junction_limit_mm_s`).
     let v_limit_mm_s = v_max_mm_s;
     let v_max_mm_s = v_max_mm_s.min(feed_mm_s);
     let mut acc_mm_s2 = (0.5 * acc_budget_mm_s2).min(cfg.path_acc_mm_s2);
