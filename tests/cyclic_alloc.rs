@@ -14,9 +14,9 @@ use canmotion::bus::Frame;
 use canmotion::canopen::index;
 use canmotion::cia402::{PowerStateMachine, controlword as cwb, statusword as swb};
 use canmotion::config::Machine;
-use canmotion::gateway::alarm::Alarm;
-use canmotion::gateway::cyclic::{CyclicMaster, Phase};
 use canmotion::interpolator::Interpolator;
+use canmotion::master::alarm::Alarm;
+use canmotion::master::cyclic::{CyclicMaster, Phase};
 
 struct Counting;
 

@@ -11,8 +11,8 @@ use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
 use canmotion::cia402::State;
 use canmotion::config::Machine;
-use canmotion::gateway::alarm::{Alarm, LateAxis};
 use canmotion::gateway::{self, RunOptions};
+use canmotion::master::alarm::{Alarm, LateAxis};
 use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
 

@@ -11,9 +11,9 @@ use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
 use canmotion::commands::reset::{self, ResetOutcome};
 use canmotion::config::Machine;
-use canmotion::gateway::alarm::{Alarm, Failure};
 use canmotion::gateway::resume::{self, ResumePreview, ResumeState, RunOutcome};
 use canmotion::gateway::{GatewayError, RunOptions};
+use canmotion::master::alarm::{Alarm, Failure};
 use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
 

@@ -15,9 +15,9 @@ use std::time::{Duration, Instant};
 
 use canmotion::bus::Bus;
 use canmotion::canopen::AbortCode;
-use canmotion::gateway::alarm::Alarm;
 use canmotion::gateway::io::NodeIo;
 use canmotion::gateway::{self, GatewayError, RunOptions};
+use canmotion::master::alarm::Alarm;
 use canopen_rs::{DataType, Value};
 
 const IFACE: &str = "vcan0";

@@ -29,8 +29,8 @@ use crate::bus::{BusError, ErrorFrame, Frame, Port, Received, TrySend};
 use crate::config::Machine;
 use crate::rt::period_stats::{PeriodStats, PeriodSummary, TimestampSource};
 
-use super::alarm::{Alarm, BusLoss, SharedBusError};
-use super::cyclic::CyclicMaster;
+use crate::master::alarm::{Alarm, BusLoss, SharedBusError};
+use crate::master::cyclic::CyclicMaster;
 
 /// The longest run of lost cycles a fault is declared after, whatever the following-error
 /// windows allow: the master's own alarm on missing process data (50 cycles) comes no later.
@@ -510,7 +510,7 @@ impl CyclicBus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gateway::cyclic::Phase;
+    use crate::master::cyclic::Phase;
 
     /// A port whose transmit queue is full for the frames numbered in `full_at` (counting every
     /// attempt), recording what it queued.

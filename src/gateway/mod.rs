@@ -1,9 +1,7 @@
 //! The gateway: start the drives up over SDO, stream the program's setpoints on SYNC from the
 //! cyclic thread, watch the drives, and bring everything down in order.
 
-pub mod alarm;
 pub mod control;
-pub mod cyclic;
 pub mod cyclic_bus;
 pub mod io;
 pub mod progress;
@@ -21,10 +19,10 @@ use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
 use crate::interpolator::{Interpolator, OverrideRamp};
+use crate::master::alarm::{Alarm, Failure, SharedBusError, axis_letter};
+use crate::master::cyclic::{CycleRecord, CyclicMaster, Phase};
 use crate::planner::{Limits, Plan, PlanError};
 use crate::rt::{self, Ticker, Timing};
-use alarm::{Alarm, Failure, SharedBusError, axis_letter};
-use cyclic::{CycleRecord, CyclicMaster, Phase};
 use io::NodeIo;
 
 /// Everything that can stop a run, with what a person needs to act on it.

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use canmotion::bus::BusError;
 use canmotion::bus::error::class;
 use canmotion::bus::{Bus, ErrorFrame, Filter, Port, Received};
-use canmotion::gateway::alarm::{Alarm, BusLoss};
 use canmotion::gateway::{self, GatewayError, MotionFailure, RunOptions, Summary};
+use canmotion::master::alarm::{Alarm, BusLoss};
 
 use super::{BIN, IFACE, UML_MARGIN_S, common, lock, run_square, simdrive, simdrive_with};
 
