@@ -5,3 +5,4 @@
 
 pub mod alarm;
 pub mod cyclic;
+pub mod supervision;
