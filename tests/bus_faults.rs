@@ -38,6 +38,7 @@ fn run(inject: Option<(u8, Inject)>, program: &str) -> Outcome {
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     Outcome {

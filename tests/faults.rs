@@ -43,6 +43,7 @@ fn run(machine: Machine, inject: &[(u8, Inject)], program: &str) -> Outcome {
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     let text = std::fs::read_to_string(&log).unwrap();

@@ -62,6 +62,7 @@ fn opts(rig: &Rig, program: &str, log: &str) -> RunOptions {
         program_text: program.into(),
         log: Some(rig.dir.path().join(log)),
         simulate: false,
+        ..Default::default()
     }
 }
 
@@ -485,6 +486,7 @@ fn reset_reports_an_emcy_without_the_fault_bit_as_information() {
             program_text: LONG.into(),
             log: Some(dir.path().join("fault.csv")),
             simulate: false,
+            ..Default::default()
         },
     );
     assert!(matches!(out, Err(GatewayError::Motion(_))), "{out:?}");

@@ -539,6 +539,25 @@ pub struct RunOptions {
     pub log: Option<PathBuf>,
     /// Start simulated drives in-process (with the in-process bus).
     pub simulate: bool,
+    /// The run's feed override and hold: the operator's side (the `--control` socket, the
+    /// standard input keys) holds a clone; the run resets it when it starts.
+    pub control: Arc<control::Control>,
+    /// The run's live figures, for whoever displays them.
+    pub progress: Arc<progress::Progress>,
+}
+
+impl Default for RunOptions {
+    /// No program, no log, no simulated drives; fresh control and progress handles.
+    fn default() -> RunOptions {
+        RunOptions {
+            program_name: String::new(),
+            program_text: String::new(),
+            log: None,
+            simulate: false,
+            control: Arc::new(control::Control::new()),
+            progress: Arc::new(progress::Progress::new()),
+        }
+    }
 }
 
 /// The planner's limits from the machine's axes (axes the machine lacks get none: moving them is
@@ -785,7 +804,7 @@ async fn run_async(
 ) -> Result<Summary, GatewayError> {
     // The feed override's ramp (none when the planner keeps no acceleration for it).
     let ramp = OverrideRamp::for_machine(&limits(machine), &machine.planner);
-    control::CONTROL.reset(ramp.is_ok());
+    opts.control.reset(ramp.is_ok());
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
     // Check the program against the travel from where the machine is, before anything is
@@ -828,6 +847,7 @@ async fn run_async(
     // The cyclic thread, with the supervision: what start-up saw of the nodes' heartbeats and
     // EMCYs is its starting point (the last lock of the health view the run takes).
     let sup = supervision_from(machine, &io.health());
+    let (control, progress) = (opts.control.clone(), opts.progress.clone());
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
     let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
     let m = machine.clone();
@@ -865,6 +885,8 @@ async fn run_async(
                     plan_rx,
                     armed_tx,
                     log_tx,
+                    control,
+                    progress,
                 },
                 completed,
             )
@@ -1012,6 +1034,10 @@ struct CyclicLinks {
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
     /// One record per cycle for `--log`.
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+    /// The operator's override and hold.
+    control: Arc<control::Control>,
+    /// Where the live figures go.
+    progress: Arc<progress::Progress>,
 }
 
 /// What the cyclic thread hands back when it ends.
@@ -1042,6 +1068,8 @@ fn cyclic_thread(
         plan_rx,
         armed_tx,
         log_tx,
+        control,
+        progress,
     } = links;
     let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
@@ -1061,7 +1089,7 @@ fn cyclic_thread(
     loop {
         ticker.wait();
         // Override and hold from the operator: atomics only, applied from this cycle's sample.
-        if let Some((fraction, hold)) = control::CONTROL.poll(&mut control_seen) {
+        if let Some((fraction, hold)) = control.poll(&mut control_seen) {
             master.set_override(fraction, hold);
         }
         // Stop signals: one atomic load per cycle; the first stops on the path, the second
@@ -1113,14 +1141,14 @@ fn cyclic_thread(
         }
         let max_ferr_mm = master.max_ferr_mm.iter().fold(0.0f64, |m, f| m.max(*f));
         prev_cmd_mm = Some(rec.cmd_mm);
-        progress::PROGRESS.store(
+        progress.store(
             rec.cycle,
             rec.line,
             feed2.sqrt() / master.period_s(),
             max_ferr_mm,
         );
         if let Some(m) = master.motion() {
-            progress::PROGRESS.store_override(
+            progress.store_override(
                 m.effective_override(),
                 m.requested_override(),
                 m.is_held(),

@@ -921,6 +921,7 @@ mod tests {
             program_text: text.into(),
             log: None,
             simulate: false,
+            ..Default::default()
         }
     }
 

@@ -52,6 +52,7 @@ fn run_in_thread(
                 program_text: program.into(),
                 log: Some(log),
                 simulate: false,
+                ..Default::default()
             },
         )
     });
@@ -399,6 +400,7 @@ fn vcan0_error_passive_is_a_warning_counted_in_the_summary() {
             program_text: common::PROGRAM.into(),
             log: None,
             simulate: false,
+            ..Default::default()
         },
     )
     .expect("error-passive does not stop the run");

@@ -45,6 +45,7 @@ fn run_recorded(
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     let frames = rec.stop();
