@@ -245,8 +245,7 @@ fn a_silent_drive_is_missing_process_data_51_cycles_after_its_last_tpdo() {
     let last = r
         .drive_frames
         .iter()
-        .filter(|s| s.frame.id() == tpdo)
-        .last()
+        .rfind(|s| s.frame.id() == tpdo)
         .unwrap()
         .at;
     // The last TPDO answers the SYNC of cycle j and is read in cycle j + 1 (stamped j); the

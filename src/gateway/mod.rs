@@ -1262,7 +1262,7 @@ mod late_wake_tests {
         let mut cycles = [0; WARNING_CYCLES];
         cycles[..at.len()].copy_from_slice(at);
         Warning {
-            axis: ["X", "Y", "Z"][usize::from(node) - 1].into(),
+            axis: ["X", "Y", "Z"][usize::from(node) - 1],
             node,
             code,
             count: at.len() as u32,

@@ -254,7 +254,7 @@ impl Rig {
     }
 
     fn gateway_heartbeat(&mut self) {
-        let hb = self.machine.heartbeat.clone();
+        let hb = self.machine.heartbeat;
         let f = Frame::new(
             cob::HEARTBEAT + u16::from(hb.gateway_node),
             &[NmtState::Operational.byte()],
