@@ -210,6 +210,53 @@ fn a_fault_emcy_is_decided_by_the_tpdo_after_it_one_cycle_later() {
 }
 
 #[test]
+fn a_jammed_motor_is_stopped_in_the_cycle_after_the_tpdo_that_shows_it() {
+    let mut r = rig(&[(2, Inject::FollowingError { after: ms(400) })], LONG);
+    r.run_to_end(MAX_CYCLES);
+    // The first TPDO of node 2 with the following-error bit (13) or the fault bit (3): it
+    // answers the SYNC of cycle j and is read in cycle j + 1, which stops the group.
+    let tpdo = r.machine.axes[1].feedback_pdo.cob_id;
+    let first = r
+        .drive_frames
+        .iter()
+        .find(|s| {
+            s.frame.id() == tpdo
+                && u16::from_le_bytes([s.frame.data()[0], s.frame.data()[1]])
+                    & (swb::OP_MODE_SPECIFIC_13 | swb::FAULT)
+                    != 0
+        })
+        .expect("the jam shows in a TPDO");
+    let sw = u16::from_le_bytes([first.frame.data()[0], first.frame.data()[1]]);
+    let j = r.cycle_at_or_after(first.at);
+    assert_eq!(failed_cycle(&r), j + 1);
+    match failure(&r) {
+        Alarm::FollowingError {
+            axis: "Y",
+            node: 2,
+            statusword,
+        } => assert_eq!(*statusword, sw),
+        Alarm::DriveFault {
+            axis: "Y",
+            node: 2,
+            statusword,
+        } => assert_eq!(*statusword, sw),
+        // The drive faulted with its EMCY read by then: the supervision decides it before
+        // the cycle's own check of the statusword.
+        Alarm::Emcy {
+            axis: "Y",
+            node: 2,
+            code: 0x8611,
+        } => {
+            assert_ne!(sw & swb::FAULT, 0);
+            let emcy = r.sent_by(cob::EMCY, 2).next().expect("its EMCY").at;
+            assert!(r.cycle_at_or_after(emcy) <= j + 1);
+        }
+        a => panic!("{a}"),
+    }
+    stop_checked(&r, &[1]);
+}
+
+#[test]
 fn a_warning_emcy_is_counted_in_the_cycle_after_it_and_the_run_completes() {
     let mut r = rig(
         &[(
