@@ -28,9 +28,9 @@
 //!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
 //!    `filter` in the machine file passes its samples through [`interpolator::filter::AxisFilter`]
 //!    (moving average or first-order lag after interpolation), which ends exactly there too.
-//! 5. [`gateway::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
+//! 5. [`master::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,
 //!    SCHED_FIFO where permitted; no allocation, even when it stops on a
-//!    [`gateway::alarm::Alarm`]), converts the sample to counts (50 mm → 50000), checks it
+//!    [`master::alarm::Alarm`]), converts the sample to counts (50 mm → 50000), checks it
 //!    against the travel and the largest step a cycle allows, and packs it with the controlword
 //!    into the axis's RPDO as the machine file maps it (`0x60400010, 0x60C10120`: the objects
 //!    [`canopen::index`] names):
@@ -50,7 +50,7 @@
 //!
 //! ## Layers
 //!
-//! Data flows one way: `gcode → compensation → planner → interpolator → gateway::cyclic →
+//! Data flows one way: `gcode → compensation → planner → interpolator → master::cyclic →
 //! canopen/cia402 → bus`. Only [`bus`], [`rt`], the runners in [`sim::runner`] and
 //! [`gateway`], and the command line touch sockets, threads or the wall clock; everything else
 //! takes time as an argument.
@@ -74,12 +74,14 @@
 //! 9. [`config`]: machine files (which configure the layers above), and the loading of drive
 //!    dictionaries and tool tables;
 //! 10. [`eds`]: EDS/DCF import into a drive dictionary;
-//! 11. [`rt`]: the cyclic thread's timing;
-//! 12. [`sim`]: the simulated drive;
-//! 13. [`gateway`]: start-up, the cyclic master, supervision, resume, the control socket;
-//! 14. [`plot`] and [`optimize`];
-//! 15. [`offline`], the `plan` command;
-//! 16. [`commands`]: the bus utilities (`scan`, `sdo`, `nmt`, `reset`, `monitor`, `candump`),
+//! 11. [`master`]: the sans-I/O CANopen master (the cyclic master, its alarms, supervision);
+//! 12. [`rt`]: the cyclic thread's timing;
+//! 13. [`sim`]: the simulated drive;
+//! 14. [`gateway`]: the drivers of the master (the real-time thread, the bus, tokio), resume,
+//!     the control socket;
+//! 15. [`plot`] and [`optimize`];
+//! 16. [`offline`], the `plan` command;
+//! 17. [`commands`]: the bus utilities (`scan`, `sdo`, `nmt`, `reset`, `monitor`, `candump`),
 //!     then `main.rs`, the command line.
 
 pub mod bus;
@@ -95,6 +97,7 @@ pub mod fuzzing;
 pub mod gateway;
 pub mod gcode;
 pub mod interpolator;
+pub mod master;
 pub mod offline;
 pub mod optimize;
 pub mod planner;

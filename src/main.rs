@@ -372,14 +372,17 @@ fn confirm(preview: &ResumePreview, yes: bool) -> bool {
 
 /// The progress line of `run` on a terminal: program line, feed and largest following error,
 /// read a few times per second from the figures the cyclic thread stores
-/// ([`gateway::progress::PROGRESS`]); drawn only once the program streams.
+/// (the run's [`gateway::progress::Progress`]); drawn only once the program streams.
 struct ProgressLine {
     stop: std::sync::mpsc::Sender<()>,
     thread: std::thread::JoinHandle<()>,
 }
 
 impl ProgressLine {
-    fn start(total_lines: u64) -> ProgressLine {
+    fn start(
+        total_lines: u64,
+        figures: std::sync::Arc<gateway::progress::Progress>,
+    ) -> ProgressLine {
         use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
         let (stop, stopped) = std::sync::mpsc::channel::<()>();
         let thread = std::thread::spawn(move || {
@@ -396,7 +399,7 @@ impl ProgressLine {
             while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
                 stopped.recv_timeout(std::time::Duration::from_millis(250))
             {
-                let p = gateway::progress::PROGRESS.read();
+                let p = figures.read();
                 let Some(line) = p.line else { continue };
                 if !shown {
                     bar.set_draw_target(ProgressDrawTarget::stderr());
@@ -568,16 +571,21 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 program_text: text,
                 log: log.clone(),
                 simulate,
+                ..RunOptions::default()
             };
             let _control = control
                 .as_deref()
-                .map(gateway::control::ControlSocket::bind)
+                .map(|path| gateway::control::ControlSocket::bind(path, opts.control.clone()))
                 .transpose()?;
             if !(no_keys || program_on_stdin || resume && !yes) {
-                gateway::control::spawn_stdin_keys();
+                gateway::control::spawn_stdin_keys(opts.control.clone());
             }
-            let progress = std::io::IsTerminal::is_terminal(&std::io::stderr())
-                .then(|| ProgressLine::start(opts.program_text.lines().count() as u64));
+            let progress = std::io::IsTerminal::is_terminal(&std::io::stderr()).then(|| {
+                ProgressLine::start(
+                    opts.program_text.lines().count() as u64,
+                    opts.progress.clone(),
+                )
+            });
             let outcome = if resume {
                 let path = state.as_deref().ok_or(
                     "--resume needs --state FILE when the program comes from standard input or is the embedded demo",

@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use canmotion::bus::Bus;
 use canmotion::bus::inproc::InProcBus;
-use canmotion::gateway::alarm::{Alarm, BusLoss};
 use canmotion::gateway::{self, RunOptions};
+use canmotion::master::alarm::{Alarm, BusLoss};
 use canmotion::rt::period_stats::TimestampSource;
 use canmotion::sim::{Inject, SimDrive, runner};
 use common::*;
@@ -38,6 +38,7 @@ fn run(inject: Option<(u8, Inject)>, program: &str) -> Outcome {
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     Outcome {

@@ -11,12 +11,15 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use canmotion::bus::Frame;
+use canmotion::canopen::cob;
 use canmotion::canopen::index;
 use canmotion::cia402::{PowerStateMachine, controlword as cwb, statusword as swb};
 use canmotion::config::Machine;
-use canmotion::gateway::alarm::Alarm;
-use canmotion::gateway::cyclic::{CyclicMaster, Phase};
 use canmotion::interpolator::Interpolator;
+use canmotion::master::alarm::Alarm;
+use canmotion::master::cyclic::{CyclicMaster, Phase};
+use canmotion::master::supervision::Supervision;
+use std::time::Duration;
 
 struct Counting;
 
@@ -350,6 +353,56 @@ fn an_alarm_from_the_supervision_allocates_nothing_either() {
     assert!(
         matches!(f.alarm, Alarm::HeartbeatLost { node: 3, .. }),
         "{f}"
+    );
+    assert_eq!(
+        r.allocs, 0,
+        "allocations on the cyclic path during a fault stop"
+    );
+}
+
+#[test]
+fn the_supervision_counting_a_warning_and_losing_a_heartbeat_allocates_nothing() {
+    // As the cyclic thread feeds it: every node's heartbeat each cycle until line 2, then node 3
+    // falls silent; node 1 warns (EMCY without the fault bit) once streaming. Every call of the
+    // supervision is counted, until the run is done.
+    let mut r = Rig::streaming(PROGRAM);
+    let mut sup = Supervision::new(&r.machine);
+    let period = Duration::from_micros(u64::from(r.machine.cycle_us));
+    let hb = |node: u16| Frame::new(cob::HEARTBEAT + node, &[0x05]).unwrap();
+    let warning = Frame::new(cob::EMCY + 1, &[0x10, 0x42, 0x01, 0, 0, 0, 0, 0]).unwrap();
+    let mut now = Duration::ZERO;
+    let mut warned = false;
+    for _ in 0..10_000 {
+        if r.master.phase() == Phase::Done {
+            break;
+        }
+        now += period;
+        let silent = r.master.line() >= Some(2);
+        let (_, n) = counted(|| {
+            for node in 1..=3 {
+                if node != 3 || !silent {
+                    sup.on_frame(now, &hb(node));
+                }
+            }
+            if !warned {
+                sup.on_frame(now, &warning);
+            }
+            sup.poll(now, &mut r.master);
+        });
+        warned = true;
+        r.allocs += n;
+        r.step();
+    }
+    assert_eq!(r.master.phase(), Phase::Done);
+    let f = r.master.failure().unwrap();
+    assert!(
+        matches!(f.alarm, Alarm::HeartbeatLost { node: 3, .. }),
+        "{f}"
+    );
+    let w = sup.warnings();
+    assert_eq!(
+        (w.len(), w[0].node, w[0].code, w[0].count),
+        (1, 1, 0x4210, 1)
     );
     assert_eq!(
         r.allocs, 0,

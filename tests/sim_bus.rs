@@ -15,6 +15,7 @@ fn opts(program: &str, simulate: bool, log: Option<std::path::PathBuf>) -> RunOp
         program_text: program.into(),
         log,
         simulate,
+        ..Default::default()
     }
 }
 
@@ -39,7 +40,13 @@ fn end_to_end(m: canmotion::config::Machine) {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("out.csv");
     let bus = Bus::InProc(InProcBus::new());
-    let s = gateway::run(&m, &bus, &opts(PROGRAM, true, Some(log.clone()))).expect("run");
+    let o = opts(PROGRAM, true, Some(log.clone()));
+    let other = opts(PROGRAM, true, None);
+    let s = gateway::run(&m, &bus, &o).expect("run");
+    // The run's figures went to its own progress handle, and to no other run's.
+    let p = o.progress.read();
+    assert_eq!(p.cycle, s.cycles, "{p:?}");
+    assert_eq!(other.progress.read().cycle, 0);
     for (i, want) in PROGRAM_END_COUNTS.iter().enumerate() {
         assert_eq!(s.target_counts[i], *want, "axis {} setpoint", s.axes[i]);
         assert!(
@@ -99,8 +106,6 @@ fn end_to_end(m: canmotion::config::Machine) {
 
 #[test]
 fn a_missing_node_is_named() {
-    // Every run resets the process's control state (`gateway::control::CONTROL`), which the
-    // hold test relies on: one run at a time.
     let _one = one_at_a_time();
     let m = machine(|t| t);
     let bus = InProcBus::new();
@@ -270,13 +275,14 @@ fn run_streams_the_compensated_tool_centre_path() {
 
 /// Waits for `cond` on the progress figures, up to `within`; panics with `what` past it.
 fn wait_for(
+    figures: &gateway::progress::Progress,
     what: &str,
     within: std::time::Duration,
     cond: impl Fn(&gateway::progress::ProgressSnapshot) -> bool,
 ) -> gateway::progress::ProgressSnapshot {
     let deadline = std::time::Instant::now() + within;
     loop {
-        let p = gateway::progress::PROGRESS.read();
+        let p = figures.read();
         if cond(&p) {
             return p;
         }
@@ -309,23 +315,26 @@ fn a_hold_from_the_control_socket_stops_the_drives_on_the_path_and_a_resume_fini
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("hold.csv");
     let sock = dir.path().join("control.sock");
-    let socket = gateway::control::ControlSocket::bind(&sock).unwrap();
+    let o = opts(SLOW_DIAGONAL, true, Some(log.clone()));
+    let figures = o.progress.clone();
+    let socket = gateway::control::ControlSocket::bind(&sock, o.control.clone()).unwrap();
     let m = machine(|t| t);
     let run = {
-        let log = log.clone();
         let m = m.clone();
         std::thread::spawn(move || {
             let bus = Bus::InProc(InProcBus::new());
-            gateway::run(&m, &bus, &opts(SLOW_DIAGONAL, true, Some(log)))
+            gateway::run(&m, &bus, &o)
         })
     };
     let secs = std::time::Duration::from_secs;
-    wait_for("streaming at speed", secs(20), |p| p.feed_mm_s > 20.0);
+    wait_for(&figures, "streaming at speed", secs(20), |p| {
+        p.feed_mm_s > 20.0
+    });
     assert_eq!(control(&sock, "hold"), "ok override 100 %, hold");
-    let held = wait_for("standstill in the hold", secs(10), |p| p.held);
+    let held = wait_for(&figures, "standstill in the hold", secs(10), |p| p.held);
     assert_eq!(held.override_effective, 0.0);
     // The run goes on, held, for 100 cycles: the drives stay enabled, following.
-    wait_for("100 cycles held", secs(10), |p| {
+    wait_for(&figures, "100 cycles held", secs(10), |p| {
         p.cycle >= held.cycle + 100 && p.held
     });
     assert!(!run.is_finished(), "the run ended during the hold");

@@ -15,9 +15,9 @@ use std::time::{Duration, Instant};
 
 use canmotion::bus::Bus;
 use canmotion::canopen::AbortCode;
-use canmotion::gateway::alarm::Alarm;
 use canmotion::gateway::io::NodeIo;
 use canmotion::gateway::{self, GatewayError, RunOptions};
+use canmotion::master::alarm::Alarm;
 use canopen_rs::{DataType, Value};
 
 const IFACE: &str = "vcan0";
@@ -179,6 +179,7 @@ fn streams_on_vcan0(m: canmotion::config::Machine) {
             program_text: common::PROGRAM.into(),
             log: None,
             simulate: false,
+            ..Default::default()
         },
     )
     .expect("run over vcan0");
@@ -371,6 +372,7 @@ fn fault_run_on(m: canmotion::config::Machine, inject: &str, program: &str) -> c
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     common::Outcome {

@@ -4,9 +4,9 @@
 //! into the wanted state, a requested override and a hold flag, and publishes it with plain
 //! atomic stores and a generation count; the cyclic thread polls the generation once per cycle
 //! ([`Control::poll`]: two loads, no lock, no allocation) and hands a change to the
-//! interpolator, where it takes effect from the next sample (see [`crate::interpolator`]). One run at
-//! a time per process, as for [`super::progress::PROGRESS`]: the state lives in one static,
-//! [`CONTROL`], reset when a run starts.
+//! interpolator, where it takes effect from the next sample (see [`crate::interpolator`]). Each run
+//! has its own state ([`super::RunOptions::control`], an `Arc` shared with the socket and the
+//! keys that drive it), reset when the run starts.
 //!
 //! Commands, one per line: `override P` (P in percent, 0 to 200; above 100 % the motion goes
 //! faster where the plan and the machine leave room, see [`crate::interpolator`]), `hold`, `resume`,
@@ -82,9 +82,6 @@ impl Default for Control {
         Control::new()
     }
 }
-
-/// The control of the run in progress.
-pub static CONTROL: Control = Control::new();
 
 impl Control {
     /// No run: 100 %, no hold, and no override available until [`Self::reset`].
@@ -342,17 +339,10 @@ pub struct ControlSocket {
 }
 
 impl ControlSocket {
-    /// Listens at `path` for [`CONTROL`]. A socket file left by a dead process (a connection is
-    /// refused) is replaced; a live one, or anything else at the path, is refused.
-    pub fn bind(path: &Path) -> Result<ControlSocket, ControlSocketError> {
-        ControlSocket::bind_with(path, &CONTROL)
-    }
-
-    /// [`Self::bind`] for the given control state.
-    pub fn bind_with(
-        path: &Path,
-        control: &'static Control,
-    ) -> Result<ControlSocket, ControlSocketError> {
+    /// Listens at `path` for commands to `control` (a run's). A socket file left by a dead
+    /// process (a connection is refused) is replaced; a live one, or anything else at the path,
+    /// is refused.
+    pub fn bind(path: &Path, control: Arc<Control>) -> Result<ControlSocket, ControlSocketError> {
         let listener = listen(path)?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = stop.clone();
@@ -410,7 +400,7 @@ fn listen(path: &Path) -> Result<UnixListener, ControlSocketError> {
     }
 }
 
-fn accept_loop(listener: &UnixListener, control: &'static Control, stop: &Arc<AtomicBool>) {
+fn accept_loop(listener: &UnixListener, control: Arc<Control>, stop: &Arc<AtomicBool>) {
     let mut clients: Vec<std::thread::JoinHandle<()>> = Vec::new();
     for conn in listener.incoming() {
         if stop.load(Ordering::Acquire) {
@@ -427,9 +417,10 @@ fn accept_loop(listener: &UnixListener, control: &'static Control, stop: &Arc<At
             continue;
         }
         let stop = stop.clone();
+        let control = control.clone();
         if let Ok(t) = std::thread::Builder::new()
             .name("canmotion-control-client".into())
-            .spawn(move || serve(conn, control, &stop))
+            .spawn(move || serve(conn, &control, &stop))
         {
             clients.push(t);
         }
@@ -580,13 +571,13 @@ pub fn read_keys<R: BufRead + ?Sized>(input: &mut R, control: &Control, report: 
 
 /// Reads commands and keys from standard input ([`read_keys`]) for as long as it is open;
 /// problems go to standard error. The thread is left to end with the process.
-pub fn spawn_stdin_keys() {
+pub fn spawn_stdin_keys(control: Arc<Control>) {
     let _ = std::thread::Builder::new()
         .name("canmotion-keys".into())
-        .spawn(|| {
+        .spawn(move || {
             read_keys(
                 &mut std::io::stdin().lock(),
-                &CONTROL,
+                &control,
                 &mut std::io::stderr(),
             )
         });
@@ -598,8 +589,8 @@ mod tests {
     use std::io::Cursor;
 
     /// A control state of a test's own, with a run in progress (override available).
-    fn running() -> &'static Control {
-        let c: &'static Control = Box::leak(Box::new(Control::new()));
+    fn running() -> Arc<Control> {
+        let c = Arc::new(Control::new());
         c.reset(true);
         c
     }
@@ -673,7 +664,7 @@ mod tests {
     fn keys_go_on_after_a_line_that_is_not_utf8() {
         let c = running();
         let mut report = Vec::new();
-        read_keys(&mut Cursor::new(b"\xff\xfe\nh\n".to_vec()), c, &mut report);
+        read_keys(&mut Cursor::new(b"\xff\xfe\nh\n".to_vec()), &c, &mut report);
         assert_eq!(c.wanted(), (1.0, true), "the h after the bad line holds");
         let report = String::from_utf8(report).unwrap();
         assert!(
@@ -688,7 +679,7 @@ mod tests {
         let c = running();
         let mut report = Vec::new();
         let mut input = BufReader::new(HugeLine::new(300 << 20, b"\nh\n"));
-        read_keys(&mut input, c, &mut report);
+        read_keys(&mut input, &c, &mut report);
         assert_eq!(c.wanted(), (1.0, true), "the h after the long line holds");
         let report = String::from_utf8(report).unwrap();
         assert!(
@@ -722,7 +713,7 @@ mod tests {
         let c = running();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("ctl");
-        let _socket = ControlSocket::bind_with(&path, c).unwrap();
+        let _socket = ControlSocket::bind(&path, c.clone()).unwrap();
         let idle = client(&path);
         let mut half = client(&path);
         half.write_all(b"overr").unwrap();
@@ -753,7 +744,7 @@ mod tests {
         let c = running();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("ctl");
-        let _socket = ControlSocket::bind_with(&path, c).unwrap();
+        let _socket = ControlSocket::bind(&path, c.clone()).unwrap();
         let s = client(&path);
         s.set_write_timeout(Some(Duration::from_secs(5))).unwrap();
         let chunk = vec![b'x'; 64 * 1024];
@@ -791,9 +782,9 @@ mod tests {
         // A listener dropped without removing its file: what a killed process leaves.
         drop(UnixListener::bind(&path).unwrap());
         assert!(path.exists());
-        let live = ControlSocket::bind_with(&path, c).expect("stale socket replaced");
+        let live = ControlSocket::bind(&path, c.clone()).expect("stale socket replaced");
         assert!(matches!(
-            ControlSocket::bind_with(&path, c),
+            ControlSocket::bind(&path, c.clone()),
             Err(ControlSocketError::InUse { path: p }) if p == path
         ));
         let mut s = client(&path);
@@ -808,7 +799,7 @@ mod tests {
         let file = dir.path().join("file");
         std::fs::write(&file, b"keep me").unwrap();
         assert!(matches!(
-            ControlSocket::bind_with(&file, c),
+            ControlSocket::bind(&file, c.clone()),
             Err(ControlSocketError::NotASocket { .. })
         ));
         assert_eq!(std::fs::read(&file).unwrap(), b"keep me");

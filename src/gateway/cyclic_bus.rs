@@ -29,8 +29,9 @@ use crate::bus::{BusError, ErrorFrame, Frame, Port, Received, TrySend};
 use crate::config::Machine;
 use crate::rt::period_stats::{PeriodStats, PeriodSummary, TimestampSource};
 
-use super::alarm::{Alarm, BusLoss, SharedBusError};
-use super::cyclic::CyclicMaster;
+use crate::master::alarm::{Alarm, BusLoss, SharedBusError};
+use crate::master::cyclic::CyclicMaster;
+use crate::master::supervision::Supervision;
 
 /// The longest run of lost cycles a fault is declared after, whatever the following-error
 /// windows allow: the master's own alarm on missing process data (50 cycles) comes no later.
@@ -314,13 +315,15 @@ impl CyclicBus {
         self.lost
     }
 
-    /// Everything received since the last cycle: feedback to `master`, error frames counted or,
-    /// for a bus-off, the end of the run. An error of the port other than the bus going away is
+    /// Everything received since the last cycle: feedback to `master`, heartbeats and EMCYs to
+    /// `sup` (stamped `now`), error frames counted or, for a bus-off, the end of the run. An error of the port other than the bus going away is
     /// returned (the caller stops the run with it).
     pub fn receive(
         &mut self,
         port: &mut dyn Port,
         master: &mut CyclicMaster,
+        sup: &mut Supervision,
+        now: Duration,
         cycle: u64,
     ) -> Result<(), BusError> {
         // The program line whose predecessor just completed.
@@ -330,7 +333,10 @@ impl CyclicBus {
         }
         loop {
             match port.recv_any(Duration::ZERO) {
-                Ok(Some(Received::Frame(f))) => master.on_frame(&f),
+                Ok(Some(Received::Frame(f))) => {
+                    sup.on_frame(now, &f);
+                    master.on_frame(&f);
+                }
                 Ok(Some(Received::Error(e))) => self.on_error_frame(&e, master, cycle),
                 Ok(None) => return Ok(()),
                 Err(e) if e.is_bus_lost() => {
@@ -510,7 +516,7 @@ impl CyclicBus {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gateway::cyclic::Phase;
+    use crate::master::cyclic::Phase;
 
     /// A port whose transmit queue is full for the frames numbered in `full_at` (counting every
     /// attempt), recording what it queued.
@@ -723,14 +729,17 @@ mod tests {
         let mut port = bus_.port(&[]);
         let mut controller = bus_.port(&[]);
         let mut master = CyclicMaster::new(&m);
+        let mut sup = Supervision::new(&m);
         let mut bus = CyclicBus::new(&m, "can0", &mut port, None).unwrap();
         controller
             .send_error(&ErrorFrame::error_passive(130, 2))
             .unwrap();
-        bus.receive(&mut port, &mut master, 1).unwrap();
+        bus.receive(&mut port, &mut master, &mut sup, Duration::ZERO, 1)
+            .unwrap();
         assert_eq!(master.failure(), None, "error-passive is a warning");
         controller.send_error(&ErrorFrame::bus_off()).unwrap();
-        bus.receive(&mut port, &mut master, 2).unwrap();
+        bus.receive(&mut port, &mut master, &mut sup, Duration::ZERO, 2)
+            .unwrap();
         assert!(bus.lost());
         assert_eq!(master.phase(), Phase::Done);
         let f = master.failure().unwrap();

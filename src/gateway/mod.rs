@@ -1,9 +1,7 @@
 //! The gateway: start the drives up over SDO, stream the program's setpoints on SYNC from the
 //! cyclic thread, watch the drives, and bring everything down in order.
 
-pub mod alarm;
 pub mod control;
-pub mod cyclic;
 pub mod cyclic_bus;
 pub mod io;
 pub mod progress;
@@ -21,10 +19,11 @@ use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
 use crate::interpolator::{Interpolator, OverrideRamp};
+use crate::master::alarm::{Alarm, Failure, SharedBusError};
+use crate::master::cyclic::{CycleRecord, CyclicMaster, Phase};
+use crate::master::supervision::Supervision;
 use crate::planner::{Limits, Plan, PlanError};
 use crate::rt::{self, Ticker, Timing};
-use alarm::{Alarm, Failure, SharedBusError, axis_letter};
-use cyclic::{CycleRecord, CyclicMaster, Phase};
 use io::NodeIo;
 
 /// Everything that can stop a run, with what a person needs to act on it.
@@ -391,29 +390,7 @@ pub struct Summary {
     pub bus: cyclic_bus::BusReport,
 }
 
-/// An EMCY after which the drive kept running (its statusword without the fault bit 3: a warning,
-/// bit 7, or a communication warning), counted.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Warning {
-    /// Axis letter.
-    pub axis: String,
-    /// Node.
-    pub node: u8,
-    /// EMCY code.
-    pub code: u16,
-    /// How many times.
-    pub count: u32,
-    /// Cycle of the first.
-    pub first_cycle: u64,
-    /// Cycle of the last.
-    pub last_cycle: u64,
-    /// The cycles of the first [`WARNING_CYCLES`] (the rest are only counted), to tie them to a
-    /// late wake-up of the cyclic thread ([`late_wake_causes`]).
-    pub cycles: [u64; WARNING_CYCLES],
-}
-
-/// How many occurrences of a warning keep their cycle.
-pub const WARNING_CYCLES: usize = 8;
+pub use crate::master::supervision::{WARNING_CYCLES, Warning};
 
 /// How many cycles after a late wake-up of the cyclic thread a drive's warning is taken for its
 /// consequence: the drive notices the missing SYNC during the gap, and its EMCY reaches the
@@ -562,6 +539,25 @@ pub struct RunOptions {
     pub log: Option<PathBuf>,
     /// Start simulated drives in-process (with the in-process bus).
     pub simulate: bool,
+    /// The run's feed override and hold: the operator's side (the `--control` socket, the
+    /// standard input keys) holds a clone; the run resets it when it starts.
+    pub control: Arc<control::Control>,
+    /// The run's live figures, for whoever displays them.
+    pub progress: Arc<progress::Progress>,
+}
+
+impl Default for RunOptions {
+    /// No program, no log, no simulated drives; fresh control and progress handles.
+    fn default() -> RunOptions {
+        RunOptions {
+            program_name: String::new(),
+            program_text: String::new(),
+            log: None,
+            simulate: false,
+            control: Arc::new(control::Control::new()),
+            progress: Arc::new(progress::Progress::new()),
+        }
+    }
 }
 
 /// The planner's limits from the machine's axes (axes the machine lacks get none: moving them is
@@ -808,7 +804,7 @@ async fn run_async(
 ) -> Result<Summary, GatewayError> {
     // The feed override's ramp (none when the planner keeps no acceleration for it).
     let ramp = OverrideRamp::for_machine(&limits(machine), &machine.planner);
-    control::CONTROL.reset(ramp.is_ok());
+    opts.control.reset(ramp.is_ok());
     let nodes: Vec<u8> = machine.axes.iter().map(|a| a.node).collect();
     let mut io = NodeIo::start(bus, &nodes)?;
     // Check the program against the travel from where the machine is, before anything is
@@ -848,22 +844,26 @@ async fn run_async(
         None => (None, None),
     };
 
-    // The cyclic thread.
-    let health = io.health();
+    // The cyclic thread, with the supervision: what start-up saw of the nodes' heartbeats and
+    // EMCYs is its starting point (the last lock of the health view the run takes).
+    let sup = supervision_from(machine, &io.health());
+    let (control, progress) = (opts.control.clone(), opts.progress.clone());
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
     let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
     let m = machine.clone();
-    // The TPDOs, and the nodes' heartbeats: a boot-up freezes its axis in the cycle that reads it.
+    // The TPDOs, the nodes' heartbeats (a boot-up freezes its axis in the cycle that reads it)
+    // and their EMCYs: the cyclic thread supervises the nodes itself.
     let tpdo_filters: Vec<Filter> = machine
         .axes
         .iter()
-        .map(|a| Filter::exact(a.feedback_pdo.cob_id))
-        .chain(
-            machine
-                .axes
-                .iter()
-                .map(|a| Filter::exact(crate::canopen::cob::HEARTBEAT + u16::from(a.node))),
-        )
+        .flat_map(|a| {
+            let node = u16::from(a.node);
+            [
+                Filter::exact(a.feedback_pdo.cob_id),
+                Filter::exact(crate::canopen::cob::HEARTBEAT + node),
+                Filter::exact(crate::canopen::cob::EMCY + node),
+            ]
+        })
         .collect();
     let mut port = bus.open(&tpdo_filters)?;
     let completed = source.completed_line();
@@ -880,11 +880,13 @@ async fn run_async(
                 &m,
                 port.as_mut(),
                 cyc_bus,
-                &health,
+                sup,
                 CyclicLinks {
                     plan_rx,
                     armed_tx,
                     log_tx,
+                    control,
+                    progress,
                 },
                 completed,
             )
@@ -1032,6 +1034,10 @@ struct CyclicLinks {
     armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
     /// One record per cycle for `--log`.
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
+    /// The operator's override and hold.
+    control: Arc<control::Control>,
+    /// Where the live figures go.
+    progress: Arc<progress::Progress>,
 }
 
 /// What the cyclic thread hands back when it ends.
@@ -1054,7 +1060,7 @@ fn cyclic_thread(
     machine: &Machine,
     port: &mut dyn crate::bus::Port,
     mut bus: cyclic_bus::CyclicBus,
-    health: &io::Health,
+    mut sup: Supervision,
     links: CyclicLinks,
     completed_line: Option<usize>,
 ) -> CyclicEnd {
@@ -1062,6 +1068,8 @@ fn cyclic_thread(
         plan_rx,
         armed_tx,
         log_tx,
+        control,
+        progress,
     } = links;
     let rt_setup = rt::make_realtime(rt::priority_from_env()).to_string();
     let mut master = CyclicMaster::new(machine);
@@ -1070,19 +1078,7 @@ fn cyclic_thread(
     let mut out: Vec<Frame> = Vec::with_capacity(machine.axes.len() + 1);
     let mut armed_tx = Some(armed_tx);
     let mut dropped = 0u64;
-    let mut seen_emcys = vec![0usize; machine.axes.len()];
-    let mut pending_emcys: Vec<PendingEmcy> = Vec::with_capacity(4 * machine.axes.len());
-    let mut bootups_at_start: Vec<u32> = {
-        let g = health.lock().unwrap();
-        machine
-            .axes
-            .iter()
-            .map(|a| g.get(&a.node).map_or(0, |h| h.bootups))
-            .collect()
-    };
-    let consumer = Duration::from_millis(u64::from(machine.heartbeat.gateway_consumer_ms));
     let mut port_err = None;
-    let mut warnings: Vec<Warning> = Vec::new();
     let (mut bit12_ns, mut fail_ns): (Option<u64>, Option<u64>) = (None, None);
     // For the progress display: the path speed of the setpoints (the largest following error is
     // the master's own figure).
@@ -1093,7 +1089,7 @@ fn cyclic_thread(
     loop {
         ticker.wait();
         // Override and hold from the operator: atomics only, applied from this cycle's sample.
-        if let Some((fraction, hold)) = control::CONTROL.poll(&mut control_seen) {
+        if let Some((fraction, hold)) = control.poll(&mut control_seen) {
             master.set_override(fraction, hold);
         }
         // Stop signals: one atomic load per cycle; the first stops on the path, the second
@@ -1110,73 +1106,18 @@ fn cyclic_thread(
             }
             signals_seen = signals;
         }
-        // Feedback and error frames received since the last cycle.
-        if let Err(e) = bus.receive(port, &mut master, ticker.timing.cycles) {
+        // Feedback, heartbeats, EMCYs and error frames received since the last cycle, stamped
+        // with this cycle's time.
+        let now = Duration::from_nanos(rt::now_ns());
+        if let Err(e) = bus.receive(port, &mut master, &mut sup, now, ticker.timing.cycles) {
             port_err.get_or_insert(SharedBusError(Arc::new(e)));
         }
         if let Some(e) = &port_err {
             // Cloning the shared error allocates nothing.
             master.alarm(0, Alarm::Bus { error: e.clone() });
         }
-        // Health from the non-cyclic side.
-        if let Ok(g) = health.try_lock() {
-            for (i, a) in machine.axes.iter().enumerate() {
-                let Some(h) = g.get(&a.node) else { continue };
-                // The statusword decides what an EMCY was (CiA 402): with the fault bit (3) a
-                // fault, which stops the group; without it a warning (bit 7, or a
-                // communication warning), counted in the summary. The EMCY can arrive before
-                // the TPDO that carries the fault bit: one without it waits for a TPDO
-                // received after it.
-                for e in &h.emcys[seen_emcys[i].min(h.emcys.len())..] {
-                    pending_emcys.push(PendingEmcy {
-                        axis: i,
-                        code: e.code,
-                        seen_cycle: master.cycle_number(),
-                    });
-                }
-                seen_emcys[i] = h.emcys.len();
-                if h.bootups > bootups_at_start[i] {
-                    bootups_at_start[i] = h.bootups;
-                    master.node_reset(a.node);
-                }
-                if let Some((_, at)) = h.last_heartbeat
-                    && at.elapsed() > consumer
-                {
-                    master.alarm(
-                        a.node,
-                        Alarm::HeartbeatLost {
-                            axis: axis_letter(&a.name),
-                            node: a.node,
-                            silent_ms: at.elapsed().as_millis() as u64,
-                            consumer_ms: consumer.as_millis() as u64,
-                        },
-                    );
-                }
-            }
-        }
-        let cycle = ticker.timing.cycles;
-        pending_emcys.retain(|p| {
-            let a = &machine.axes[p.axis];
-            let Some(fb) = master.feedback(p.axis) else {
-                return true;
-            };
-            if fb.statusword & crate::cia402::statusword::FAULT != 0 {
-                master.alarm(
-                    a.node,
-                    Alarm::Emcy {
-                        axis: axis_letter(&a.name),
-                        node: a.node,
-                        code: p.code,
-                    },
-                );
-                return false;
-            }
-            if fb.cycle <= p.seen_cycle {
-                return true; // no TPDO since the EMCY yet
-            }
-            count_warning(&mut warnings, a, p.code, cycle);
-            false
-        });
+        // Heartbeat consumer and EMCYs: faults raised on the master, warnings counted.
+        sup.poll(now, &mut master);
         if master.phase() == Phase::Armed
             && let Some(tx) = armed_tx.take()
         {
@@ -1200,14 +1141,14 @@ fn cyclic_thread(
         }
         let max_ferr_mm = master.max_ferr_mm.iter().fold(0.0f64, |m, f| m.max(*f));
         prev_cmd_mm = Some(rec.cmd_mm);
-        progress::PROGRESS.store(
+        progress.store(
             rec.cycle,
             rec.line,
             feed2.sqrt() / master.period_s(),
             max_ferr_mm,
         );
         if let Some(m) = master.motion() {
-            progress::PROGRESS.store_override(
+            progress.store_override(
                 m.effective_override(),
                 m.requested_override(),
                 m.is_held(),
@@ -1259,54 +1200,31 @@ fn cyclic_thread(
         rt_setup,
         port_err,
         dropped,
-        warnings,
+        warnings: sup.into_warnings(),
         bit12_to_failure_s,
         detected_ns: fail_ns,
         bus: bus.report(),
     }
 }
 
-/// An EMCY waiting for the statusword that says what it was.
-struct PendingEmcy {
-    /// Axis, machine order.
-    axis: usize,
-    code: u16,
-    /// The master's cycle number when it was seen.
-    seen_cycle: u64,
-}
-
-/// Count a warning of `axis` in `cycle`.
-fn count_warning(
-    warnings: &mut Vec<Warning>,
-    axis: &crate::config::AxisConfig,
-    code: u16,
-    cycle: u64,
-) {
-    match warnings
-        .iter_mut()
-        .find(|w| w.node == axis.node && w.code == code)
-    {
-        Some(w) => {
-            if let Some(c) = w.cycles.get_mut(w.count as usize) {
-                *c = cycle;
-            }
-            w.count += 1;
-            w.last_cycle = cycle;
+/// The run's supervision, from what start-up saw of the nodes: their last heartbeats (on the
+/// cyclic thread's clock, CLOCK_MONOTONIC) and their EMCYs, which the first cycles decide by the
+/// statusword like any other.
+fn supervision_from(machine: &Machine, health: &io::Health) -> Supervision {
+    let mut sup = Supervision::new(machine);
+    let now_ns = rt::now_ns();
+    let g = health.lock().unwrap_or_else(|e| e.into_inner());
+    for a in &machine.axes {
+        let Some(h) = g.get(&a.node) else { continue };
+        if let Some((_, at)) = h.last_heartbeat {
+            let ago = at.elapsed().as_nanos() as u64;
+            sup.seed_heartbeat(a.node, Duration::from_nanos(now_ns.saturating_sub(ago)));
         }
-        None => warnings.push(Warning {
-            axis: axis.name.clone(),
-            node: axis.node,
-            code,
-            count: 1,
-            first_cycle: cycle,
-            last_cycle: cycle,
-            cycles: {
-                let mut c = [0; WARNING_CYCLES];
-                c[0] = cycle;
-                c
-            },
-        }),
+        for e in &h.emcys {
+            sup.seed_emcy(a.node, e.code);
+        }
     }
+    sup
 }
 
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;
@@ -1344,7 +1262,7 @@ mod late_wake_tests {
         let mut cycles = [0; WARNING_CYCLES];
         cycles[..at.len()].copy_from_slice(at);
         Warning {
-            axis: ["X", "Y", "Z"][usize::from(node) - 1].into(),
+            axis: ["X", "Y", "Z"][usize::from(node) - 1],
             node,
             code,
             count: at.len() as u32,

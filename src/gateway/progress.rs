@@ -2,9 +2,9 @@
 //!
 //! The cyclic thread stores them once per cycle with plain atomic stores (no lock, no
 //! allocation, nothing that can block it); the display reads them from another thread a few
-//! times per second. One run at a time per process is what the command line does, so the
-//! figures live in one static, [`PROGRESS`], which costs the cyclic thread the same whether
-//! anyone reads it or not.
+//! times per second. Each run has its own ([`super::RunOptions::progress`], an `Arc` shared
+//! with whoever displays it), so runs in one process (tests) do not see each other's figures;
+//! storing costs the cyclic thread the same whether anyone reads them or not.
 //!
 //! Units in names: `_mm` millimetres, `_mm_s` mm/s.
 
@@ -49,7 +49,8 @@ pub struct ProgressSnapshot {
 }
 
 impl Progress {
-    const fn new() -> Progress {
+    /// Nothing run yet: cycle 0, no line, 100 %.
+    pub const fn new() -> Progress {
         Progress {
             cycle: AtomicU64::new(0),
             line: AtomicU64::new(0),
@@ -105,8 +106,11 @@ impl Progress {
     }
 }
 
-/// The figures of the run in progress.
-pub static PROGRESS: Progress = Progress::new();
+impl Default for Progress {
+    fn default() -> Progress {
+        Progress::new()
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -921,6 +921,7 @@ mod tests {
             program_text: text.into(),
             log: None,
             simulate: false,
+            ..Default::default()
         }
     }
 
@@ -951,8 +952,8 @@ mod tests {
 
     fn failure(stop: StopPoint) -> MotionFailure {
         MotionFailure {
-            failure: crate::gateway::alarm::Failure {
-                alarm: crate::gateway::alarm::Alarm::BootUp {
+            failure: crate::master::alarm::Failure {
+                alarm: crate::master::alarm::Alarm::BootUp {
                     axis: "X",
                     node: 1,
                     completed_line: None,

@@ -5,52 +5,15 @@
 //! an interrupted thread, and no system call anywhere sees `EINTR`. Each signal bumps a count in
 //! [`STOP`]; the cyclic thread reads it once per cycle (one atomic load) and turns the first
 //! into a stop on the path (a feed hold, then the drives disabled, see
-//! [`crate::gateway::cyclic::CyclicMaster::stop_on_path`]) and the second into the fault stop.
+//! [`crate::master::cyclic::CyclicMaster::stop_on_path`]) and the second into the fault stop.
 //! The process exits with [`Signal::exit_code`] (128 + the signal number) once the run has
 //! wound down.
 
 use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, Ordering};
 
-/// A stop signal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Signal {
-    /// SIGINT (Ctrl-C).
-    Int,
-    /// SIGTERM.
-    Term,
-}
-
-impl Signal {
-    /// Its name, `SIGINT` or `SIGTERM`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Signal::Int => "SIGINT",
-            Signal::Term => "SIGTERM",
-        }
-    }
-
-    /// The signal number.
-    pub fn number(self) -> i32 {
-        match self {
-            Signal::Int => libc::SIGINT,
-            Signal::Term => libc::SIGTERM,
-        }
-    }
-
-    fn from_number(n: i32) -> Option<Signal> {
-        match n {
-            libc::SIGINT => Some(Signal::Int),
-            libc::SIGTERM => Some(Signal::Term),
-            _ => None,
-        }
-    }
-
-    /// The exit status of a run it stopped: 128 + its number (130, 143), as a shell reports a
-    /// process the signal ended.
-    pub fn exit_code(self) -> u8 {
-        128 + self.number() as u8
-    }
-}
+/// The stop signal type lives with the alarms that name it (the sans-I/O master cannot import
+/// this module); signals themselves are process-wide, so their counts stay statics here.
+pub use crate::master::alarm::Signal;
 
 /// The stop signals received (see the module documentation).
 #[derive(Debug)]

@@ -12,6 +12,11 @@ use canmotion::gateway::{self, GatewayError, MotionFailure};
 /// drives keeping real time, and the machines this runs on have two cores. Runs in parallel
 /// stall each other's cycles by several periods, and a drive that sees its demand stop for
 /// 12 ms at 200 mm/s faults on its following-error window, as a real one would.
+///
+/// That is the lock's only reason now: a run's override, hold and progress figures are its own
+/// (`RunOptions::control`, `RunOptions::progress`), and the stop-signal counts of
+/// `rt::signal::STOP` are process-wide by nature but no test raises a signal in its own process.
+/// The virtual-clock suite (tests/virtual_clock.rs) keeps no real time and takes no lock.
 pub fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())

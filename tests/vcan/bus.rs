@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use canmotion::bus::BusError;
 use canmotion::bus::error::class;
 use canmotion::bus::{Bus, ErrorFrame, Filter, Port, Received};
-use canmotion::gateway::alarm::{Alarm, BusLoss};
 use canmotion::gateway::{self, GatewayError, MotionFailure, RunOptions, Summary};
+use canmotion::master::alarm::{Alarm, BusLoss};
 
 use super::{BIN, IFACE, UML_MARGIN_S, common, lock, run_square, simdrive, simdrive_with};
 
@@ -52,6 +52,7 @@ fn run_in_thread(
                 program_text: program.into(),
                 log: Some(log),
                 simulate: false,
+                ..Default::default()
             },
         )
     });
@@ -399,6 +400,7 @@ fn vcan0_error_passive_is_a_warning_counted_in_the_summary() {
             program_text: common::PROGRAM.into(),
             log: None,
             simulate: false,
+            ..Default::default()
         },
     )
     .expect("error-passive does not stop the run");

@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 use canmotion::bus::{Bus, Filter, Port};
 use canmotion::config::Machine;
 use canmotion::gateway::RunOptions;
-use canmotion::gateway::alarm::{Alarm, Failure};
 use canmotion::gateway::resume::{self, ResumeState};
+use canmotion::master::alarm::{Alarm, Failure};
 
 use super::{BIN, IFACE, ROOT, SimDrives, UML_MARGIN_S, lock, simdrive_with};
 use crate::common::{self, Outcome, Recorder};
@@ -45,6 +45,7 @@ fn run_recorded(
             program_text: program.into(),
             log: Some(log.clone()),
             simulate: false,
+            ..Default::default()
         },
     );
     let frames = rec.stop();

@@ -1188,7 +1188,7 @@ mod tests {
         assert_eq!(r.master.phase(), Phase::Streaming);
         let stopped_at = r.records.len();
         let sigint = Alarm::Signal {
-            signal: Some(crate::rt::signal::Signal::Int),
+            signal: Some(crate::master::alarm::Signal::Int),
         };
         r.master.stop_on_path(sigint.clone());
         // An operator's resume does not lift it.

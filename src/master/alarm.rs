@@ -4,8 +4,7 @@
 //! The alarms are the cyclic master's output, next to its frames: it raises them from the
 //! process data ([`super::cyclic::CyclicMaster::cycle`]) and takes them from the supervision
 //! around it (EMCY, heartbeat, boot-up, the bus, stop signals). This module depends only on what
-//! the alarms name (CiA 402 states, EMCY codes, bus errors, signals), so it moves unchanged into
-//! the sans-I/O master the issue plans (`src/master/`).
+//! the alarms name (CiA 402 states, EMCY codes, bus errors, signals), as the sans-I/O master must.
 //!
 //! The alarms raised inside a cycle carry only `Copy` data (axis letters are `&'static str`s from
 //! [`AXIS_LETTERS`]), so raising one allocates nothing: the cyclic path stays allocation-free
@@ -19,7 +18,6 @@ use crate::bus::{BusError, ErrorFrame};
 use crate::canopen::emcy;
 use crate::cia402::State;
 use crate::config::machine::{AXIS_LETTERS, MAX_AXES};
-use crate::rt::signal::Signal;
 
 /// The axis letter of `name` as a `&'static str` (names are validated against
 /// [`AXIS_LETTERS`] when the machine file loads; anything else shows as `?`).
@@ -113,6 +111,48 @@ impl fmt::Display for BusLoss {
                 }
             }
         }
+    }
+}
+
+/// A stop signal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Signal {
+    /// SIGINT (Ctrl-C).
+    Int,
+    /// SIGTERM.
+    Term,
+}
+
+impl Signal {
+    /// Its name, `SIGINT` or `SIGTERM`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::Int => "SIGINT",
+            Signal::Term => "SIGTERM",
+        }
+    }
+
+    /// The signal number.
+    pub fn number(self) -> i32 {
+        match self {
+            Signal::Int => libc::SIGINT,
+            Signal::Term => libc::SIGTERM,
+        }
+    }
+
+    /// The signal of number `n`, if it is a stop signal.
+    pub fn from_number(n: i32) -> Option<Signal> {
+        match n {
+            libc::SIGINT => Some(Signal::Int),
+            libc::SIGTERM => Some(Signal::Term),
+            _ => None,
+        }
+    }
+
+    /// The exit status of a run it stopped: 128 + its number (130, 143), as a shell reports a
+    /// process the signal ended.
+    pub fn exit_code(self) -> u8 {
+        128 + self.number() as u8
     }
 }
 
