@@ -419,12 +419,7 @@ where
     /// Opens a start-up move: from the current point, uncompensated, to the join with the next.
     fn start_up(&mut self, e: Element, key: Key) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
-            return Err(self.error(
-                &e,
-                ErrorKind::CompensationStartOnArc {
-                    code: if cw { "G2" } else { "G3" },
-                },
-            ));
+            return self.start_up_arc(e, key, if cw { "G2" } else { "G3" });
         }
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
         // Its offset line begins one radius over from the programmed start.
@@ -436,6 +431,142 @@ where
             geo,
             end,
             check_from,
+            start_trim: 0.0,
+            startup: true,
+        });
+        Ok(())
+    }
+
+    /// Opens an arc as the start-up move, as LinuxCNC's `convert_arc_comp1` makes it: from the
+    /// current, uncompensated point to the programmed end moved one tool radius along the
+    /// arc's radius there (toward the centre when the tool is inside the arc, away when
+    /// outside), about the centre on that radius that is as far from the start as from the
+    /// end. Its end keeps the programmed arc's tangent, so the corner after it joins as after
+    /// any arc; an inside corner trims it on its own circle.
+    fn start_up_arc(&mut self, e: Element, key: Key, code: &'static str) -> Result<(), Error> {
+        let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
+        let Geo::Arc {
+            center,
+            r0,
+            u1,
+            ccw,
+            normal,
+            ..
+        } = geo
+        else {
+            return Err(self.geometry_error(&e, "an arc without an arc's geometry"));
+        };
+        let r = key.d.abs();
+        let start = plane_point(&self.pos(), key.plane);
+        if (start - plane_point(&e.start_mm, key.plane)).norm() > TANGENT_GAP_MM {
+            // A new run right after another (G40 and G41/G42 with no move between): the tool
+            // is at the last run's offset point, not at the arc's programmed start. LinuxCNC
+            // computes such an arc from the programmed start and moves from the tool.
+            return Err(self.error(
+                &e,
+                ErrorKind::Unsupported {
+                    what: format!(
+                        "{code} as the start-up move right after another compensation run"
+                    ),
+                    reason: "program a straight move between the G40 and the next G41/G42",
+                },
+            ));
+        }
+        let end = plane_point(&e.end_mm, key.plane);
+        let chord_mm = (end - start).norm();
+        if chord_mm <= r {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryArcTooShort {
+                    code,
+                    chord_mm,
+                    tool_radius_mm: r,
+                },
+            ));
+        }
+        // LinuxCNC's TOOL_INSIDE_ARC: left of a counter-clockwise arc, right of a clockwise one.
+        let inside = (key.d > 0.0) == ccw;
+        if inside && r0 <= r {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationArcTooSmall {
+                    arc_radius_mm: r0,
+                    tool_radius_mm: r,
+                    offset_radius_mm: r0 - r,
+                },
+            ));
+        }
+        let to = end + if inside { -u1 } else { u1 } * r;
+        // The centre lies on the line from the new end toward the programmed centre, at
+        // c_len = (|start − to| / 2) / cos A from the new end, A the angle at the new end
+        // between that line and the chord to the start (negative: beyond the end, on the far
+        // side; LinuxCNC keeps that too).
+        let toward = center - to;
+        let toward_len = toward.norm();
+        let chord = start - to;
+        let cos_a = if toward_len > 0.0 {
+            toward.dot(&chord) / (toward_len * chord.norm())
+        } else {
+            0.0
+        };
+        // LinuxCNC's TOLERANCE_EQUAL.
+        if !(cos_a.abs() >= 1e-4) {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryArcNoCentre {
+                    code,
+                    tool_radius_mm: r,
+                },
+            ));
+        }
+        let c_len = 0.5 * chord.norm() / cos_a;
+        let new_center = to + toward / toward_len * c_len;
+        let radius_mm = c_len.abs();
+        if !(radius_mm >= MIN_ARC_RADIUS_MM && radius_mm.is_finite()) {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationArcTooSmall {
+                    arc_radius_mm: r0,
+                    tool_radius_mm: r,
+                    offset_radius_mm: radius_mm,
+                },
+            ));
+        }
+        let (v0, v1) = ((start - new_center) / radius_mm, (to - new_center) / radius_mm);
+        // From the start to the new end the way the arc turns, in (0, 2π] (LinuxCNC's
+        // find_turn), plus the programmed extra turns.
+        let s = if ccw { 1.0 } else { -1.0 };
+        let mut sweep = s * geometry::cross(v0, v1).atan2(v0.dot(&v1));
+        if sweep <= 0.0 {
+            sweep += TAU;
+        }
+        if let ElementKind::Arc { turns, .. } = e.kind {
+            sweep += TAU * f64::from(turns);
+        }
+        self.open = Some(Open {
+            e,
+            key,
+            geo: Geo::Arc {
+                center: new_center,
+                r0: radius_mm,
+                r1: radius_mm,
+                u0: v0,
+                u1: v1,
+                ccw,
+                sweep,
+                normal,
+            },
+            end: End {
+                curve: Curve::Circle {
+                    center: new_center,
+                    radius_mm,
+                },
+                point: to,
+                // The programmed arc's direction at its end: LinuxCNC classifies the next
+                // corner by it.
+                tangent: left(u1) * s,
+            },
+            check_from: V2::zeros(),
             start_trim: 0.0,
             startup: true,
         });
@@ -473,10 +604,27 @@ where
     /// end point.
     fn cancel(&mut self, open: Open, e: Element) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
+            let code = if cw { "G2" } else { "G3" };
+            let after_g40 = self
+                .held
+                .iter()
+                .any(|i| matches!(i, Item::Motion(m) if m.comp == CompState::Off));
             return Err(self.error(
                 &e,
-                ErrorKind::CompensationEndOnArc {
-                    code: if cw { "G2" } else { "G3" },
+                if after_g40 {
+                    // LinuxCNC takes the move along the tool axis after G40 as its exit move
+                    // (back to the programmed point in the plane too), then the arc; here
+                    // the cancel move is the first move in the plane.
+                    ErrorKind::Unsupported {
+                        what: format!(
+                            "{code} as the first move in the plane after G40 and a move along the tool axis"
+                        ),
+                        reason: "program a straight move in the plane right after G40",
+                    }
+                } else {
+                    // LinuxCNC: "the move just after exiting cutter compensation mode must be
+                    // straight, not an arc".
+                    ErrorKind::CompensationEndOnArc { code }
                 },
             ));
         }

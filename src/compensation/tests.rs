@@ -460,23 +460,25 @@ fn the_zx_plane() {
 #[test]
 fn errors_name_the_line() {
     let err = |text: &str| run(text).unwrap_err();
-    // Start-up and cancel on arcs.
-    let e = err("G0 X0 Y0\nG41.1 D4\nG3 X10 Y0 I5 J0 F600\n");
-    assert_eq!((e.line, e.col), (3, 1));
-    assert!(matches!(
-        e.kind,
-        ErrorKind::CompensationStartOnArc { code: "G3" }
-    ));
-    assert_eq!(
-        e.to_string(),
-        "t.ngc:3:1: G3 cannot start cutter compensation: the first move in the plane after G41/G42 must be a straight G0 or G1 move"
-    );
+    // An arc right after G40 (LinuxCNC refuses it too).
     let e = err(&format!("{HEAD}G40 G2 X20 Y0 I5 J0\n"));
-    assert_eq!(e.line, 6);
+    assert_eq!((e.line, e.col), (6, 5));
     assert!(matches!(
         e.kind,
         ErrorKind::CompensationEndOnArc { code: "G2" }
     ));
+    assert_eq!(
+        e.to_string(),
+        "t.ngc:6:5: G2 cannot end cutter compensation: the first move after G40 must be a straight G0 or G1 move"
+    );
+    // After G40 and a move along the tool axis LinuxCNC accepts an arc (its exit move is the
+    // axial one, which also returns to the programmed point in the plane): unsupported here.
+    let e = err(&format!("{HEAD}G40\nG0 Z5\nG2 X20 Y0 I5 J0\n"));
+    assert_eq!((e.line, e.col), (8, 1));
+    assert!(
+        matches!(e.kind, ErrorKind::Unsupported { .. }),
+        "{e}"
+    );
     // Tool too big for an inside arc: R 2 counter-clockwise under G41 leaves radius 0.
     let e = err(&format!("{HEAD}G3 X14 Y0 I2 J0\n"));
     assert_eq!(e.line, 6);

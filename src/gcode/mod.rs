@@ -831,17 +831,34 @@ pub enum ErrorKind {
         /// What happens, e.g. the element is shorter than its corners take.
         what: &'static str,
     },
-    /// An arc as the start-up move of cutter compensation.
+    /// An arc as the start-up move of cutter compensation whose end point is not farther than
+    /// the tool radius from the current point (LinuxCNC refuses it too).
     #[error(
-        "{code} cannot start cutter compensation: the first move in the plane after G41/G42 must be a straight G0 or G1 move"
+        "{code} cannot start cutter compensation: its end point is {chord_mm:.4} mm from the current point, not more than the tool radius {tool_radius_mm:.4} mm (start farther away)"
     )]
-    CompensationStartOnArc {
+    CompensationEntryArcTooShort {
         /// G2 or G3.
         code: &'static str,
+        /// Distance from the current point to the programmed end point.
+        chord_mm: f64,
+        /// The tool radius.
+        tool_radius_mm: f64,
     },
-    /// An arc as the cancel move of cutter compensation.
+    /// An arc as the start-up move of cutter compensation for which no tool-centre arc runs
+    /// from the current point to the offset end point with its centre on the end point's
+    /// radius (LinuxCNC: "tool radius not less than arc radius with comp").
     #[error(
-        "{code} cannot end cutter compensation: the first move in the plane after G40 must be a straight G0 or G1 move"
+        "{code} cannot start cutter compensation: no tool-centre arc runs from the current point to the end point's offset with tool radius {tool_radius_mm:.4} mm (start farther from the end point, or use a smaller tool)"
+    )]
+    CompensationEntryArcNoCentre {
+        /// G2 or G3.
+        code: &'static str,
+        /// The tool radius.
+        tool_radius_mm: f64,
+    },
+    /// An arc as the first move after G40 (LinuxCNC refuses it too).
+    #[error(
+        "{code} cannot end cutter compensation: the first move after G40 must be a straight G0 or G1 move"
     )]
     CompensationEndOnArc {
         /// G2 or G3.
