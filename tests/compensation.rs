@@ -820,3 +820,69 @@ fn an_outside_corner_after_an_entry_arc() {
         ],
     );
 }
+
+/// The path's geometry alone (the comp state of the elements differs between G41 and G42).
+fn shapes(path: &[Element]) -> Vec<(ElementKind, Vector3<f64>, Vector3<f64>)> {
+    path.iter().map(|e| (e.kind, e.start_mm, e.end_mm)).collect()
+}
+
+#[test]
+fn d_words_mean_what_they_mean_in_linuxcnc() {
+    let program = |head: &str| format!("G0 X-10 Y0\n{head}\nG1 X0 Y0 F600\nX10\nG3 X20 Y10 I0 J10\nG1 Y20\nG40 X0\n");
+    let g42 = comp_path(&program("G42.1 D4"), CompOptions::default());
+    assert_eq!(g42.len(), 5, "{g42:#?}");
+    // A negative G41.1 diameter is G42 with its magnitude (LinuxCNC swaps the side of a
+    // negative radius), and the other way round.
+    let swapped = comp_path(&program("G41.1 D-4"), CompOptions::default());
+    assert_eq!(shapes(&swapped), shapes(&g42));
+    let g41 = comp_path(&program("G41.1 D4"), CompOptions::default());
+    let swapped = comp_path(&program("G42.1 D-4"), CompOptions::default());
+    assert_eq!(shapes(&swapped), shapes(&g41));
+    assert_ne!(shapes(&g41), shapes(&g42));
+
+    // G41/G42 D is a tool number: LinuxCNC takes it to within 0.0001 of a whole number, and
+    // refuses a negative one.
+    let d1 = comp_path(&program("G41 D1"), CompOptions::default());
+    assert_eq!(shapes(&d1), shapes(&g41));
+    let near = comp_path(&program("G41 D1.00001"), CompOptions::default());
+    assert_eq!(shapes(&near), shapes(&d1));
+    let e = compensate(&program("G41 D-1")).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 5));
+    assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
+    let e = compensate(&program("G42 D1.5")).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 5));
+
+    // D0 is the tool in the spindle (LinuxCNC's pocket 0), not "no tool".
+    let mut s = setup();
+    s.loaded_tool = 1;
+    let text = program("G41 D0");
+    let interp = Interpreter::new(text.as_bytes(), FILE, s);
+    let items: Vec<Item> = Compensator::new(interp, FILE, CompOptions::default())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let d0: Vec<Element> = motions(&items)
+        .into_iter()
+        .skip_while(|e| e.comp == CompState::Off)
+        .collect();
+    assert_eq!(shapes(&d0), shapes(&d1));
+}
+
+#[test]
+fn g41_1_l_is_a_lathe_orientation_in_g18_only() {
+    let program = |plane: &str, l: &str| {
+        format!("{plane}\nG0 X-10 Y0 Z0\nG41.1 D4 {l}\nG1 X0 Y0 Z0 F600\nG40 X10\n")
+    };
+    // LinuxCNC: "G41.1 with L word, but plane is not G18".
+    let e = compensate(&program("G17", "L2")).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 10));
+    assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
+    // Orientations 1–8 move the controlled point off the nose centre: not supported.
+    let e = compensate(&program("G18", "L3")).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 10));
+    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+    // 0 and 9 leave it at the nose centre: the same path as without L.
+    let plain = compensate(&program("G18", "")).unwrap();
+    for l in ["L0", "L9"] {
+        assert_eq!(compensate(&program("G18", l)).unwrap(), plain);
+    }
+}
