@@ -7,7 +7,7 @@ use std::path::Path;
 
 use canmotion::compensation::{CompOptions, Compensator, OutsideCorners, compensate_program};
 use canmotion::gcode::{
-    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup,
+    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup, Tool,
     ToolTable, parse_program_with,
 };
 use nalgebra::{Vector2, Vector3};
@@ -703,10 +703,7 @@ fn arc_corner_machine(dir: &Path) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries");
     let demo = std::fs::read_to_string(root.join("machines/demo-xyz.toml")).unwrap();
     let text = demo
-        .replace(
-            "[program]",
-            "[program]\noutside_corners = \"arc\"",
-        )
+        .replace("[program]", "[program]\noutside_corners = \"arc\"")
         .replace("../", &format!("{}/", root.display()));
     let file = dir.join("machine.toml");
     std::fs::write(&file, text).unwrap();
@@ -769,7 +766,11 @@ fn an_arc_starts_compensation_as_in_linuxcnc() {
         &path,
         &[
             (3, [100.0, 90.0], None),
-            (5, [112.0, 100.0], Some(([100.0 + 11.0 / 6.0, 100.0], false))),
+            (
+                5,
+                [112.0, 100.0],
+                Some(([100.0 + 11.0 / 6.0, 100.0], false)),
+            ),
             (6, [112.0, 110.0], None),
             (7, [110.0, 120.0], None),
             (8, [100.0, 40.0], None),
@@ -783,7 +784,11 @@ fn an_arc_starts_compensation_as_in_linuxcnc() {
         let (_, _, s, e, arc) = path[k];
         let (c, _) = arc.unwrap();
         for p in [s, e] {
-            assert!(((p[0] - c[0]).hypot(p[1] - c[1]) - r).abs() < 1e-9, "{:?}", path[k]);
+            assert!(
+                ((p[0] - c[0]).hypot(p[1] - c[1]) - r).abs() < 1e-9,
+                "{:?}",
+                path[k]
+            );
         }
     }
 }
@@ -796,7 +801,11 @@ fn an_arc_starts_compensation_as_in_linuxcnc() {
 /// at (112,102).
 #[test]
 fn an_outside_corner_after_an_entry_arc() {
-    let entry = (5, [112.0, 100.0], Some(([100.0 + 11.0 / 6.0, 100.0], false)));
+    let entry = (
+        5,
+        [112.0, 100.0],
+        Some(([100.0 + 11.0 / 6.0, 100.0], false)),
+    );
     let dir = tempfile::tempdir().unwrap();
     let machine = arc_corner_machine(dir.path());
     check_path(
@@ -823,12 +832,16 @@ fn an_outside_corner_after_an_entry_arc() {
 
 /// The path's geometry alone (the comp state of the elements differs between G41 and G42).
 fn shapes(path: &[Element]) -> Vec<(ElementKind, Vector3<f64>, Vector3<f64>)> {
-    path.iter().map(|e| (e.kind, e.start_mm, e.end_mm)).collect()
+    path.iter()
+        .map(|e| (e.kind, e.start_mm, e.end_mm))
+        .collect()
 }
 
 #[test]
 fn d_words_mean_what_they_mean_in_linuxcnc() {
-    let program = |head: &str| format!("G0 X-10 Y0\n{head}\nG1 X0 Y0 F600\nX10\nG3 X20 Y10 I0 J10\nG1 Y20\nG40 X0\n");
+    let program = |head: &str| {
+        format!("G0 X-10 Y0\n{head}\nG1 X0 Y0 F600\nX10\nG3 X20 Y10 I0 J10\nG1 Y20\nG40 X0\n")
+    };
     let g42 = comp_path(&program("G42.1 D4"), CompOptions::default());
     assert_eq!(g42.len(), 5, "{g42:#?}");
     // A negative G41.1 diameter is G42 with its magnitude (LinuxCNC swaps the side of a
@@ -851,6 +864,26 @@ fn d_words_mean_what_they_mean_in_linuxcnc() {
     assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
     let e = compensate(&program("G42 D1.5")).unwrap_err();
     assert_eq!((e.line, e.col), (2, 5));
+
+    // A negative radius in the tool table swaps the side too (LinuxCNC's negative diameter).
+    let mut s = setup();
+    s.tools.insert(
+        7,
+        Tool {
+            radius_mm: -2.0,
+            length_mm: 0.0,
+        },
+    );
+    let text = program("G41 D7");
+    let interp = Interpreter::new(text.as_bytes(), FILE, s);
+    let items: Vec<Item> = Compensator::new(interp, FILE, CompOptions::default())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let d7: Vec<Element> = motions(&items)
+        .into_iter()
+        .skip_while(|e| e.comp == CompState::Off)
+        .collect();
+    assert_eq!(shapes(&d7), shapes(&g42));
 
     // D0 is the tool in the spindle (LinuxCNC's pocket 0), not "no tool".
     let mut s = setup();

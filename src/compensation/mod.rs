@@ -532,7 +532,10 @@ where
                 },
             ));
         }
-        let (v0, v1) = ((start - new_center) / radius_mm, (to - new_center) / radius_mm);
+        let (v0, v1) = (
+            (start - new_center) / radius_mm,
+            (to - new_center) / radius_mm,
+        );
         // From the start to the new end the way the arc turns, in (0, 2π] (LinuxCNC's
         // find_turn), plus the programmed extra turns.
         let s = if ccw { 1.0 } else { -1.0 };

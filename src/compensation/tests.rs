@@ -475,10 +475,7 @@ fn errors_name_the_line() {
     // axial one, which also returns to the programmed point in the plane): unsupported here.
     let e = err(&format!("{HEAD}G40\nG0 Z5\nG2 X20 Y0 I5 J0\n"));
     assert_eq!((e.line, e.col), (8, 1));
-    assert!(
-        matches!(e.kind, ErrorKind::Unsupported { .. }),
-        "{e}"
-    );
+    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
     // Tool too big for an inside arc: R 2 counter-clockwise under G41 leaves radius 0.
     let e = err(&format!("{HEAD}G3 X14 Y0 I2 J0\n"));
     assert_eq!(e.line, 6);
