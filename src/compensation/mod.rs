@@ -34,12 +34,22 @@
 //! # Start-up and cancel
 //!
 //! The start-up move is the first move in the plane with G41/G42 in force; the cancel move is
-//! the first move in the plane with G40 in force after it. Both must be straight (G0 or G1):
-//! an arc is an error naming its line. The start-up move runs from the current, uncompensated
-//! point to the point where its *offset line* (parallel to it, one radius over) joins the next
-//! element's offset by the corner rules above (so for a right-angle approach to an inside
-//! corner it ends one radius short, for an outside one one radius long, as in the source's
-//! figure 3-41); the cancel move mirrors it and ends at the programmed point. A move with no
+//! the first move in the plane with G40 in force after it. A straight start-up move runs from
+//! the current, uncompensated point to the point where its *offset line* (parallel to it, one
+//! radius over) joins the next element's offset by the corner rules above (so for a
+//! right-angle approach to an inside corner it ends one radius short, for an outside one one
+//! radius long, as in the source's figure 3-41); the cancel move mirrors it and ends at the
+//! programmed point.
+//!
+//! An arc may be the start-up move, as LinuxCNC makes it (`convert_arc_comp1`): from the
+//! current point to the programmed end moved one radius along the arc's radius there (inward
+//! when the tool is inside the arc, outward when outside), about the centre on that radius
+//! that is equally far from both; the corner after it joins as after any arc. What LinuxCNC
+//! refuses is an error: an end point not farther than the radius from the start
+//! ([`ErrorKind::CompensationEntryArcTooShort`]), the tool inside an arc not larger than it,
+//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). An arc right after G40
+//! is an error as in LinuxCNC ([`ErrorKind::CompensationEndOnArc`]); after G40 and a move
+//! along the tool axis, which LinuxCNC takes as its exit move, it is unsupported. A move with no
 //! motion in the plane (a Z plunge under G17) keeps the offset and is looked past: the corner
 //! joins the elements on either side of it, and join connectors come after it, right before the
 //! next element in the plane (as LinuxCNC queues them). A change of radius or side with no
@@ -51,9 +61,9 @@
 //! - Program end (M2/M30/%/end of text) with compensation on cancels it at the last point, as
 //!   LinuxCNC does: the last element ends at its plain offset end point, and no move returns
 //!   to the programmed path.
-//! - A radius of 0 (or G41/G42 with tool 0) offsets nothing: the elements pass through bit for
-//!   bit, with no start-up or cancel rules (LinuxCNC). A negative radius (G41.1 with a negative
-//!   diameter) swaps the side (LinuxCNC).
+//! - A radius of 0 offsets nothing: the elements pass through bit for bit, with no start-up
+//!   or cancel rules (LinuxCNC). A negative radius (G41.1 with a negative diameter, or a tool
+//!   whose table radius is negative) swaps the side (LinuxCNC).
 //! - Feed: every offset element keeps its programmed feed, so the tool centre moves at F (also
 //!   what LinuxCNC does); under G93 the feed is the one the interpreter computed from the
 //!   programmed length. Connectors take the feed, rapid flag, blend, comp state, line and
