@@ -520,7 +520,7 @@ where
             0.0
         };
         // LinuxCNC's TOLERANCE_EQUAL.
-        if !(cos_a.abs() >= 1e-4) {
+        if cos_a.is_nan() || cos_a.abs() < 1e-4 {
             return Err(self.error(
                 &e,
                 ErrorKind::CompensationEntryArcNoCentre {
