@@ -146,13 +146,12 @@ impl Setup {
         if !(self.arc_tolerance_rel > 0.0 && self.arc_tolerance_rel.is_finite()) {
             return bad("arc_tolerance_rel must be finite and greater than zero");
         }
+        // A negative radius swaps the side of G41/G42 (LinuxCNC's negative diameter).
         let tools_ok = self.tools.iter().all(|(_, t)| {
-            t.radius_mm >= 0.0
-                && t.radius_mm <= MAX_TOOL_SIZE_MM
-                && t.length_mm.abs() <= MAX_TOOL_SIZE_MM
+            t.radius_mm.abs() <= MAX_TOOL_SIZE_MM && t.length_mm.abs() <= MAX_TOOL_SIZE_MM
         });
         if !tools_ok {
-            return bad("tool radii must be from 0 to 10000 mm and lengths at most 10000 mm");
+            return bad("tool radii and lengths must be at most 10000 mm in magnitude");
         }
         Ok(())
     }
