@@ -919,3 +919,78 @@ fn g41_1_l_is_a_lathe_orientation_in_g18_only() {
         assert_eq!(compensate(&program("G18", l)).unwrap(), plain);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Random entry arcs, either direction, either side: the tool-centre arc starts at the
+    /// current point, ends one radius from the programmed end along the arc's radius (inward
+    /// when the tool is inside the arc), turns the programmed way, and its centre lies on that
+    /// radius as far from both ends: A + w·t with w the unit vector from the new end A toward
+    /// the programmed centre and t = |S − A|² / (2 w·(S − A)) (from |A + w t − S| = |t|).
+    /// Entries LinuxCNC refuses are errors of their kinds.
+    #[test]
+    fn entry_arcs(
+        cx in -20.0f64..20.0,
+        cy in -20.0f64..20.0,
+        big_r in 3.0f64..40.0,
+        a0 in 0.0f64..TAU,
+        sweep in 0.2f64..(TAU - 0.2),
+        ccw in any::<bool>(),
+        left in any::<bool>(),
+        tool_r in 0.25f64..2.5,
+    ) {
+        let s = if ccw { 1.0 } else { -1.0 };
+        let a1 = a0 + s * sweep;
+        let start = Vector2::new(cx + big_r * a0.cos(), cy + big_r * a0.sin());
+        let end = Vector2::new(cx + big_r * a1.cos(), cy + big_r * a1.sin());
+        let code = if left { "G41.1" } else { "G42.1" };
+        let arc = if ccw { "G3" } else { "G2" };
+        let text = format!(
+            "G90.1\nG0 X{} Y{}\n{code} D{}\n{arc} X{} Y{} I{cx} J{cy} F600\n",
+            start.x, start.y, 2.0 * tool_r, end.x, end.y
+        );
+        // The arc as the interpreter reads it (printed coordinates are rounded).
+        let prog = programmed(&text);
+        let p = prog[1];
+        let (s0, e0) = (xy(&p.start_mm), xy(&p.end_mm));
+        let center = xy(&p.arc().unwrap().center_mm);
+        let r0 = (s0 - center).norm();
+        let u1 = (e0 - center).normalize();
+        let inside = left == ccw;
+        let to = e0 + if inside { -u1 } else { u1 } * tool_r;
+        let w = (center - to).normalize();
+        let denom = 2.0 * w.dot(&(s0 - to));
+        let result = compensate(&text);
+        let chord = (e0 - s0).norm();
+        let cos_a = w.dot(&(s0 - to).normalize());
+        // Away from LinuxCNC's refusal thresholds, the path; on the refused side, the errors.
+        if chord <= tool_r - 1e-6 {
+            let e = result.unwrap_err();
+            prop_assert!(matches!(e.kind, ErrorKind::CompensationEntryArcTooShort { .. }), "{}", e);
+        } else if inside && r0 <= tool_r - 1e-6 {
+            let e = result.unwrap_err();
+            prop_assert!(matches!(e.kind, ErrorKind::CompensationArcTooSmall { .. }), "{}", e);
+        } else if chord > tool_r + 1e-6
+            && !(inside && r0 <= tool_r + 1e-6)
+            && cos_a.abs() > 1e-3
+        {
+            let out = motions(&result.unwrap_or_else(|e| panic!("{e}\n{text}")));
+            prop_assert_eq!(out.len(), 2);
+            let e = out[1];
+            let ElementKind::Arc { center_mm, cw, turns, .. } = e.kind else {
+                panic!("not an arc: {e:?}");
+            };
+            prop_assert_eq!(cw, !ccw);
+            prop_assert_eq!(turns, 0);
+            let t = (s0 - to).norm_squared() / denom;
+            let want_center = to + w * t;
+            let tol = 1e-6 * (1.0 + t.abs());
+            prop_assert!((xy(&center_mm) - want_center).norm() < tol, "{} vs {}\n{}", center_mm, want_center, text);
+            prop_assert!((xy(&e.start_mm) - s0).norm() < 1e-9);
+            prop_assert!((xy(&e.end_mm) - to).norm() < 1e-9);
+            let g = e.arc().unwrap();
+            prop_assert!((g.start_radius_mm - g.end_radius_mm).abs() < tol);
+        }
+    }
+}
