@@ -30,8 +30,9 @@
 //!   (degrees) about the work system's origin (G91: added to the current distance and angle).
 //!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
-//!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D,
-//!   G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
+//!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D L
+//!   (as LinuxCNC reads them: D0 the tool in the spindle, a negative diameter swaps the side,
+//!   L only in G18 and only 0 or 9), G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
 //! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off),
 //!   G10 L2/L20 P X Y Z R (work offsets and rotation), G52 (local offset, in the G92 register),
 //!   G92/G92.1/G92.2/G92.3; line numbers `N`, fractional too.
