@@ -7,7 +7,7 @@ use std::path::Path;
 
 use canmotion::compensation::{CompOptions, Compensator, OutsideCorners, compensate_program};
 use canmotion::gcode::{
-    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup,
+    CompState, Element, ElementKind, Error, ErrorKind, Interpreter, Item, Program, Setup, Tool,
     ToolTable, parse_program_with,
 };
 use nalgebra::{Vector2, Vector3};
@@ -408,13 +408,6 @@ fn errors_name_file_line_and_column() {
         e.to_string(),
         "part.ngc:5:1: cutter compensation with tool radius 2.0000 mm would gouge: this element is shorter than its corners take (its tool-centre path would run backwards)"
     );
-    // Start-up on an arc.
-    let e = compensate("G0 X-10 Y0\nG42 D1\nG2 X10 Y0 R10 F600\n").unwrap_err();
-    assert_eq!((e.line, e.col), (3, 1));
-    assert!(matches!(
-        e.kind,
-        ErrorKind::CompensationStartOnArc { code: "G2" }
-    ));
     // Cancel on an arc.
     let text = "G0 X-10 Y0\nG41 D1\nG1 X0 Y0 F600\nX10\nG40 G3 X20 Y0 R5\n";
     let e = compensate(text).unwrap_err();
@@ -658,6 +651,346 @@ proptest! {
                 let want = a + (n1 + n2) * (d / (1.0 + t1.dot(&t)));
                 prop_assert!((xy(&off.start_mm) - want).norm() < 1e-9);
             }
+        }
+    }
+}
+
+/// The `--path` records of `canmotion plan` on `tests/programs/<program>`: (line, rapid, start,
+/// end, arc centre and clockwise flag).
+type Record = (u64, bool, [f64; 3], [f64; 3], Option<([f64; 3], bool)>);
+
+fn plan_path(program: &str, machine: Option<&Path>) -> Vec<Record> {
+    let dir = tempfile::tempdir().unwrap();
+    let program = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/programs")
+        .join(program);
+    let path = dir.path().join("path.jsonl");
+    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_canmotion"));
+    cmd.arg("plan").arg(&program).arg("--path").arg(&path);
+    if let Some(m) = machine {
+        cmd.arg("--machine").arg(m);
+    }
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let point = |v: &serde_json::Value| -> [f64; 3] {
+        let a = v.as_array().unwrap();
+        [0, 1, 2].map(|i| a[i].as_f64().unwrap())
+    };
+    std::fs::read_to_string(&path)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            let arc = (v["kind"] == "arc").then(|| (point(&v["center"]), v["cw"] == true));
+            (
+                v["line"].as_u64().unwrap(),
+                v["rapid"].as_bool().unwrap(),
+                point(&v["start"]),
+                point(&v["end"]),
+                arc,
+            )
+        })
+        .collect()
+}
+
+/// A machine file like the demo's with `outside_corners = "arc"` (LinuxCNC's corners).
+fn arc_corner_machine(dir: &Path) -> std::path::PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries");
+    let demo = std::fs::read_to_string(root.join("machines/demo-xyz.toml")).unwrap();
+    let text = demo
+        .replace("[program]", "[program]\noutside_corners = \"arc\"")
+        .replace("../", &format!("{}/", root.display()));
+    let file = dir.join("machine.toml");
+    std::fs::write(&file, text).unwrap();
+    file
+}
+
+/// An expected element: line, end point, and for an arc its centre and direction (cw).
+type Want = (u64, [f64; 2], Option<([f64; 2], bool)>);
+
+/// Compares the path (z = 0 throughout) element by element with `want`, to 0.001 mm; the
+/// first element is the positioning rapid from the machine's start (0, 0, 0).
+#[track_caller]
+fn check_path(path: &[Record], want: &[Want]) {
+    let near = |a: [f64; 3], b: [f64; 2]| {
+        (a[0] - b[0]).abs() <= 0.001 && (a[1] - b[1]).abs() <= 0.001 && a[2].abs() <= 0.001
+    };
+    assert_eq!(path.len(), want.len(), "{path:#?}");
+    let mut at = [0.0; 3];
+    for (i, (got, want)) in path.iter().zip(want).enumerate() {
+        let (line, _, start, end, arc) = *got;
+        assert_eq!(start, at, "element {i} starts where the last ended");
+        at = end;
+        let (want_line, want_end, want_arc) = *want;
+        let arc_ok = match (arc, want_arc) {
+            (None, None) => true,
+            (Some((c, cw)), Some((wc, wcw))) => near(c, wc) && cw == wcw,
+            _ => false,
+        };
+        assert!(
+            line == want_line && near(end, want_end) && arc_ok,
+            "element {i}: got line {line} to {end:?} arc {arc:?}, want line {want_line} to \
+             {want_end:?} arc {want_arc:?}"
+        );
+    }
+}
+
+/// LinuxCNC's entry arc (`convert_arc_comp1`): it starts at the current, uncompensated point;
+/// its end is the programmed end moved one tool radius along the arc's radius (outward when the
+/// tool is outside the arc, inward when inside); its centre lies on that radius, as far from
+/// the end as from the start.
+///
+/// Run 1 (lines 3–7): G41.1 D-4 is G42 with radius 2 (LinuxCNC swaps the side of a negative
+/// diameter). The G3 about (100,100) from (100,90) to (110,100) has the tool outside: end
+/// (112,100). Centre (112 − t, 100) with t² = (12 − t)² + 10² (distance to the start
+/// (100,90)): t = 244/24 = 61/6, centre (100 + 11/6, 100). The line up from (110,100) is
+/// tangent to the arc: its offset x = 112 starts where the arc ends. The exit (G40, straight
+/// on up) ends the last element at its offset end (112,110), then runs to (110,120), as in
+/// LinuxCNC (its G40 leaves the last move at its offset end point).
+///
+/// Run 2 (lines 8–12): G41 radius 2, the same arc 50 mm lower with the tool inside: end
+/// (108,50), centre (108 − t, 50) with t² = (8 − t)² + 10²: t = 164/16 = 10.25, centre
+/// (97.75, 50). The turn into −X (line 11) is inside: the arc ends where its circle meets the
+/// line's offset y = 48, nearest the corner: x = 97.75 + √(10.25² − 2²) = 97.75 + √101.0625
+/// (LinuxCNC's arc-to-line case takes the same root). Exit straight on: (90,48) to (80,50).
+#[test]
+fn an_arc_starts_compensation_as_in_linuxcnc() {
+    let x = 97.75 + 101.0625f64.sqrt();
+    let path = plan_path("comp_arc_entry.ngc", None);
+    check_path(
+        &path,
+        &[
+            (3, [100.0, 90.0], None),
+            (
+                5,
+                [112.0, 100.0],
+                Some(([100.0 + 11.0 / 6.0, 100.0], false)),
+            ),
+            (6, [112.0, 110.0], None),
+            (7, [110.0, 120.0], None),
+            (8, [100.0, 40.0], None),
+            (10, [x, 48.0], Some(([97.75, 50.0], false))),
+            (11, [90.0, 48.0], None),
+            (12, [80.0, 50.0], None),
+        ],
+    );
+    // The entry arcs keep their radius: start and end on one circle.
+    for (k, r) in [(1, 61.0 / 6.0), (5, 10.25)] {
+        let (_, _, s, e, arc) = path[k];
+        let (c, _) = arc.unwrap();
+        for p in [s, e] {
+            assert!(
+                ((p[0] - c[0]).hypot(p[1] - c[1]) - r).abs() < 1e-9,
+                "{:?}",
+                path[k]
+            );
+        }
+    }
+}
+
+/// An outside corner after an entry arc (G42, radius 2): the entry arc as in run 1 above ends
+/// at (112,100) heading +Y; the line into −X turns left, away from the tool. With
+/// `outside_corners = "arc"` (LinuxCNC's) the corner is a counter-clockwise arc of radius 2
+/// about the programmed corner (110,100) from (112,100) to the line's offset start (110,102);
+/// with the default (C-type lines, α = 90°) both offsets are extended by 2·tan 45° = 2 to meet
+/// at (112,102).
+#[test]
+fn an_outside_corner_after_an_entry_arc() {
+    let entry = (
+        5,
+        [112.0, 100.0],
+        Some(([100.0 + 11.0 / 6.0, 100.0], false)),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let machine = arc_corner_machine(dir.path());
+    check_path(
+        &plan_path("comp_arc_entry_corner.ngc", Some(&machine)),
+        &[
+            (3, [100.0, 90.0], None),
+            entry,
+            (6, [110.0, 102.0], Some(([110.0, 100.0], false))),
+            (6, [90.0, 102.0], None),
+            (7, [80.0, 100.0], None),
+        ],
+    );
+    check_path(
+        &plan_path("comp_arc_entry_corner.ngc", None),
+        &[
+            (3, [100.0, 90.0], None),
+            entry,
+            (6, [112.0, 102.0], None),
+            (6, [90.0, 102.0], None),
+            (7, [80.0, 100.0], None),
+        ],
+    );
+}
+
+/// The path's geometry alone (the comp state of the elements differs between G41 and G42).
+fn shapes(path: &[Element]) -> Vec<(ElementKind, Vector3<f64>, Vector3<f64>)> {
+    path.iter()
+        .map(|e| (e.kind, e.start_mm, e.end_mm))
+        .collect()
+}
+
+#[test]
+fn d_words_mean_what_they_mean_in_linuxcnc() {
+    let program = |head: &str| {
+        format!("G0 X-10 Y0\n{head}\nG1 X0 Y0 F600\nX10\nG3 X20 Y10 I0 J10\nG1 Y20\nG40 X0\n")
+    };
+    let g42 = comp_path(&program("G42.1 D4"), CompOptions::default());
+    assert_eq!(g42.len(), 5, "{g42:#?}");
+    // A negative G41.1 diameter is G42 with its magnitude (LinuxCNC swaps the side of a
+    // negative radius), and the other way round.
+    let swapped = comp_path(&program("G41.1 D-4"), CompOptions::default());
+    assert_eq!(shapes(&swapped), shapes(&g42));
+    let g41 = comp_path(&program("G41.1 D4"), CompOptions::default());
+    let swapped = comp_path(&program("G42.1 D-4"), CompOptions::default());
+    assert_eq!(shapes(&swapped), shapes(&g41));
+    assert_ne!(shapes(&g41), shapes(&g42));
+
+    // G41/G42 D is a tool number: LinuxCNC takes it to within 0.0001 of a whole number, and
+    // refuses a negative one.
+    let d1 = comp_path(&program("G41 D1"), CompOptions::default());
+    assert_eq!(shapes(&d1), shapes(&g41));
+    let near = comp_path(&program("G41 D1.00001"), CompOptions::default());
+    assert_eq!(shapes(&near), shapes(&d1));
+    let e = compensate(&program("G41 D-1")).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 5));
+    assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
+    let e = compensate(&program("G42 D1.5")).unwrap_err();
+    assert_eq!((e.line, e.col), (2, 5));
+
+    // A negative radius in the tool table swaps the side too (LinuxCNC's negative diameter).
+    let mut s = setup();
+    s.tools.insert(
+        7,
+        Tool {
+            radius_mm: -2.0,
+            length_mm: 0.0,
+        },
+    );
+    let text = program("G41 D7");
+    let interp = Interpreter::new(text.as_bytes(), FILE, s);
+    let items: Vec<Item> = Compensator::new(interp, FILE, CompOptions::default())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let d7: Vec<Element> = motions(&items)
+        .into_iter()
+        .skip_while(|e| e.comp == CompState::Off)
+        .collect();
+    assert_eq!(shapes(&d7), shapes(&g42));
+
+    // D0 is the tool in the spindle (LinuxCNC's pocket 0), not "no tool".
+    let mut s = setup();
+    s.loaded_tool = 1;
+    let text = program("G41 D0");
+    let interp = Interpreter::new(text.as_bytes(), FILE, s);
+    let items: Vec<Item> = Compensator::new(interp, FILE, CompOptions::default())
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let d0: Vec<Element> = motions(&items)
+        .into_iter()
+        .skip_while(|e| e.comp == CompState::Off)
+        .collect();
+    assert_eq!(shapes(&d0), shapes(&d1));
+}
+
+#[test]
+fn g41_1_l_is_a_lathe_orientation_in_g18_only() {
+    let program = |plane: &str, l: &str| {
+        format!("{plane}\nG0 X-10 Y0 Z0\nG41.1 D4 {l}\nG1 X0 Y0 Z0 F600\nG40 X10\n")
+    };
+    // LinuxCNC: "G41.1 with L word, but plane is not G18".
+    let e = compensate(&program("G17", "L2")).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 10));
+    assert!(matches!(e.kind, ErrorKind::InvalidValue { .. }), "{e}");
+    // Orientations 1–8 move the controlled point off the nose centre: not supported.
+    let e = compensate(&program("G18", "L3")).unwrap_err();
+    assert_eq!((e.line, e.col), (3, 10));
+    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+    // 0 and 9 leave it at the nose centre: the same path as without L.
+    let plain = compensate(&program("G18", "")).unwrap();
+    for l in ["L0", "L9"] {
+        assert_eq!(compensate(&program("G18", l)).unwrap(), plain);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Random entry arcs, either direction, either side: the tool-centre arc starts at the
+    /// current point, ends one radius from the programmed end along the arc's radius (inward
+    /// when the tool is inside the arc), turns the programmed way, and its centre lies on that
+    /// radius as far from both ends: A + w·t with w the unit vector from the new end A toward
+    /// the programmed centre and t = |S − A|² / (2 w·(S − A)) (from |A + w t − S| = |t|).
+    /// Entries LinuxCNC refuses are errors of their kinds.
+    #[test]
+    fn entry_arcs(
+        cx in -20.0f64..20.0,
+        cy in -20.0f64..20.0,
+        big_r in 3.0f64..40.0,
+        a0 in 0.0f64..TAU,
+        sweep in 0.2f64..(TAU - 0.2),
+        ccw in any::<bool>(),
+        left in any::<bool>(),
+        tool_r in 0.25f64..2.5,
+    ) {
+        let s = if ccw { 1.0 } else { -1.0 };
+        let a1 = a0 + s * sweep;
+        let start = Vector2::new(cx + big_r * a0.cos(), cy + big_r * a0.sin());
+        let end = Vector2::new(cx + big_r * a1.cos(), cy + big_r * a1.sin());
+        let code = if left { "G41.1" } else { "G42.1" };
+        let arc = if ccw { "G3" } else { "G2" };
+        let text = format!(
+            "G90.1\nG0 X{} Y{}\n{code} D{}\n{arc} X{} Y{} I{cx} J{cy} F600\n",
+            start.x, start.y, 2.0 * tool_r, end.x, end.y
+        );
+        // The arc as the interpreter reads it (printed coordinates are rounded).
+        let prog = programmed(&text);
+        let p = prog[1];
+        let (s0, e0) = (xy(&p.start_mm), xy(&p.end_mm));
+        let center = xy(&p.arc().unwrap().center_mm);
+        let r0 = (s0 - center).norm();
+        let u1 = (e0 - center).normalize();
+        let inside = left == ccw;
+        let to = e0 + if inside { -u1 } else { u1 } * tool_r;
+        let w = (center - to).normalize();
+        let denom = 2.0 * w.dot(&(s0 - to));
+        let result = compensate(&text);
+        let chord = (e0 - s0).norm();
+        let cos_a = w.dot(&(s0 - to).normalize());
+        // Away from LinuxCNC's refusal thresholds, the path; on the refused side, the errors.
+        if chord <= tool_r - 1e-6 {
+            let e = result.unwrap_err();
+            prop_assert!(matches!(e.kind, ErrorKind::CompensationEntryArcTooShort { .. }), "{}", e);
+        } else if inside && r0 <= tool_r - 1e-6 {
+            let e = result.unwrap_err();
+            prop_assert!(matches!(e.kind, ErrorKind::CompensationArcTooSmall { .. }), "{}", e);
+        } else if chord > tool_r + 1e-6
+            && !(inside && r0 <= tool_r + 1e-6)
+            && cos_a.abs() > 1e-3
+        {
+            let out = motions(&result.unwrap_or_else(|e| panic!("{e}\n{text}")));
+            prop_assert_eq!(out.len(), 2);
+            let e = out[1];
+            let ElementKind::Arc { center_mm, cw, turns, .. } = e.kind else {
+                panic!("not an arc: {e:?}");
+            };
+            prop_assert_eq!(cw, !ccw);
+            prop_assert_eq!(turns, 0);
+            let t = (s0 - to).norm_squared() / denom;
+            let want_center = to + w * t;
+            let tol = 1e-6 * (1.0 + t.abs());
+            prop_assert!((xy(&center_mm) - want_center).norm() < tol, "{} vs {}\n{}", center_mm, want_center, text);
+            prop_assert!((xy(&e.start_mm) - s0).norm() < 1e-9);
+            prop_assert!((xy(&e.end_mm) - to).norm() < 1e-9);
+            let g = e.arc().unwrap();
+            prop_assert!((g.start_radius_mm - g.end_radius_mm).abs() < tol);
         }
     }
 }

@@ -34,12 +34,22 @@
 //! # Start-up and cancel
 //!
 //! The start-up move is the first move in the plane with G41/G42 in force; the cancel move is
-//! the first move in the plane with G40 in force after it. Both must be straight (G0 or G1):
-//! an arc is an error naming its line. The start-up move runs from the current, uncompensated
-//! point to the point where its *offset line* (parallel to it, one radius over) joins the next
-//! element's offset by the corner rules above (so for a right-angle approach to an inside
-//! corner it ends one radius short, for an outside one one radius long, as in the source's
-//! figure 3-41); the cancel move mirrors it and ends at the programmed point. A move with no
+//! the first move in the plane with G40 in force after it. A straight start-up move runs from
+//! the current, uncompensated point to the point where its *offset line* (parallel to it, one
+//! radius over) joins the next element's offset by the corner rules above (so for a
+//! right-angle approach to an inside corner it ends one radius short, for an outside one one
+//! radius long, as in the source's figure 3-41); the cancel move mirrors it and ends at the
+//! programmed point.
+//!
+//! An arc may be the start-up move, as LinuxCNC makes it (`convert_arc_comp1`): from the
+//! current point to the programmed end moved one radius along the arc's radius there (inward
+//! when the tool is inside the arc, outward when outside), about the centre on that radius
+//! that is equally far from both; the corner after it joins as after any arc. What LinuxCNC
+//! refuses is an error: an end point not farther than the radius from the start
+//! ([`ErrorKind::CompensationEntryArcTooShort`]), the tool inside an arc not larger than it,
+//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). An arc right after G40
+//! is an error as in LinuxCNC ([`ErrorKind::CompensationEndOnArc`]); after G40 and a move
+//! along the tool axis, which LinuxCNC takes as its exit move, it is unsupported. A move with no
 //! motion in the plane (a Z plunge under G17) keeps the offset and is looked past: the corner
 //! joins the elements on either side of it, and join connectors come after it, right before the
 //! next element in the plane (as LinuxCNC queues them). A change of radius or side with no
@@ -51,9 +61,9 @@
 //! - Program end (M2/M30/%/end of text) with compensation on cancels it at the last point, as
 //!   LinuxCNC does: the last element ends at its plain offset end point, and no move returns
 //!   to the programmed path.
-//! - A radius of 0 (or G41/G42 with tool 0) offsets nothing: the elements pass through bit for
-//!   bit, with no start-up or cancel rules (LinuxCNC). A negative radius (G41.1 with a negative
-//!   diameter) swaps the side (LinuxCNC).
+//! - A radius of 0 offsets nothing: the elements pass through bit for bit, with no start-up
+//!   or cancel rules (LinuxCNC). A negative radius (G41.1 with a negative diameter, or a tool
+//!   whose table radius is negative) swaps the side (LinuxCNC).
 //! - Feed: every offset element keeps its programmed feed, so the tool centre moves at F (also
 //!   what LinuxCNC does); under G93 the feed is the one the interpreter computed from the
 //!   programmed length. Connectors take the feed, rapid flag, blend, comp state, line and
@@ -419,12 +429,7 @@ where
     /// Opens a start-up move: from the current point, uncompensated, to the join with the next.
     fn start_up(&mut self, e: Element, key: Key) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
-            return Err(self.error(
-                &e,
-                ErrorKind::CompensationStartOnArc {
-                    code: if cw { "G2" } else { "G3" },
-                },
-            ));
+            return self.start_up_arc(e, key, if cw { "G2" } else { "G3" });
         }
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
         // Its offset line begins one radius over from the programmed start.
@@ -436,6 +441,145 @@ where
             geo,
             end,
             check_from,
+            start_trim: 0.0,
+            startup: true,
+        });
+        Ok(())
+    }
+
+    /// Opens an arc as the start-up move, as LinuxCNC's `convert_arc_comp1` makes it: from the
+    /// current, uncompensated point to the programmed end moved one tool radius along the
+    /// arc's radius there (toward the centre when the tool is inside the arc, away when
+    /// outside), about the centre on that radius that is as far from the start as from the
+    /// end. Its end keeps the programmed arc's tangent, so the corner after it joins as after
+    /// any arc; an inside corner trims it on its own circle.
+    fn start_up_arc(&mut self, e: Element, key: Key, code: &'static str) -> Result<(), Error> {
+        let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
+        let Geo::Arc {
+            center,
+            r0,
+            u1,
+            ccw,
+            normal,
+            ..
+        } = geo
+        else {
+            return Err(self.geometry_error(&e, "an arc without an arc's geometry"));
+        };
+        let r = key.d.abs();
+        let start = plane_point(&self.pos(), key.plane);
+        if (start - plane_point(&e.start_mm, key.plane)).norm() > TANGENT_GAP_MM {
+            // A new run right after another (G40 and G41/G42 with no move between): the tool
+            // is at the last run's offset point, not at the arc's programmed start. LinuxCNC
+            // computes such an arc from the programmed start and moves from the tool.
+            return Err(self.error(
+                &e,
+                ErrorKind::Unsupported {
+                    what: format!(
+                        "{code} as the start-up move right after another compensation run"
+                    ),
+                    reason: "program a straight move between the G40 and the next G41/G42",
+                },
+            ));
+        }
+        let end = plane_point(&e.end_mm, key.plane);
+        let chord_mm = (end - start).norm();
+        if chord_mm <= r {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryArcTooShort {
+                    code,
+                    chord_mm,
+                    tool_radius_mm: r,
+                },
+            ));
+        }
+        // LinuxCNC's TOOL_INSIDE_ARC: left of a counter-clockwise arc, right of a clockwise one.
+        let inside = (key.d > 0.0) == ccw;
+        if inside && r0 <= r {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationArcTooSmall {
+                    arc_radius_mm: r0,
+                    tool_radius_mm: r,
+                    offset_radius_mm: r0 - r,
+                },
+            ));
+        }
+        let to = end + if inside { -u1 } else { u1 } * r;
+        // The centre lies on the line from the new end toward the programmed centre, at
+        // c_len = (|start − to| / 2) / cos A from the new end, A the angle at the new end
+        // between that line and the chord to the start (negative: beyond the end, on the far
+        // side; LinuxCNC keeps that too).
+        let toward = center - to;
+        let toward_len = toward.norm();
+        let chord = start - to;
+        let cos_a = if toward_len > 0.0 {
+            toward.dot(&chord) / (toward_len * chord.norm())
+        } else {
+            0.0
+        };
+        // LinuxCNC's TOLERANCE_EQUAL.
+        if cos_a.is_nan() || cos_a.abs() < 1e-4 {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryArcNoCentre {
+                    code,
+                    tool_radius_mm: r,
+                },
+            ));
+        }
+        let c_len = 0.5 * chord.norm() / cos_a;
+        let new_center = to + toward / toward_len * c_len;
+        let radius_mm = c_len.abs();
+        if !(radius_mm >= MIN_ARC_RADIUS_MM && radius_mm.is_finite()) {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationArcTooSmall {
+                    arc_radius_mm: r0,
+                    tool_radius_mm: r,
+                    offset_radius_mm: radius_mm,
+                },
+            ));
+        }
+        let (v0, v1) = (
+            (start - new_center) / radius_mm,
+            (to - new_center) / radius_mm,
+        );
+        // From the start to the new end the way the arc turns, in (0, 2π] (LinuxCNC's
+        // find_turn), plus the programmed extra turns.
+        let s = if ccw { 1.0 } else { -1.0 };
+        let mut sweep = s * geometry::cross(v0, v1).atan2(v0.dot(&v1));
+        if sweep <= 0.0 {
+            sweep += TAU;
+        }
+        if let ElementKind::Arc { turns, .. } = e.kind {
+            sweep += TAU * f64::from(turns);
+        }
+        self.open = Some(Open {
+            e,
+            key,
+            geo: Geo::Arc {
+                center: new_center,
+                r0: radius_mm,
+                r1: radius_mm,
+                u0: v0,
+                u1: v1,
+                ccw,
+                sweep,
+                normal,
+            },
+            end: End {
+                curve: Curve::Circle {
+                    center: new_center,
+                    radius_mm,
+                },
+                point: to,
+                // The programmed arc's direction at its end: LinuxCNC classifies the next
+                // corner by it.
+                tangent: left(u1) * s,
+            },
+            check_from: V2::zeros(),
             start_trim: 0.0,
             startup: true,
         });
@@ -473,10 +617,27 @@ where
     /// end point.
     fn cancel(&mut self, open: Open, e: Element) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
+            let code = if cw { "G2" } else { "G3" };
+            let after_g40 = self
+                .held
+                .iter()
+                .any(|i| matches!(i, Item::Motion(m) if m.comp == CompState::Off));
             return Err(self.error(
                 &e,
-                ErrorKind::CompensationEndOnArc {
-                    code: if cw { "G2" } else { "G3" },
+                if after_g40 {
+                    // LinuxCNC takes the move along the tool axis after G40 as its exit move
+                    // (back to the programmed point in the plane too), then the arc; here
+                    // the cancel move is the first move in the plane.
+                    ErrorKind::Unsupported {
+                        what: format!(
+                            "{code} as the first move in the plane after G40 and a move along the tool axis"
+                        ),
+                        reason: "program a straight move in the plane right after G40",
+                    }
+                } else {
+                    // LinuxCNC: "the move just after exiting cutter compensation mode must be
+                    // straight, not an arc".
+                    ErrorKind::CompensationEndOnArc { code }
                 },
             ));
         }

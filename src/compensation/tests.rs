@@ -460,23 +460,22 @@ fn the_zx_plane() {
 #[test]
 fn errors_name_the_line() {
     let err = |text: &str| run(text).unwrap_err();
-    // Start-up and cancel on arcs.
-    let e = err("G0 X0 Y0\nG41.1 D4\nG3 X10 Y0 I5 J0 F600\n");
-    assert_eq!((e.line, e.col), (3, 1));
-    assert!(matches!(
-        e.kind,
-        ErrorKind::CompensationStartOnArc { code: "G3" }
-    ));
-    assert_eq!(
-        e.to_string(),
-        "t.ngc:3:1: G3 cannot start cutter compensation: the first move in the plane after G41/G42 must be a straight G0 or G1 move"
-    );
+    // An arc right after G40 (LinuxCNC refuses it too).
     let e = err(&format!("{HEAD}G40 G2 X20 Y0 I5 J0\n"));
-    assert_eq!(e.line, 6);
+    assert_eq!((e.line, e.col), (6, 5));
     assert!(matches!(
         e.kind,
         ErrorKind::CompensationEndOnArc { code: "G2" }
     ));
+    assert_eq!(
+        e.to_string(),
+        "t.ngc:6:5: G2 cannot end cutter compensation: the first move after G40 must be a straight G0 or G1 move"
+    );
+    // After G40 and a move along the tool axis LinuxCNC accepts an arc (its exit move is the
+    // axial one, which also returns to the programmed point in the plane): unsupported here.
+    let e = err(&format!("{HEAD}G40\nG0 Z5\nG2 X20 Y0 I5 J0\n"));
+    assert_eq!((e.line, e.col), (8, 1));
+    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
     // Tool too big for an inside arc: R 2 counter-clockwise under G41 leaves radius 0.
     let e = err(&format!("{HEAD}G3 X14 Y0 I2 J0\n"));
     assert_eq!(e.line, 6);
@@ -500,6 +499,97 @@ fn errors_name_the_line() {
     let e = err("G0 X-1 Y0\nG41.1 D4\nG1 X0 Y0 F600\nY10\n");
     assert_eq!(e.line, 3);
     assert!(matches!(e.kind, ErrorKind::CompensationGouge { .. }));
+}
+
+#[test]
+fn an_entry_arc_in_the_zx_plane_and_as_a_helix() {
+    // G18 (first axis Z, second X): the G3 from Z0 X-10 about Z0 X0 to Z10 X0 turns
+    // counter-clockwise in (Z, X); under G41 the tool is inside it. As in the XY case of
+    // tests/compensation.rs: end (Z8, X0), centre on the end's radius at Z = 8 − t with
+    // t² = (8 − t)² + 10², t = 10.25: (Z−2.25, X0). The arc leaves along +X, so the line to
+    // X10 is tangent (its offset Z = 8); the cancel runs straight on to Z10 X20.
+    let text = "G18 G21 G90\nG0 X-10 Z0\nG41.1 D4\nG3 Z10 X0 I10 K0 F600\nG1 X10\nG40 G1 X20\n";
+    let m = motions(&run(text).unwrap());
+    assert_eq!(m.len(), 3, "{m:#?}");
+    let g = assert_arc(
+        &m[0],
+        4,
+        v(0.0, 0.0, -2.25),
+        10.25,
+        true,
+        v(-10.0, 0.0, 0.0),
+        v(0.0, 0.0, 8.0),
+    );
+    // Counter-clockwise about +Y from (Z0, X−10) to (Z8, X0): the angle in (Z, X) from
+    // atan2(−10, 2.25) to 0.
+    assert!((g.sweep_rad - 10f64.atan2(2.25)).abs() < 1e-9, "{g:?}");
+    assert_line(&m[1], 5, v(0.0, 0.0, 8.0), v(10.0, 0.0, 8.0));
+    assert_line(&m[2], 6, v(10.0, 0.0, 8.0), v(20.0, 0.0, 10.0));
+
+    // A helical entry (G42, tool outside): the end point (12, 0) and centre (11/6, 0) of the
+    // plane arc, with the programmed descent to Z−3; the tangent line keeps Z−3.
+    let text = "G0 X0 Y-10\nG42.1 D4\nG3 X10 Y0 Z-3 I0 J10 F600\nG1 Y10\nG40 Y20\n";
+    let m = motions(&run(text).unwrap());
+    assert_eq!(m.len(), 3, "{m:#?}");
+    let g = assert_arc(
+        &m[0],
+        3,
+        v(11.0 / 6.0, 0.0, 0.0),
+        61.0 / 6.0,
+        true,
+        v(0.0, -10.0, 0.0),
+        v(12.0, 0.0, -3.0),
+    );
+    assert!((g.helix_mm + 3.0).abs() < 1e-12);
+    assert_line(&m[1], 4, v(12.0, 0.0, -3.0), v(12.0, 10.0, -3.0));
+    assert_line(&m[2], 5, v(12.0, 10.0, -3.0), v(10.0, 20.0, -3.0));
+}
+
+#[test]
+fn entry_arcs_linuxcnc_refuses_are_errors_naming_the_line() {
+    let err = |text: &str| run(text).unwrap_err();
+    // The end point √2 from the start, within the tool radius 2.
+    let e = err("G0 X0 Y0\nG41.1 D4\nG3 X1 Y1 I1 J0 F600\n");
+    assert_eq!((e.line, e.col), (3, 1));
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationEntryArcTooShort { code: "G3", chord_mm, tool_radius_mm }
+                if (chord_mm - SQRT_2).abs() < 1e-12 && tool_radius_mm == 2.0
+        ),
+        "{e}"
+    );
+    assert_eq!(
+        e.to_string(),
+        "t.ngc:3:1: G3 cannot start cutter compensation: its end point is 1.4142 mm from the current point, not more than the tool radius 2.0000 mm (start farther away)"
+    );
+    // The tool (radius 2) inside an arc of radius 2.
+    let e = err("G0 X0 Y0\nG41.1 D4\nG3 X4 Y0 I2 J0 F600\n");
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationArcTooSmall { arc_radius_mm, offset_radius_mm, .. }
+                if arc_radius_mm == 2.0 && offset_radius_mm == 0.0
+        ),
+        "{e}"
+    );
+    // Inside the arc about (0,0) of radius 10 from (8,−6) to (10,0): the end moves to (8,0),
+    // and the chord from there to the start, (0,−6), is square to the radius (−8,0): no
+    // centre on that radius is as far from both.
+    let e = err("G0 X8 Y-6\nG41.1 D4\nG3 X10 Y0 I-8 J6 F600\n");
+    assert_eq!((e.line, e.col), (3, 1));
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationEntryArcNoCentre { code: "G3", tool_radius_mm } if tool_radius_mm == 2.0
+        ),
+        "{e}"
+    );
+    // A new run started on an arc right after another run, with no move between: the tool is
+    // at the last run's offset point (10,2), not at the arc's start (10,0).
+    let e = err(&format!("{HEAD}G40\nG42.1 D4\nG2 X20 Y-10 I0 J-10\n"));
+    assert_eq!((e.line, e.col), (8, 1));
+    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
 }
 
 #[test]

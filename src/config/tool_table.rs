@@ -69,12 +69,15 @@ impl ToolTable {
                     )
                 })?;
             let name = format!("tool {number}");
-            if !(entry.radius_mm >= 0.0 && entry.radius_mm <= MAX_TOOL_SIZE_MM) {
+            // A negative radius is allowed, as a negative diameter in LinuxCNC's table: G41/G42
+            // then compensate on the other side (a path made for a nominal tool, cut with a
+            // smaller one).
+            if !(-MAX_TOOL_SIZE_MM..=MAX_TOOL_SIZE_MM).contains(&entry.radius_mm) {
                 return Err(invalid(
                     name,
                     "radius_mm",
                     format!(
-                        "{} must be from 0 to {MAX_TOOL_SIZE_MM} mm",
+                        "{} must be from -{MAX_TOOL_SIZE_MM} to {MAX_TOOL_SIZE_MM} mm",
                         entry.radius_mm
                     ),
                 ));
@@ -130,11 +133,18 @@ mod tests {
     }
 
     #[test]
+    fn a_negative_radius_loads() {
+        // LinuxCNC's tables may hold a negative diameter: G41/G42 swap sides with it.
+        let t = parse("[[tool]]\nnumber = 3\nradius_mm = -0.5\nlength_mm = 5\n").unwrap();
+        assert_eq!(t.get(3).map(|t| t.radius_mm), Some(-0.5));
+    }
+
+    #[test]
     fn errors_name_file_table_and_key() {
         let cases = [
             (
-                "[[tool]]\nnumber = 1\nradius_mm = -1\nlength_mm = 5\n",
-                "t.toml: [tool 1] radius_mm: -1 must be from 0 to 10000 mm",
+                "[[tool]]\nnumber = 1\nradius_mm = -10001\nlength_mm = 5\n",
+                "t.toml: [tool 1] radius_mm: -10001 must be from -10000 to 10000 mm",
             ),
             (
                 "[[tool]]\nnumber = 0\nradius_mm = 1\nlength_mm = 5\n",

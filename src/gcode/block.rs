@@ -471,7 +471,9 @@ fn check_domain(word: &Word) -> Result<(), BlockError> {
             Err(invalid(word, "a non-negative integer tool number"))
         }
         'L' if as_index(word.value).is_none() => Err(invalid(word, "a non-negative integer")),
-        'D' | 'Q' if word.value < 0.0 => Err(invalid(word, "a non-negative value")),
+        // D may be negative: a G41.1/G42.1 diameter below zero swaps the side (LinuxCNC);
+        // G41/G42 refuse a negative tool number themselves.
+        'Q' if word.value < 0.0 => Err(invalid(word, "a non-negative value")),
         _ => Ok(()),
     }
 }

@@ -146,13 +146,12 @@ impl Setup {
         if !(self.arc_tolerance_rel > 0.0 && self.arc_tolerance_rel.is_finite()) {
             return bad("arc_tolerance_rel must be finite and greater than zero");
         }
+        // A negative radius swaps the side of G41/G42 (LinuxCNC's negative diameter).
         let tools_ok = self.tools.iter().all(|(_, t)| {
-            t.radius_mm >= 0.0
-                && t.radius_mm <= MAX_TOOL_SIZE_MM
-                && t.length_mm.abs() <= MAX_TOOL_SIZE_MM
+            t.radius_mm.abs() <= MAX_TOOL_SIZE_MM && t.length_mm.abs() <= MAX_TOOL_SIZE_MM
         });
         if !tools_ok {
-            return bad("tool radii must be from 0 to 10000 mm and lengths at most 10000 mm");
+            return bad("tool radii and lengths must be at most 10000 mm in magnitude");
         }
         Ok(())
     }
@@ -983,22 +982,63 @@ impl State {
                 },
             ));
         }
+        // What a D word means follows LinuxCNC's `convert_cutter_compensation_on`; a negative
+        // radius (from a negative G41.1/G42.1 diameter) swaps the side in the compensation
+        // stage, as LinuxCNC does.
         let (tool, radius_mm) = if code.tenths == 411 || code.tenths == 421 {
             let d = self
                 .take(b, 'D')
                 .ok_or_else(|| missing(code.col, code, 'D', "the tool diameter"))?;
-            // L (lathe tool orientation) is accepted with G41.1/G42.1 and has no effect here.
-            self.take(b, 'L');
+            if let Some(l) = self.take(b, 'L') {
+                self.lathe_orientation(code, l)?;
+            }
             (None, d.value * scale / 2.0)
         } else {
-            let (n, t) = self.tool_word(b, 'D', code)?;
-            (Some(n), t.radius_mm)
+            match self.take(b, 'D') {
+                Some(w) => {
+                    // A whole number to within 0.0001; D0 is the tool in the spindle (pocket 0
+                    // of LinuxCNC's non-random tool changer), not "no tool".
+                    let rounded = w.value.round();
+                    let n = as_index(rounded)
+                        .filter(|n| *n <= MAX_TOOL_NUMBER && (w.value - rounded).abs() < 1e-4)
+                        .ok_or_else(|| invalid(w, "a tool number from 0 to 99999"))?;
+                    let n = if n == 0 { self.loaded_tool } else { n };
+                    (Some(n), self.lookup_tool(n, w.col, 'D')?.radius_mm)
+                }
+                None => {
+                    let (n, t) = self.tool_word(b, 'D', code)?;
+                    (Some(n), t.radius_mm)
+                }
+            }
         };
         self.comp = if code.tenths / 10 == 41 {
             CompState::Left { tool, radius_mm }
         } else {
             CompState::Right { tool, radius_mm }
         };
+        Ok(())
+    }
+
+    /// The L word of G41.1/G42.1 (a lathe tool's orientation), as LinuxCNC takes it: only in
+    /// the ZX plane (G18); orientations 0 and 9 put the controlled point at the nose centre,
+    /// which is what the compensation stage computes; 1 to 8 move it to an imaginary tool tip,
+    /// which is not supported.
+    fn lathe_orientation(&self, code: Code, l: Word) -> Result<(), BlockError> {
+        if self.plane != Plane::Zx {
+            return Err(invalid(
+                l,
+                "no L outside the ZX plane: the lathe tool orientation of G41.1/G42.1 needs G18",
+            ));
+        }
+        if (1.0..=8.0).contains(&l.value) {
+            return Err(err_at(
+                l.col,
+                ErrorKind::Unsupported {
+                    what: format!("{code} with tool orientation L{}", l.value),
+                    reason: "only orientations 0 and 9 (the controlled point at the nose centre)",
+                },
+            ));
+        }
         Ok(())
     }
 

@@ -30,8 +30,9 @@
 //!   (degrees) about the work system's origin (G91: added to the current distance and angle).
 //!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
-//!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D,
-//!   G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
+//!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D L
+//!   (as LinuxCNC reads them: D0 the tool in the spindle, a negative diameter swaps the side,
+//!   L only in G18 and only 0 or 9), G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
 //! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off),
 //!   G10 L2/L20 P X Y Z R (work offsets and rotation), G52 (local offset, in the G92 register),
 //!   G92/G92.1/G92.2/G92.3; line numbers `N`, fractional too.
@@ -831,17 +832,34 @@ pub enum ErrorKind {
         /// What happens, e.g. the element is shorter than its corners take.
         what: &'static str,
     },
-    /// An arc as the start-up move of cutter compensation.
+    /// An arc as the start-up move of cutter compensation whose end point is not farther than
+    /// the tool radius from the current point (LinuxCNC refuses it too).
     #[error(
-        "{code} cannot start cutter compensation: the first move in the plane after G41/G42 must be a straight G0 or G1 move"
+        "{code} cannot start cutter compensation: its end point is {chord_mm:.4} mm from the current point, not more than the tool radius {tool_radius_mm:.4} mm (start farther away)"
     )]
-    CompensationStartOnArc {
+    CompensationEntryArcTooShort {
         /// G2 or G3.
         code: &'static str,
+        /// Distance from the current point to the programmed end point.
+        chord_mm: f64,
+        /// The tool radius.
+        tool_radius_mm: f64,
     },
-    /// An arc as the cancel move of cutter compensation.
+    /// An arc as the start-up move of cutter compensation for which no tool-centre arc runs
+    /// from the current point to the offset end point with its centre on the end point's
+    /// radius (LinuxCNC: "tool radius not less than arc radius with comp").
     #[error(
-        "{code} cannot end cutter compensation: the first move in the plane after G40 must be a straight G0 or G1 move"
+        "{code} cannot start cutter compensation: no tool-centre arc runs from the current point to the end point's offset with tool radius {tool_radius_mm:.4} mm (start farther from the end point, or use a smaller tool)"
+    )]
+    CompensationEntryArcNoCentre {
+        /// G2 or G3.
+        code: &'static str,
+        /// The tool radius.
+        tool_radius_mm: f64,
+    },
+    /// An arc as the first move after G40 (LinuxCNC refuses it too).
+    #[error(
+        "{code} cannot end cutter compensation: the first move after G40 must be a straight G0 or G1 move"
     )]
     CompensationEndOnArc {
         /// G2 or G3.

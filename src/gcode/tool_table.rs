@@ -20,7 +20,8 @@ pub const MAX_TOOL_SIZE_MM: f64 = 10_000.0;
 /// One tool's offsets.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Tool {
-    /// Radius for cutter compensation, ≥ 0.
+    /// Radius for cutter compensation; negative puts the tool on the other side under G41/G42
+    /// (a negative diameter in LinuxCNC's table).
     pub radius_mm: f64,
     /// Length along the tool axis for length compensation (may be negative).
     pub length_mm: f64,
