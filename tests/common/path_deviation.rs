@@ -96,10 +96,7 @@ impl Tolerances {
 #[derive(Debug, Clone, Copy)]
 pub enum Shape {
     /// The segment from `a` to `b`.
-    Line {
-        a: Vector3<f64>,
-        b: Vector3<f64>,
-    },
+    Line { a: Vector3<f64>, b: Vector3<f64> },
     /// The arc's points for `s` in `[s0, s1]`.
     Arc { arc: ArcGeometry, s0: f64, s1: f64 },
 }
@@ -342,7 +339,11 @@ impl Path {
         let own: Vec<f64> = elements.iter().map(|e| tol.of_blend(e.blend)).collect();
         let mut pieces = Vec::with_capacity(elements.len());
         for (k, e) in elements.iter().enumerate() {
-            let before = if k > 0 { own[k - 1].max(own[k]) } else { own[k] };
+            let before = if k > 0 {
+                own[k - 1].max(own[k])
+            } else {
+                own[k]
+            };
             let after = own.get(k + 1).map_or(own[k], |n| n.max(own[k]));
             let arc = match e.kind {
                 ElementKind::Arc { .. } => e.arc(),
@@ -666,9 +667,7 @@ impl<'a> Checker<'a> {
         self.report.samples += 1;
         let still = self.previous == Some(q);
         let step = self.previous.map_or(0.0, |p| (q - p).norm());
-        let mut n = self
-            .path
-            .nearest_near(q, self.cursor, step, Metric::Ratio);
+        let mut n = self.path.nearest_near(q, self.cursor, step, Metric::Ratio);
         let worst = self.report.worst.map_or(0.0, |w| w.ratio);
         if !(n.ratio <= worst) {
             self.report.whole_path_searches += 1;
