@@ -14,6 +14,8 @@ use nalgebra::Vector3;
 #[path = "common/path_deviation.rs"]
 mod path_deviation;
 
+// Only its machine (limits and planner configuration) is used here.
+#[allow(dead_code)]
 #[path = "common/random_programs.rs"]
 mod random_programs;
 

@@ -669,7 +669,7 @@ impl<'a> Checker<'a> {
         let step = self.previous.map_or(0.0, |p| (q - p).norm());
         let mut n = self.path.nearest_near(q, self.cursor, step, Metric::Ratio);
         let worst = self.report.worst.map_or(0.0, |w| w.ratio);
-        if !(n.ratio <= worst) {
+        if n.ratio > worst || n.ratio.is_nan() {
             self.report.whole_path_searches += 1;
             n = self.path.nearest(q, n, Metric::Ratio);
         }
@@ -713,7 +713,7 @@ impl<'a> Checker<'a> {
         let mut n = self
             .path
             .nearest_near(q, self.cursor, step_mm, Metric::Distance);
-        if !(n.distance_mm <= AT_REST_MM) {
+        if n.distance_mm > AT_REST_MM || n.distance_mm.is_nan() {
             self.report.whole_path_searches += 1;
             n = self.path.nearest(q, n, Metric::Distance);
         }
