@@ -18,6 +18,9 @@ use canmotion::planner::{Limits, PlannerConfig, ProfileKind, plan_items, plan_it
 
 #[path = "common/setpoints.rs"]
 mod setpoints;
+
+#[path = "common/path_deviation.rs"]
+mod path_deviation;
 use nalgebra::Vector3;
 
 /// Acceptance of issue 3: at least this many of the 169 programs plan.
@@ -152,6 +155,22 @@ fn corpus() -> Option<(PathBuf, Vec<(PathBuf, String)>)> {
     Some((dir, named))
 }
 
+/// The planner configuration of the setpoint checks over the corpus.
+fn config(profile: ProfileKind) -> PlannerConfig {
+    PlannerConfig {
+        period_s: 0.004,
+        corner_acc_mm_s2: 4000.0,
+        path_acc_share: 0.75,
+        path_acc_mm_s2: f64::INFINITY,
+        max_jerk_mm_s3: Vector3::new(200_000.0, 200_000.0, 100_000.0),
+        profile,
+        chord_tol_mm: 0.001,
+        default_tolerance_mm: 0.01,
+        lookahead: 1000,
+        integer_periods: false,
+    }
+}
+
 /// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
 /// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
 #[test]
@@ -166,18 +185,7 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
             continue;
         };
         for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
-            let config = PlannerConfig {
-                period_s: 0.004,
-                corner_acc_mm_s2: 4000.0,
-                path_acc_share: 0.75,
-                path_acc_mm_s2: f64::INFINITY,
-                max_jerk_mm_s3: Vector3::new(200_000.0, 200_000.0, 100_000.0),
-                profile,
-                chord_tol_mm: 0.001,
-                default_tolerance_mm: 0.01,
-                lookahead: 1000,
-                integer_periods: false,
-            };
+            let config = config(profile);
             let result = plan_items_with(Vector3::zeros(), &items, &limits(), &config)
                 .map_err(|e| e.to_string())
                 .and_then(|plan| setpoints::limits_hold(plan, &limits(), &config));
@@ -190,6 +198,113 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
     println!("{checked} plans checked");
     assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
     assert!(checked >= 2 * MIN_PLANNED, "only {checked} plans checked");
+}
+
+/// Issue 11's contour acceptance in the jerk-limited mode: over every corpus program that
+/// plans (with the limits test's configuration: `chord_tol_mm` 1 µm, `default_tolerance_mm`
+/// 10 µm), no setpoint is farther from the programmed path than the tolerance in force there
+/// (`common/path_deviation.rs`), the setpoint is within 1 µm of the path wherever it stands
+/// still and at the end, and the end is exact.
+///
+/// Ignored: it fails today (2026-11-25, branch base c10db98). Measured, `cargo test --test
+/// gcode_corpus corpus_setpoints_stay_within_the_tolerance -- --ignored --nocapture`: 2 of the
+/// 153 programs leave their tolerance,
+/// - `violation_checks/546_simplfied.ngc`: ratio 3.84, 0.384 µm from the path against its
+///   `G64 P0.0001` (0.1 µm), at the corner of lines 11–12 (sample 126, X0.5643 Y12.3834);
+/// - `performance/wheels.ngc`: ratio 1.058, 10.58 µm against the default tolerance of its bare
+///   `G64 Q0.0001` (10 µm), near line 3264 (sample 431, X21.7955 Y−7.8146 Z−1);
+///
+/// the next are within (0.763 `sam_vel_violation.ngc` line 35, 0.752 `bug424_long.ngc`, then
+/// 0.750 on arcs under the chord tolerance); at rest and at the end every program is within
+/// 1 µm, and every end is exact.
+#[test]
+#[ignore = "fails today: 546_simplfied.ngc (3.84× its G64 P0.0001) and wheels.ngc (1.058×)"]
+fn corpus_setpoints_stay_within_the_tolerance() {
+    tolerance_over_the_corpus(ProfileKind::SCurve);
+}
+
+/// [`corpus_setpoints_stay_within_the_tolerance`] in the trapezoid mode.
+#[test]
+fn corpus_setpoints_stay_within_the_tolerance_with_trapezoids() {
+    tolerance_over_the_corpus(ProfileKind::Trapezoid);
+}
+
+/// Measures every corpus program that plans with `profile`, prints the 15 with the largest
+/// ratio of distance to tolerance, and fails on the first deviation of each program.
+fn tolerance_over_the_corpus(profile: ProfileKind) {
+    let Some((_, files)) = corpus() else {
+        return;
+    };
+    let config = config(profile);
+    let mut measured = Vec::new();
+    let mut not_planned = Vec::new();
+    let mut broken = Vec::new();
+    for (path, name) in &files {
+        let Ok(items) = interpret(path, name) else {
+            continue;
+        };
+        let plan = match plan_items_with(Vector3::zeros(), &items, &limits(), &config) {
+            Ok(plan) => plan,
+            Err(e) => {
+                not_planned.push(format!("{name}: {e}"));
+                continue;
+            }
+        };
+        let report = path_deviation::measure_items(Vector3::zeros(), &items, plan, &config)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        if let Err(e) = report.check() {
+            broken.push(format!("{name}: {e}"));
+        }
+        measured.push((name.clone(), report));
+    }
+    measured.sort_by(|a, b| {
+        let ratio = |r: &path_deviation::Report| r.worst.map_or(0.0, |w| w.ratio);
+        ratio(&b.1).total_cmp(&ratio(&a.1))
+    });
+    println!(
+        "{profile:?}: {} programs measured; the 15 largest distance / tolerance:",
+        measured.len()
+    );
+    println!(
+        "{:<48} {:>9} {:>11} {:>9} {:>6} {:>8} {:>10} {:>5}  position",
+        "program", "ratio", "distance", "tol", "line", "sample", "at rest", "end"
+    );
+    for (name, r) in measured.iter().take(15) {
+        let Some(w) = r.worst else { continue };
+        println!(
+            "{name:<48} {:>9.3} {:>11.3e} {:>9.4} {:>6} {:>8} {:>10.1e} {:>5}  ({:.4}, {:.4}, {:.4})",
+            w.ratio,
+            w.distance_mm,
+            w.tolerance_mm,
+            w.line,
+            w.sample,
+            r.max_at_rest_mm(),
+            if r.end.is_some_and(|e| e.position_mm == r.expected_end_mm) {
+                "exact"
+            } else {
+                "OFF"
+            },
+            w.position_mm.x,
+            w.position_mm.y,
+            w.position_mm.z
+        );
+    }
+    println!("not planned: {}", not_planned.len());
+    for n in &not_planned {
+        println!("  {n}");
+    }
+    assert!(
+        broken.is_empty(),
+        "{} of {} programs leave the tolerance ({profile:?}):\n{}",
+        broken.len(),
+        measured.len(),
+        broken.join("\n")
+    );
+    assert!(
+        measured.len() >= MIN_PLANNED,
+        "only {} programs measured",
+        measured.len()
+    );
 }
 
 #[test]

@@ -16,6 +16,9 @@ mod setpoints;
 #[path = "common/random_programs.rs"]
 mod random_programs;
 
+#[path = "common/path_deviation.rs"]
+mod path_deviation;
+
 use random_programs::{T, a_move, config, limits, program};
 
 /// Plans `text` and checks its setpoints (see `common::setpoints`).
@@ -47,6 +50,37 @@ proptest! {
     fn with_integer_periods_too(moves in prop::collection::vec(a_move(), 1..20), s_curve in any::<bool>()) {
         let profile = if s_curve { ProfileKind::SCurve } else { ProfileKind::Trapezoid };
         check_with(&program(&moves), PlannerConfig { integer_periods: true, ..config(profile) })?;
+    }
+}
+
+/// Plans `text` and checks the distance of its setpoints from the programmed path (see
+/// `common::path_deviation`).
+fn check_tolerance(text: &str, profile: ProfileKind) -> Result<(), TestCaseError> {
+    let cfg = config(profile);
+    let prog = parse_program(text, "random.ngc", Vector3::zeros())
+        .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))?;
+    let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| TestCaseError::fail(e.to_string()))?;
+    let report = path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .map_err(|e| TestCaseError::fail(e.to_string()))?;
+    report
+        .check()
+        .map_err(|e| TestCaseError::fail(format!("{e}\n{text}")))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    /// Issue 11's contour acceptance on random programs (bare G64: the default tolerance),
+    /// jerk-limited mode.
+    #[test]
+    fn s_curve_setpoints_stay_within_the_tolerance(moves in prop::collection::vec(a_move(), 1..30)) {
+        check_tolerance(&program(&moves), ProfileKind::SCurve)?;
+    }
+
+    /// The same in the trapezoid mode.
+    #[test]
+    fn trapezoid_setpoints_stay_within_the_tolerance(moves in prop::collection::vec(a_move(), 1..30)) {
+        check_tolerance(&program(&moves), ProfileKind::Trapezoid)?;
     }
 }
 
