@@ -20,6 +20,7 @@ const LAYERS: &[&[&str]] = &[
     &["interpolator"],
     &["config"],
     &["eds"],
+    &["master"],
     &["rt"],
     &["sim"],
     &["gateway"],
