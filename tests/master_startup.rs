@@ -67,7 +67,16 @@ fn run(
                     None => {
                         bus.advance(poll_at.min(next_beat));
                         if bus.now >= poll_at {
-                            seq.poll(bus.now, &mut out)
+                            let step = seq.poll(bus.now, &mut out);
+                            // A machine polled at its time goes on or names a later one.
+                            if let Step::Pending { poll_at } = step {
+                                assert!(
+                                    poll_at > bus.now,
+                                    "polled at {:?}, due again at {poll_at:?}",
+                                    bus.now
+                                );
+                            }
+                            step
                         } else {
                             Step::Pending { poll_at }
                         }
