@@ -614,11 +614,6 @@ impl<'m> Sequence<'m> {
         Sequence::new(machine, Kind::OrderlyEnd, ops)
     }
 
-    /// The operations still to run (all of them before the first call).
-    pub fn remaining(&self) -> impl Iterator<Item = &Op> {
-        self.ops.iter()
-    }
-
     /// Position actual per axis (machine order), as far as read.
     pub fn positions(&self) -> &[i32] {
         &self.positions

@@ -54,7 +54,7 @@ impl VirtualBus {
 
     /// The master sends `frames` (drained) now.
     pub fn send(&mut self, frames: &mut Vec<Frame>) {
-        let mut out: Vec<Frame> = frames.drain(..).collect();
+        let mut out = std::mem::take(frames);
         self.route(None, &mut out);
     }
 
