@@ -387,6 +387,49 @@ fn a_silent_sdo_server_is_our_time_out_not_the_nodes_abort() {
 }
 
 #[test]
+fn a_mode_never_displayed_is_refused_one_second_after_the_first_read() {
+    let m = machine(|t| t);
+    let mut bus = VirtualBus::new(drives(&m, [0; 3]));
+    // Node 1's modes of operation display (0x6061) always answers 0, whatever 0x6060 holds.
+    bus.tamper(|f| {
+        let d = f.data();
+        if f.id() == 0x581 && d[0] == 0x4F && d[1..4] == [0x61, 0x60, 0x00] {
+            let mut d: [u8; 8] = d.try_into().unwrap();
+            d[4] = 0;
+            return Frame::new(f.id(), &d);
+        }
+        Some(f)
+    });
+    let mut seq = Sequence::start_up(&m);
+    let (r, _) = run(&mut bus, &mut seq, Verdict::Proceed);
+    assert_eq!(
+        r,
+        Err(StartupError::ModeNotConfirmed {
+            axis: "X".into(),
+            node: 1,
+            mode: 7,
+            found: 0,
+        })
+    );
+    // Read every 10 ms from the first read; the answer to the read at +1000 ms is not yet
+    // past the second, the one to the read at +1010 ms is, and ends it.
+    let reads: Vec<Duration> = bus
+        .log
+        .iter()
+        .filter(|(_, f)| f.id() == 0x601 && f.data()[..4] == [0x40, 0x61, 0x60, 0x00])
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(reads.len(), 102);
+    assert!(
+        reads
+            .windows(2)
+            .all(|w| w[1] - w[0] == Duration::from_millis(10))
+    );
+    assert_eq!(bus.now - reads[0], Duration::from_millis(1010));
+    assert!(downloads(&bus, 2).is_empty());
+}
+
+#[test]
 fn an_axis_outside_its_travel_is_refused_and_the_drives_stay_pre_operational() {
     let m = machine(|t| t);
     // X at -10 mm, travel [-5, 300].

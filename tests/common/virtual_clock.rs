@@ -25,8 +25,9 @@ pub struct VirtualBus {
     pub log: Vec<(Duration, Frame)>,
     /// Frames for the master, not taken yet.
     inbox: VecDeque<Frame>,
-    /// Frames a drive sends that never reach the bus (a node that answers nothing).
-    lost: Box<dyn Fn(&Frame) -> bool>,
+    /// What becomes of a frame a drive sends: `None`, lost (a node that answers nothing), or
+    /// the frame that reaches the bus (a drive that answers something else).
+    tamper: Box<dyn FnMut(Frame) -> Option<Frame>>,
 }
 
 impl VirtualBus {
@@ -37,7 +38,7 @@ impl VirtualBus {
             drives,
             log: Vec::new(),
             inbox: VecDeque::new(),
-            lost: Box::new(|_| false),
+            tamper: Box::new(Some),
         };
         let mut out = Vec::new();
         for i in 0..bus.drives.len() {
@@ -49,7 +50,13 @@ impl VirtualBus {
 
     /// From now on, frames the drives send for which `lost` is true never reach the bus.
     pub fn lose(&mut self, lost: impl Fn(&Frame) -> bool + 'static) {
-        self.lost = Box::new(lost);
+        self.tamper(move |f| (!lost(&f)).then_some(f));
+    }
+
+    /// From now on, every frame a drive sends passes through `tamper`: `None` loses it, `Some`
+    /// is what reaches the bus instead.
+    pub fn tamper(&mut self, tamper: impl FnMut(Frame) -> Option<Frame> + 'static) {
+        self.tamper = Box::new(tamper);
     }
 
     /// The master sends `frames` (drained) now.
@@ -105,9 +112,13 @@ impl VirtualBus {
         let mut queue: VecDeque<(Option<usize>, Frame)> =
             out.drain(..).map(|f| (from, f)).collect();
         while let Some((from, f)) = queue.pop_front() {
-            if from.is_some() && (self.lost)(&f) {
-                continue;
-            }
+            let f = match from {
+                Some(_) => match (self.tamper)(f) {
+                    Some(f) => f,
+                    None => continue,
+                },
+                None => f,
+            };
             self.log.push((self.now, f));
             if from.is_some() {
                 self.inbox.push_back(f);
