@@ -40,8 +40,9 @@
 //!    interpolates towards it over the period and answers with its TPDO `181#3716` followed by the position
 //!    (statusword, position actual), which the next cycle reads back for the following error.
 //!
-//! Before the first cycle, [`gateway::startup`] has used SDO ([`canopen`]: the codecs and the
-//! client of canopen-rs, with our server and abort tables) to check each drive's identity,
+//! Before the first cycle, [`master::startup`] (a sans-I/O state machine that
+//! [`gateway::startup`] drives on the bus) has used SDO ([`canopen`]: the codecs of canopen-rs,
+//! our SDO client, server and abort tables) to check each drive's identity,
 //! read its position actual (every axis inside its travel before anything is written), write the
 //! machine file's settings, remap the PDOs, set 0x60C2 to the SYNC period and the
 //! mode; [`cia402`] then walks each drive to Operation enabled through the RPDO's controlword,
@@ -74,11 +75,13 @@
 //! 9. [`config`]: machine files (which configure the layers above), and the loading of drive
 //!    dictionaries and tool tables;
 //! 10. [`eds`]: EDS/DCF import into a drive dictionary;
-//! 11. [`master`]: the sans-I/O CANopen master (the cyclic master, its alarms, supervision);
+//! 11. [`master`]: the sans-I/O CANopen master (start-up and the orderly end, the cyclic
+//!     master, its alarms, supervision), fed `(now, frame)` by the drivers in [`gateway`] and by
+//!     virtual-clock tests;
 //! 12. [`rt`]: the cyclic thread's timing;
 //! 13. [`sim`]: the simulated drive;
-//! 14. [`gateway`]: the drivers of the master (the real-time thread, the bus, tokio), resume,
-//!     the control socket;
+//! 14. [`gateway`]: the drivers of the master (the real-time thread, SocketCAN or the
+//!     in-process bus, tokio), resume, the control socket;
 //! 15. [`plot`] and [`optimize`];
 //! 16. [`offline`], the `plan` command;
 //! 17. [`commands`]: the bus utilities (`scan`, `sdo`, `nmt`, `reset`, `monitor`, `candump`),

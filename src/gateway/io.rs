@@ -16,7 +16,7 @@ use crate::canopen::sdo_client::{Mode, Outcome, SdoClient, SdoError, Step};
 use crate::canopen::{Emcy, NmtState, cob};
 
 /// How long an SDO server may take to answer one request.
-pub const SDO_TIMEOUT: Duration = Duration::from_millis(500);
+pub const SDO_TIMEOUT: Duration = crate::master::startup::SDO_TIMEOUT;
 
 /// What the monitor knows of one node.
 #[derive(Debug, Clone, Default)]

@@ -947,7 +947,7 @@ async fn run_async(
     let disarmed = if master.fault_stop() || port_err.is_some() {
         Ok(())
     } else {
-        startup::stop_consuming_heartbeat(machine, &io).await
+        startup::stop_consuming_heartbeat(machine, bus, &mut io).await
     };
     io.stop_heartbeat();
     plan_result?;
