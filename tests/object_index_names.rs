@@ -169,7 +169,8 @@ fn raw_indices(src: &str) -> Vec<(usize, String)> {
             && (lit[2] == b'1' || lit[2] == b'6')
             && lit[3..].iter().all(u8::is_ascii_hexdigit)
             && (i == 0 || !ident(b[i - 1]))
-            && b.get(i + 6).is_none_or(|&c| !ident(c)))
+            && b.get(i + 6 + suffix_len(&b[i + 6..]))
+                .is_none_or(|&c| !ident(c)))
         {
             continue;
         }
@@ -183,6 +184,23 @@ fn raw_indices(src: &str) -> Vec<(usize, String)> {
         out.push((line + 1, String::from_utf8_lossy(lit).into_owned()));
     }
     out
+}
+
+/// The length of an integer literal's type suffix at the start of `s` (`u16` in `0x6040u16`).
+fn suffix_len(s: &[u8]) -> usize {
+    let (s, sep) = match s.strip_prefix(b"_") {
+        Some(rest) => (rest, 1),
+        None => (s, 0),
+    };
+    let n = [
+        "u8", "u16", "u32", "u64", "u128", "usize", "i8", "i16", "i32", "i64", "i128", "isize",
+    ]
+    .iter()
+    .filter(|t| s.starts_with(t.as_bytes()))
+    .map(|t| t.len())
+    .max()
+    .unwrap_or(0);
+    if n == 0 { 0 } else { sep + n }
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -245,6 +263,7 @@ mod tests {
     fn t() { let _ = 0x6064; }
 }
 fn h() -> u16 { 0x607a }
+fn k() -> u16 { 0x6040u16 + 0x6041_u16 }
 "##;
     let found: Vec<(usize, String)> = raw_indices(src);
     assert_eq!(
@@ -254,6 +273,8 @@ fn h() -> u16 { 0x607a }
             (8, "0x1017".to_string()),
             (13, "0x60C2".to_string()),
             (18, "0x607a".to_string()),
+            (19, "0x6040".to_string()),
+            (19, "0x6041".to_string()),
         ]
     );
 }

@@ -358,7 +358,12 @@ impl DriveDictionary {
             }
         };
         for (idx, sub, key, want) in [
-            (0x1000u16, 0u8, "device_type", self.identity.device_type),
+            (
+                index::DEVICE_TYPE,
+                0u8,
+                "device_type",
+                self.identity.device_type,
+            ),
             (index::IDENTITY, 1, "vendor_id", self.identity.vendor_id),
             (
                 index::IDENTITY,

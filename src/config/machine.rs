@@ -1083,7 +1083,7 @@ impl Machine {
             pdo_objects(&ctx, &table, &dict, &setpoint_pdo, &feedback_pdo)?;
             let (si, ss) = a.mode.setpoint_object();
             for (idx, sub, what) in [
-                (0x6040u16, 0u8, "controlword 0x6040"),
+                (index::CONTROLWORD, 0u8, "controlword 0x6040"),
                 (si, ss, "the mode's setpoint"),
             ] {
                 if setpoint_pdo.offset_of(idx, sub).is_none() {
@@ -1098,7 +1098,7 @@ impl Machine {
                 }
             }
             for (idx, what) in [
-                (0x6041u16, "statusword 0x6041"),
+                (index::STATUSWORD, "statusword 0x6041"),
                 (index::POSITION_ACTUAL, "position actual 0x6064"),
             ] {
                 if feedback_pdo.offset_of(idx, 0).is_none() {
@@ -1337,7 +1337,12 @@ fn pdo_objects(
         need.push((index::TPDO_COMMUNICATION + k, 1, "dictionary"));
     }
     for (p, comm, map, key) in [
-        (setpoint, 0x1400u16, 0x1600u16, "setpoint_pdo.number"),
+        (
+            setpoint,
+            index::RPDO_COMMUNICATION,
+            index::RPDO_MAPPING,
+            "setpoint_pdo.number",
+        ),
         (
             feedback,
             index::TPDO_COMMUNICATION,
