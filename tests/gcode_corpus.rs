@@ -206,19 +206,11 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
 /// (`common/path_deviation.rs`), the setpoint is within 1 µm of the path wherever it stands
 /// still and at the end, and the end is exact.
 ///
-/// Ignored: it fails today (2026-11-25, branch base c10db98). Measured, `cargo test --test
-/// gcode_corpus corpus_setpoints_stay_within_the_tolerance -- --ignored --nocapture`: 2 of the
-/// 153 programs leave their tolerance,
-/// - `violation_checks/546_simplfied.ngc`: ratio 3.84, 0.384 µm from the path against its
-///   `G64 P0.0001` (0.1 µm), at the corner of lines 11–12 (sample 126, X0.5643 Y12.3834);
-/// - `performance/wheels.ngc`: ratio 1.058, 10.58 µm against the default tolerance of its bare
-///   `G64 Q0.0001` (10 µm), near line 3264 (sample 431, X21.7955 Y−7.8146 Z−1);
-///
-/// the next are within (0.763 `sam_vel_violation.ngc` line 35, 0.752 `bug424_long.ngc`, then
-/// 0.750 on arcs under the chord tolerance); at rest and at the end every program is within
-/// 1 µm, and every end is exact.
+/// Failed before the contour pre-compensation and the settling after moves alone
+/// (2026-11-25): `546_simplfied.ngc` 3.84× its `G64 P0.0001` at the corner of lines 11–12
+/// (consecutive moves alone whose axis filters mixed the two legs), `wheels.ngc` 1.058× the
+/// default tolerance near line 3264. Since then the worst is 0.56 (`line-contouring-xz.ngc`).
 #[test]
-#[ignore = "fails today: 546_simplfied.ngc (3.84× its G64 P0.0001) and wheels.ngc (1.058×)"]
 fn corpus_setpoints_stay_within_the_tolerance() {
     tolerance_over_the_corpus(ProfileKind::SCurve);
 }

@@ -829,8 +829,23 @@ pub struct Planner {
     /// The jerk-limited mode's filters, which the plan is made for.
     smoothing: Option<Smoothing>,
     /// A move planned alone (without the time-law filter) ended here, at rest, and the axis
-    /// filters have not been given time to settle: its line and end point.
-    axes_unsettled: Option<(usize, Vector3<f64>)>,
+    /// filters have not been given time to settle.
+    axes_unsettled: Option<Unsettled>,
+}
+
+/// The end of a move planned alone, where the axis filters have not settled: the next move
+/// from rest may start at once only if the filters' mix of the two cuts the corner within the
+/// tolerance (`Planner::settle`).
+#[derive(Debug, Clone, Copy)]
+struct Unsettled {
+    line: usize,
+    at_mm: Vector3<f64>,
+    /// The move's direction at its end.
+    tangent: Vector3<f64>,
+    /// How far it travelled in its last `2·T_k` (the span of the axis filters).
+    reach_mm: f64,
+    /// The deviation the axis filters may take at its end.
+    tol_mm: f64,
 }
 
 impl Planner {
@@ -972,7 +987,8 @@ impl Planner {
     /// Before an exact stop (a dwell, a program stop, the end): the axis filters settle after a
     /// move planned alone (after a filtered move [`settle`](Self::settle) already waited).
     fn settle_axes(&mut self) -> Result<(), PlanError> {
-        let (Some(smoothing), Some((line, at_mm))) = (self.smoothing, self.axes_unsettled.take())
+        let (Some(smoothing), Some(Unsettled { line, at_mm, .. })) =
+            (self.smoothing, self.axes_unsettled.take())
         else {
             return Ok(());
         };
@@ -1125,6 +1141,27 @@ impl Planner {
                 Err(_) => self.off_grid += 1,
             }
         }
+        if v0 == 0.0
+            && let (Some(smoothing), Some(u)) = (self.smoothing, self.axes_unsettled)
+        {
+            // The axis filters still hold the end of the move alone before this one: their
+            // output mixes the last `2·T_k` of it with the first of this move, which cuts the
+            // corner by at most the shorter of the two stretches (times the sine of the turn,
+            // up to a right angle). Where that could leave the tolerance they settle first.
+            let span_s = 2.0 * smoothing.axis_s(self.config.period_s);
+            let reach_mm = profile.at(span_s).s_mm.min(u.reach_mm);
+            let t = self.window[i].tangent_start;
+            let turn = if u.tangent.dot(&t) < 0.0 {
+                1.0
+            } else {
+                u.tangent.cross(&t).norm()
+            };
+            if u.tol_mm > 0.0 && reach_mm * turn > u.tol_mm {
+                self.settle_axes()?;
+            } else {
+                self.axes_unsettled = None;
+            }
+        }
         seg.v_start_mm_s = v0;
         seg.v_end_mm_s = v1;
         seg.v_limit_mm_s = self.window[i].v_limit_mm_s;
@@ -1139,7 +1176,17 @@ impl Planner {
         self.time_s = end_s;
         self.ready.push_back(seg);
         if alone.is_some() {
-            self.axes_unsettled = Some((line, seg.end_mm));
+            let span_s = self
+                .smoothing
+                .map_or(0.0, |sm| 2.0 * sm.axis_s(self.config.period_s));
+            let duration_s = profile.duration_s();
+            self.axes_unsettled = Some(Unsettled {
+                line,
+                at_mm: seg.end_mm,
+                tangent: self.window[i].tangent_end,
+                reach_mm: seg.length_mm - profile.at(duration_s - span_s).s_mm,
+                tol_mm: self.filter_tolerance_mm(self.window[i].blend),
+            });
         } else if let Some(smoothing) = self.smoothing
             && v1 == 0.0
         {
