@@ -80,8 +80,9 @@ pub use element::{
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interpreter::{
-    Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM,
-    MAX_STORED_BYTES, MIN_ARC_RADIUS_MM, Setup,
+    DEFAULT_SPLINE_TOL_MM, Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES,
+    MAX_LINE_BYTES, MAX_POSITION_MM, MAX_SPLINE_SEGMENTS, MAX_STORED_BYTES, MIN_ARC_RADIUS_MM,
+    MIN_SPLINE_TOL_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
 pub use tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
@@ -922,6 +923,52 @@ pub enum ErrorKind {
         code: &'static str,
         /// The limit.
         max: usize,
+    },
+    /// A G5/G5.1 spline outside the XY plane (LinuxCNC: "Splines must be in the XY plane").
+    #[error("{code} draws splines in the XY plane only: program G17 first (the plane is {plane})")]
+    SplinePlane {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The plane in force, e.g. `G18`.
+        plane: &'static str,
+    },
+    /// A G5/G5.1 spline with an axis word other than X and Y (LinuxCNC: "Splines may not have
+    /// motion in Z, A, B, or C").
+    #[error("{code} moves X and Y only: {letter} is not allowed on a spline")]
+    SplineAxis {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The letter.
+        letter: char,
+    },
+    /// A spline under cutter compensation (LinuxCNC: "Cannot convert spline with cutter
+    /// radius compensation").
+    #[error("{code} cannot run under cutter compensation: cancel it with G40 first")]
+    SplineWithCompensation {
+        /// G5 or G5.1.
+        code: &'static str,
+    },
+    /// A spline that would take more lines than [`MAX_SPLINE_SEGMENTS`] to stay within the
+    /// chord tolerance.
+    #[error(
+        "{code} would take {segments} lines to stay within the chord tolerance {tol_mm} mm (at most {max}): split the spline or raise [planner] chord_tol_mm"
+    )]
+    SplineTooLong {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The lines it would take.
+        segments: f64,
+        /// The tolerance.
+        tol_mm: f64,
+        /// The limit.
+        max: usize,
+    },
+    /// An assignment to one of LinuxCNC's predefined named parameters (LinuxCNC: "Cannot
+    /// assign to read-only parameter").
+    #[error("parameter #<{name}> is read-only: it is one of LinuxCNC's predefined parameters")]
+    ReadOnlyParameter {
+        /// The name.
+        name: String,
     },
     /// A tapping or boring cycle with the spindle not turning as it must (LinuxCNC's check).
     #[error("{code} needs the spindle turning {needed}: program {fix} before it")]
