@@ -581,6 +581,9 @@ fn predefined_named_parameters_read_the_interpreter_s_state() {
     )
     .unwrap();
     assert_eq!(p.end_mm(), Vector3::new(3.0, 0.0, 0.0));
+    // #<_line> is the line of the file (LinuxCNC's sequence number), not the N word.
+    let p = parse_program("G21\n\nN10 G0 X#<_line>\n", "p", Vector3::zeros()).unwrap();
+    assert_eq!(p.end_mm(), Vector3::new(3.0, 0.0, 0.0));
 }
 
 #[test]

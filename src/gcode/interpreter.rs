@@ -287,7 +287,7 @@ struct State {
     spline_tol_mm: f64,
     /// The last S word (`#<_rpm>`).
     speed_rpm: f64,
-    /// The line number of the current line (`#<_line>`).
+    /// The current line of its file (`#<_line>`, LinuxCNC's sequence number).
     line_number: f64,
 }
 
@@ -770,9 +770,6 @@ impl State {
         } else {
             b
         };
-        if let Some(n) = b.word('N') {
-            self.line_number = n.value;
-        }
 
         // Units first: every number of the line is in the units in force after it.
         if let Some(units) = b.units() {
@@ -2253,6 +2250,7 @@ impl<R: BufRead> Interpreter<R> {
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
         self.at = line;
         if text.contains('#') {
+            self.state.line_number = line as f64;
             self.state.system_parameters(&mut self.params);
         }
         let kind = self
