@@ -824,6 +824,37 @@ mod tests {
     }
 
     #[test]
+    fn predefined_named_parameters_are_read_only_and_exist() {
+        let mut p = Params::default();
+        let mut values = [0.0; PREDEFINED.len()];
+        values[PREDEFINED.iter().position(|n| *n == "_x").unwrap()] = 7.0;
+        p.set_predefined(values);
+        assert_eq!(eval_with("[#<_x> + 1]", &p).unwrap(), 8.0);
+        assert_eq!(
+            eval_with("[EXISTS[#<_x>] + EXISTS[#<_mist>]]", &p).unwrap(),
+            2.0
+        );
+        assert_eq!(
+            p.set(&ParamRef::Name("_x".into()), 1.0),
+            Err(ErrorKind::ReadOnlyParameter { name: "_x".into() })
+        );
+        assert!(p.get(&ParamRef::Name("_mist".into())).is_err());
+        assert_eq!(
+            eval_with("[#<_value_returned> + #<_call_level>]", &p).unwrap(),
+            0.0
+        );
+        p.push_scope(&[]);
+        p.set_returned(Some(4.0));
+        assert_eq!(
+            eval_with("[#<_value> + #<_value_returned> + #<_call_level>]", &p).unwrap(),
+            6.0
+        );
+        // A global of one's own is no predefined one.
+        p.set(&ParamRef::Name("_xx".into()), 2.0).unwrap();
+        assert_eq!(eval_with("#<_xx>", &p).unwrap(), 2.0);
+    }
+
+    #[test]
     fn errors_have_columns() {
         let e = |t: &str| eval_with(t, &Params::default()).unwrap_err();
         assert_eq!(e("[1/0]").1, ErrorKind::DivisionByZero);

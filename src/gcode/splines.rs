@@ -206,3 +206,37 @@ impl State {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(x: f64, y: f64) -> Vector2<f64> {
+        Vector2::new(x, y)
+    }
+
+    #[test]
+    fn the_segment_count_is_the_chord_error_bound() {
+        // Quadratic: B'' = 2 (P0 - 2 P1 + P2) = (0, -40); n = ⌈√(40 / 0.008)⌉ = 71.
+        let quad = [p(0.0, 0.0), p(10.0, 10.0), p(20.0, 0.0)];
+        assert_eq!(segments_for(&quad, 0.001), 71.0);
+        // A straight "curve" takes one line.
+        let straight = [p(0.0, 0.0), p(1.0, 0.0), p(2.0, 0.0)];
+        assert_eq!(segments_for(&straight, 0.001), 1.0);
+        // The bound holds: the worst chord of the quadratic (its middle) is within 0.001 mm.
+        let n = segments_for(&quad, 0.001);
+        for k in 0..n as usize {
+            let (t0, t1) = (k as f64 / n, (k + 1) as f64 / n);
+            let (a, b) = (bezier_at(&quad, t0), bezier_at(&quad, t1));
+            let mid = bezier_at(&quad, (t0 + t1) / 2.0);
+            let chord = b - a;
+            let off = (mid - a).perp(&chord).abs() / chord.norm();
+            assert!(off <= 0.001 + 1e-12, "chord {k}: {off}");
+        }
+        // Cubic: the end points and the middle, (P0 + 3 P1 + 3 P2 + P3) / 8.
+        let cubic = [p(0.0, 0.0), p(0.0, 8.0), p(8.0, 8.0), p(8.0, 0.0)];
+        assert_eq!(bezier_at(&cubic, 0.0), cubic[0]);
+        assert_eq!(bezier_at(&cubic, 1.0), cubic[3]);
+        assert_eq!(bezier_at(&cubic, 0.5), p(4.0, 6.0));
+    }
+}
