@@ -162,7 +162,7 @@ impl State {
             vec![p0, p1, p3]
         };
         let n = segments_for(&points, self.spline_tol_mm);
-        if !(n <= MAX_SPLINE_SEGMENTS as f64) {
+        if n.is_nan() || n > MAX_SPLINE_SEGMENTS as f64 {
             return Err(err_at(
                 col,
                 ErrorKind::SplineTooLong {
