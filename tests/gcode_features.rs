@@ -503,6 +503,20 @@ fn g5_and_g5_1_splines_are_sampled_on_the_curve_within_the_chord_tolerance() {
         (e.line, e.kind),
         (3, ErrorKind::SplineWithCompensation { code: "G5.1" })
     );
+    // A spline the bound would cut into more than MAX_SPLINE_SEGMENTS lines is refused.
+    let mut setup = canmotion::gcode::Setup::new(Vector3::zeros());
+    setup.spline_tol_mm = canmotion::gcode::MIN_SPLINE_TOL_MM;
+    let e = canmotion::gcode::parse_program_with(
+        "G21 F60\nG5.1 X1000000 I500000 J500000\n",
+        "p",
+        setup,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(e.kind, ErrorKind::SplineTooLong { code: "G5.1", max, .. } if max == canmotion::gcode::MAX_SPLINE_SEGMENTS)
+            && (e.line, e.col) == (2, 1),
+        "{e}"
+    );
     let e = err("G21 F60\nG5.2 X1 Y1 P1\n");
     assert_eq!((e.line, e.col), (2, 1));
     assert!(e.is_unsupported(), "{e}");
