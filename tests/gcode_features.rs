@@ -1,5 +1,6 @@
 //! Issue 15 item 5, the smaller gaps: G52 local offsets, spiral arcs within LinuxCNC's
-//! tolerance, fractional line numbers. Each has a program in `tests/programs/`, planned through
+//! tolerance, fractional line numbers, G5/G5.1 splines, G7/G8, predefined named parameters,
+//! G10 L20 on a rotated system. Each has a program in `tests/programs/`, planned through
 //! `canmotion plan --path` and compared with hand-computed points (to 0.001 mm); the variants
 //! that stay errors are matched by kind, line and column.
 
@@ -355,4 +356,280 @@ fn g10_l10_and_l11_touch_tools_off_at_the_current_point() {
     let e = parse_program("G21\nG10 L10 P1 X0 Z0\n", "p", Vector3::zeros()).unwrap_err();
     assert_eq!((e.line, e.col), (2, 12));
     assert!(e.is_unsupported(), "{e}");
+}
+
+/// The point at `t` of the Bézier curve with control points `p` (3 or 4, XY), written out
+/// independently of the interpreter's.
+fn bezier(p: &[[f64; 2]], t: f64) -> [f64; 2] {
+    let s = 1.0 - t;
+    let w: Vec<f64> = if p.len() == 3 {
+        vec![s * s, 2.0 * s * t, t * t]
+    } else {
+        vec![s * s * s, 3.0 * s * s * t, 3.0 * s * t * t, t * t * t]
+    };
+    let mut out = [0.0; 2];
+    for (pk, wk) in p.iter().zip(&w) {
+        out[0] += pk[0] * wk;
+        out[1] += pk[1] * wk;
+    }
+    out
+}
+
+/// The distance from `q` to the segment `a`–`b`.
+fn to_segment(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let u = if len2 == 0.0 {
+        0.0
+    } else {
+        (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    };
+    (q[0] - a[0] - u * dx).hypot(q[1] - a[1] - u * dy)
+}
+
+#[test]
+fn g5_and_g5_1_splines_are_sampled_on_the_curve_within_the_chord_tolerance() {
+    let path = plan_path("splines.ngc");
+    // The default machine's chord_tol_mm.
+    let tol_mm = canmotion::gcode::DEFAULT_SPLINE_TOL_MM;
+    let curves: [(u64, Vec<[f64; 2]>); 3] = [
+        (4, vec![[0.0, 20.0], [10.0, 30.0], [20.0, 20.0]]),
+        (
+            5,
+            vec![[20.0, 20.0], [25.0, 30.0], [35.0, 30.0], [40.0, 20.0]],
+        ),
+        // No I J: the start direction is the last G5's -(P, Q) = (5, -10).
+        (
+            6,
+            vec![[40.0, 20.0], [45.0, 10.0], [55.0, 10.0], [60.0, 20.0]],
+        ),
+    ];
+    let mut at = [0.0, 20.0];
+    for (line, points) in &curves {
+        let lines: Vec<&Record> = path.iter().filter(|r| r.0 == *line).collect();
+        let n = lines.len();
+        assert!(n > 10, "line {line}: {n} lines");
+        for (k, r) in lines.iter().enumerate() {
+            assert_eq!((r.1.as_str(), r.2), ("line", F), "line {line}: {r:?}");
+            assert_eq!(r.3[2], 0.0);
+            let t = (k + 1) as f64 / n as f64;
+            let want = bezier(points, t);
+            assert!(
+                close(r.3, [want[0], want[1], 0.0]),
+                "line {line}: sample {k} at {:?}, curve at t = {t}: {want:?}",
+                r.3
+            );
+            // Every chord stays within the tolerance of the curve between its samples.
+            let end = [r.3[0], r.3[1]];
+            let t0 = k as f64 / n as f64;
+            for j in 0..=50 {
+                let q = bezier(points, t0 + (t - t0) * j as f64 / 50.0);
+                let d = to_segment(q, at, end);
+                assert!(d <= tol_mm + 1e-9, "line {line}: chord {k} is {d} mm off");
+            }
+            at = end;
+        }
+    }
+    // Hand-computed: the ends, and the middles of the cubics (t = 1/2 is a sample when the
+    // count is even): (P0 + 3 P1 + 3 P2 + P3) / 8.
+    let ends: Vec<[f64; 3]> = [4, 5, 6]
+        .iter()
+        .map(|l| path.iter().rfind(|r| r.0 == *l).unwrap().3)
+        .collect();
+    assert_eq!(
+        ends,
+        vec![[20.0, 20.0, 0.0], [40.0, 20.0, 0.0], [60.0, 20.0, 0.0]]
+    );
+    for (line, middle) in [(5, [30.0, 27.5, 0.0]), (6, [50.0, 12.5, 0.0])] {
+        let lines: Vec<&Record> = path.iter().filter(|r| r.0 == line).collect();
+        // 92 lines each (⌈√(6·√125 / 0.008)⌉): t = 1/2 is sample 46.
+        assert!(
+            lines.len().is_multiple_of(2),
+            "line {line}: {}",
+            lines.len()
+        );
+        assert!(close(lines[lines.len() / 2 - 1].3, middle), "line {line}");
+    }
+    assert_eq!(path.last().unwrap().3, [70.0, 20.0, 0.0]);
+
+    // LinuxCNC's errors, with line and column.
+    let err = |text: &str| parse_program(text, "p", Vector3::zeros()).unwrap_err();
+    let e = err("G21 F60\nG18 G5.1 X1 I1 J1\n");
+    assert_eq!(
+        (e.line, e.col, e.kind),
+        (
+            2,
+            5,
+            ErrorKind::SplinePlane {
+                code: "G5.1",
+                plane: "G18"
+            }
+        )
+    );
+    let e = err("G21 F60\nG5.1 X1 Z1 I1 J1\n");
+    assert_eq!(
+        (e.line, e.col, e.kind),
+        (
+            2,
+            9,
+            ErrorKind::SplineAxis {
+                code: "G5.1",
+                letter: 'Z'
+            }
+        )
+    );
+    let e = err("G21\nG5.1 X1 I1 J1\n");
+    assert_eq!(
+        (e.line, e.col, e.kind),
+        (2, 1, ErrorKind::MissingFeed { code: "G5.1" })
+    );
+    for (text, line, letter) in [
+        ("G21 F60\nG5.1 X1 I1\n", 2, 'J'),
+        ("G21 F60\nG5 X1 Y1 P1 Q1\n", 2, 'I'),
+        ("G21 F60\nG5 X1 I1 J1 P1\n", 2, 'Q'),
+        ("G21 F60\nG5 X1 J1 P1 Q1\n", 2, 'I'),
+        // The continuation needs a G5 right before.
+        ("G21 F60\nG5 X1 I1 J1 P1 Q1\nG1 X2\nG5 X3 P1 Q1\n", 4, 'I'),
+    ] {
+        let e = err(text);
+        assert!(
+            matches!(&e.kind, ErrorKind::MissingWord { letter: l, .. } if *l == letter)
+                && (e.line, e.col) == (line, 1),
+            "{text}: {e}"
+        );
+    }
+    let e = err("G21 F60 G41.1 D2\nG0 X10\nG5.1 X20 I1 J1\n");
+    assert_eq!(
+        (e.line, e.kind),
+        (3, ErrorKind::SplineWithCompensation { code: "G5.1" })
+    );
+    // A spline the bound would cut into more than MAX_SPLINE_SEGMENTS lines is refused.
+    let mut setup = canmotion::gcode::Setup::new(Vector3::zeros());
+    setup.spline_tol_mm = canmotion::gcode::MIN_SPLINE_TOL_MM;
+    let e = canmotion::gcode::parse_program_with(
+        "G21 F60\nG5.1 X1000000 I500000 J500000\n",
+        "p",
+        setup,
+    )
+    .unwrap_err();
+    assert!(
+        matches!(e.kind, ErrorKind::SplineTooLong { code: "G5.1", max, .. } if max == canmotion::gcode::MAX_SPLINE_SEGMENTS)
+            && (e.line, e.col) == (2, 1),
+        "{e}"
+    );
+    let e = err("G21 F60\nG5.2 X1 Y1 P1\n");
+    assert_eq!((e.line, e.col), (2, 1));
+    assert!(e.is_unsupported(), "{e}");
+}
+
+#[test]
+fn g7_reads_x_words_as_diameters_and_g8_as_radii() {
+    check(
+        "lathe_diameter.ngc",
+        &[
+            // G7 on the line: X20 is a radius of 10.
+            (3, "line", R, [10.0, 0.0, 0.0], None),
+            (4, "line", F, [15.0, 0.0, -10.0], None),
+            // X50 is 25; I stays a radius: the centre is 10 away along X.
+            (5, "arc", F, [25.0, 0.0, -20.0], Some([25.0, 0.0, -10.0])),
+            // G91: X-10 (diameter) is -5.
+            (6, "line", F, [20.0, 0.0, -20.0], None),
+            (7, "line", R, [30.0, 0.0, -20.0], None),
+        ],
+    );
+    let text = "G21 G7\n";
+    let mut it = canmotion::gcode::Interpreter::new(
+        text.as_bytes(),
+        "p",
+        canmotion::gcode::Setup::new(Vector3::zeros()),
+    );
+    assert!(!it.diameter_mode());
+    it.next();
+    assert!(it.diameter_mode());
+    // `#<_lathe_diameter_mode>` reads it.
+    let p = parse_program(
+        "G21 G7\nG0 X[#<_lathe_diameter_mode> * 10 + #<_lathe_radius_mode>]\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap();
+    assert_eq!(p.end_mm(), Vector3::new(5.0, 0.0, 0.0));
+}
+
+#[test]
+fn predefined_named_parameters_read_the_interpreter_s_state() {
+    check(
+        "named_params.ngc",
+        &[
+            (3, "line", R, [10.0, 20.0, 5.0], None),
+            // G92 puts the program origin at (10, 20): #<_abs_x> + #<_abs_y> is 30.
+            (5, "line", F, [40.0, 20.0, 5.0], None),
+            // #<_x> (30) + #<_metric> (1).
+            (6, "line", R, [40.0, 51.0, 5.0], None),
+            // #<_plane> (170) / 100 + #<_motion_mode> (G0: 0) - 5.
+            (7, "line", R, [40.0, 51.0, -3.3], None),
+            // #<_coord_system> (540) / 10 + EXISTS (1) + #<_feed> (600) / 100 + level 0.
+            (8, "line", R, [71.0, 51.0, -3.3], None),
+            // The subroutine returns #<_call_level> (1) * 5; #<_value_returned> is 1.
+            (13, "line", R, [71.0, 26.0, -3.3], None),
+        ],
+    );
+    // Read-only, and the ones LinuxCNC has but this front end does not keep are named.
+    let e = parse_program("G21\n#<_x> = 1\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!(
+        (e.line, e.kind),
+        (
+            2,
+            ErrorKind::ReadOnlyParameter {
+                name: "_x".to_owned()
+            }
+        )
+    );
+    let e = parse_program("G21\nG0 X#<_mist>\n", "p", Vector3::zeros()).unwrap_err();
+    assert_eq!(e.line, 2);
+    assert_eq!(
+        e.unsupported_feature(),
+        Some("predefined parameter #<_mist>")
+    );
+    // EXISTS knows them; a global of one's own still works.
+    let p = parse_program(
+        "G21\n#<_mine> = 2\nG0 X[EXISTS[#<_mist>] + EXISTS[#<_nope>] + #<_mine>]\n",
+        "p",
+        Vector3::zeros(),
+    )
+    .unwrap();
+    assert_eq!(p.end_mm(), Vector3::new(3.0, 0.0, 0.0));
+    // #<_line> is the line of the file (LinuxCNC's sequence number), not the N word.
+    let p = parse_program("G21\n\nN10 G0 X#<_line>\n", "p", Vector3::zeros()).unwrap();
+    assert_eq!(p.end_mm(), Vector3::new(3.0, 0.0, 0.0));
+}
+
+#[test]
+fn g10_l20_sets_a_rotated_system_and_g10_takes_a_negative_radius() {
+    check(
+        "g10_rotated.ngc",
+        &[
+            // G54 at (100, 0) turned 90°: (10, 4) is machine (100 - 4, 10).
+            (4, "line", R, [96.0, 10.0, 0.0], None),
+            // L20 X0: the point reads X0 and still Y4, so the origin is (96, 10) - R(0, 4)
+            // = (100, 10); (5, 4) is (100 - 4, 10 + 5).
+            (6, "line", R, [96.0, 15.0, 0.0], None),
+            // L20 X0 Y0 R0: the origin is here, unturned.
+            (8, "line", R, [97.0, 17.0, 0.0], None),
+        ],
+    );
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/programs/g10_rotated.ngc"),
+    )
+    .unwrap();
+    let mut it = canmotion::gcode::Interpreter::new(
+        text.as_bytes(),
+        "t",
+        canmotion::gcode::Setup::new(Vector3::zeros()),
+    );
+    for item in it.by_ref() {
+        item.unwrap();
+    }
+    assert_eq!(it.tools().get(1).unwrap().radius_mm, -2.0);
+    assert_eq!(it.tools().get(2).unwrap().radius_mm, -1.5);
 }

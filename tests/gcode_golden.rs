@@ -496,16 +496,16 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "unsupported: G38.2 (probing is not supported)",
     ),
     (
-        "G5.1 X1 I1",
+        "G5.2 X1 Y1 P1",
         1,
         1,
-        "unsupported: G5.1 (splines (G5, G5.1, G5.2, G5.3) are not supported)",
+        "unsupported: G5.2 (NURBS (G5.2, G5.3) are not supported: use G5 or G5.1)",
     ),
     (
-        "G7",
+        "G5.3",
         1,
         1,
-        "unsupported: G7 (lathe diameter mode is not supported)",
+        "unsupported: G5.3 (NURBS (G5.2, G5.3) are not supported: use G5 or G5.1)",
     ),
     (
         "G0 X1 A90",

@@ -588,6 +588,11 @@ impl Machine {
         setup.g28_mm = self.program.g28_mm;
         setup.g30_mm = self.program.g30_mm;
         setup.work_offsets_mm = self.program.work_offsets_mm;
+        // G5/G5.1 are sampled within the planner's chord tolerance (0 there: no limit on
+        // arcs, and the interpreter's default for splines).
+        if self.planner.chord_tol_mm >= crate::gcode::MIN_SPLINE_TOL_MM {
+            setup.spline_tol_mm = self.planner.chord_tol_mm;
+        }
         setup.subroutine_path = self
             .program
             .subroutine_path

@@ -105,6 +105,8 @@ fn classify_g(tenths: u32) -> Known {
     use Known::*;
     match tenths {
         0 | 10 | 20 | 30 | 800 => In(Group::Motion),
+        // Splines (see `splines.rs`).
+        50 | 51 => In(Group::Motion),
         // Canned cycles (see `cycles.rs`).
         730 | 740 | 810..=860 | 890 => In(Group::Motion),
         40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920..=923 => In(Group::NonModal),
@@ -118,10 +120,9 @@ fn classify_g(tenths: u32) -> Known {
         540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => In(Group::Coord),
         610 | 611 | 640 => In(Group::Path),
         980 | 990 => In(Group::Retract),
-        80 => In(Group::LatheMode),
+        70 | 80 => In(Group::LatheMode),
         970 => In(Group::SpindleMode),
-        50..=53 => Unsupported("splines (G5, G5.1, G5.2, G5.3) are not supported"),
-        70 => Unsupported("lathe diameter mode is not supported"),
+        52 | 53 => Unsupported("NURBS (G5.2, G5.3) are not supported: use G5 or G5.1"),
         150 | 160 => Unsupported(
             "Fanuc polar mode (G15/G16) is not supported: use LinuxCNC's polar words @ (distance) and ^ (angle)",
         ),
@@ -192,7 +193,7 @@ fn letter_index(letter: char) -> Option<usize> {
 }
 
 /// The words of one line, checked and sorted into modal groups.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub(super) struct Block {
     groups: [Option<Code>; GROUPS],
     words: [Option<Word>; LETTERS.len()],
@@ -455,6 +456,20 @@ impl Block {
         self.get(Group::Override)
     }
     /// M70 … M73.
+    pub fn lathe_mode(&self) -> Option<Code> {
+        self.get(Group::LatheMode)
+    }
+
+    /// This block with its X word halved: under G7 an X word is a diameter (LinuxCNC halves
+    /// it as it reads it, whatever code uses it).
+    pub fn with_x_halved(&self) -> Block {
+        let mut b = self.clone();
+        if let Some(w) = b.words[0].as_mut() {
+            w.value /= 2.0;
+        }
+        b
+    }
+
     pub fn modal_state(&self) -> Option<Code> {
         self.get(Group::ModalState)
     }
@@ -473,7 +488,7 @@ fn check_domain(word: &Word) -> Result<(), BlockError> {
         'L' if as_index(word.value).is_none() => Err(invalid(word, "a non-negative integer")),
         // D may be negative: a G41.1/G42.1 diameter below zero swaps the side (LinuxCNC);
         // G41/G42 refuse a negative tool number themselves.
-        'Q' if word.value < 0.0 => Err(invalid(word, "a non-negative value")),
+        // Q may be negative: G5's end control point. M61, G64 and the cycles check their own.
         _ => Ok(()),
     }
 }

@@ -21,6 +21,80 @@ pub const MAX_USER_PARAMETER: u32 = 4999;
 /// Most named parameters one scope (the main program or one call) may hold.
 pub const MAX_NAMED_PARAMETERS: usize = 10_000;
 
+/// LinuxCNC's predefined named parameters (`interp_namedparams.cc`) that the interpreter
+/// keeps, read-only, in the order of the values [`Params::set_predefined`] takes.
+pub(super) const PREDEFINED: [&str; 33] = [
+    "_line",
+    "_motion_mode",
+    "_plane",
+    "_ccomp",
+    "_metric",
+    "_imperial",
+    "_absolute",
+    "_incremental",
+    "_inverse_time",
+    "_units_per_minute",
+    "_units_per_rev",
+    "_coord_system",
+    "_tool_offset",
+    "_retract_r_plane",
+    "_retract_old_z",
+    "_spindle_rpm_mode",
+    "_spindle_css_mode",
+    "_ijk_absolute_mode",
+    "_lathe_diameter_mode",
+    "_lathe_radius_mode",
+    "_spindle_on",
+    "_spindle_cw",
+    "_feed",
+    "_rpm",
+    "_current_tool",
+    "_selected_tool",
+    "_x",
+    "_y",
+    "_z",
+    "_abs_x",
+    "_abs_y",
+    "_abs_z",
+    "_remap_level",
+];
+
+/// LinuxCNC's predefined named parameters that hold state this front end does not keep
+/// (version, coolant, overrides, pockets, the axes it does not have): read-only, and reading
+/// one is [`ErrorKind::Unsupported`].
+const PREDEFINED_NOT_KEPT: [&str; 19] = [
+    "_vmajor",
+    "_vminor",
+    "_mist",
+    "_flood",
+    "_speed_override",
+    "_feed_override",
+    "_adaptive_feed",
+    "_feed_hold",
+    "_current_pocket",
+    "_selected_pocket",
+    "_a",
+    "_b",
+    "_c",
+    "_u",
+    "_v",
+    "_w",
+    "_abs_a",
+    "_abs_b",
+    "_abs_c",
+];
+
+/// The predefined parameters the store itself answers: the last return value, whether the
+/// last return gave one, the call level.
+const PREDEFINED_OWN: [&str; 3] = ["_value", "_value_returned", "_call_level"];
+
+/// Whether `name` (lower case) is one of LinuxCNC's predefined named parameters.
+fn is_predefined(name: &str) -> bool {
+    PREDEFINED.contains(&name)
+        || PREDEFINED_OWN.contains(&name)
+        || PREDEFINED_NOT_KEPT.contains(&name)
+}
+
 /// An error with its 1-based column.
 pub(super) type ExprError = (usize, ErrorKind);
 
@@ -59,6 +133,12 @@ pub(super) struct Params {
     /// The read-only system parameters kept (`#5070`, `#5220`, `#5420`…), as the interpreter
     /// last set them.
     system: HashMap<u32, f64>,
+    /// The values of [`PREDEFINED`], as the interpreter last set them.
+    predefined: [f64; PREDEFINED.len()],
+    /// `#<_value>`: the value the last `return`/`endsub` gave.
+    return_value: f64,
+    /// `#<_value_returned>`: whether the last `return`/`endsub` gave one.
+    value_returned: bool,
 }
 
 impl Default for Params {
@@ -68,6 +148,9 @@ impl Default for Params {
             global: HashMap::new(),
             scopes: vec![Scope::new()],
             system: HashMap::new(),
+            predefined: [0.0; PREDEFINED.len()],
+            return_value: 0.0,
+            value_returned: false,
         }
     }
 }
@@ -98,6 +181,9 @@ impl Params {
                 .get(n)
                 .copied()
                 .ok_or_else(|| system_parameter(*n)),
+            ParamRef::Name(name) if name.starts_with('_') && is_predefined(name) => {
+                self.predefined(name)
+            }
             ParamRef::Name(name) => {
                 let map = if name.starts_with('_') {
                     &self.global
@@ -111,6 +197,37 @@ impl Params {
         }
     }
 
+    /// A predefined named parameter's value.
+    fn predefined(&self, name: &str) -> Result<f64, ErrorKind> {
+        if let Some(k) = PREDEFINED.iter().position(|n| *n == name) {
+            return Ok(self.predefined[k]);
+        }
+        match name {
+            "_value" => Ok(self.return_value),
+            "_value_returned" => Ok(if self.value_returned { 1.0 } else { 0.0 }),
+            "_call_level" => Ok((self.scopes.len() - 1) as f64),
+            _ => Err(ErrorKind::Unsupported {
+                what: format!("predefined parameter #<{name}>"),
+                reason: "it holds state this front end does not keep (version, coolant, overrides, pockets, A/B/C/U/V/W)",
+            }),
+        }
+    }
+
+    /// Sets the values the kept predefined named parameters read as, in the order of
+    /// [`PREDEFINED`].
+    pub fn set_predefined(&mut self, values: [f64; PREDEFINED.len()]) {
+        self.predefined = values;
+    }
+
+    /// A `return` or `endsub`, with its value if it gave one (`#<_value>`,
+    /// `#<_value_returned>`).
+    pub fn set_returned(&mut self, value: Option<f64>) {
+        self.value_returned = value.is_some();
+        if let Some(v) = value {
+            self.return_value = v;
+        }
+    }
+
     /// Sets the value a read-only system parameter reads as.
     pub fn set_system(&mut self, n: u32, value: f64) {
         self.system.insert(n, value);
@@ -119,7 +236,7 @@ impl Params {
     /// Whether a named parameter is defined (`EXISTS`).
     pub fn exists(&self, name: &str) -> bool {
         if name.starts_with('_') {
-            self.global.contains_key(name)
+            is_predefined(name) || self.global.contains_key(name)
         } else {
             self.scope().named.contains_key(name)
         }
@@ -133,6 +250,9 @@ impl Params {
                 self.numbered.insert(*n, value);
             }
             ParamRef::Number(n) => return Err(system_parameter(*n)),
+            ParamRef::Name(name) if name.starts_with('_') && is_predefined(name) => {
+                return Err(ErrorKind::ReadOnlyParameter { name: name.clone() });
+            }
             ParamRef::Name(name) => {
                 let map = if name.starts_with('_') {
                     &mut self.global
@@ -701,6 +821,37 @@ mod tests {
         assert!(eval_with("#<scale>", &p).is_err());
         p.pop_scope();
         assert_eq!(eval_with("#1", &p).unwrap(), 2.0);
+    }
+
+    #[test]
+    fn predefined_named_parameters_are_read_only_and_exist() {
+        let mut p = Params::default();
+        let mut values = [0.0; PREDEFINED.len()];
+        values[PREDEFINED.iter().position(|n| *n == "_x").unwrap()] = 7.0;
+        p.set_predefined(values);
+        assert_eq!(eval_with("[#<_x> + 1]", &p).unwrap(), 8.0);
+        assert_eq!(
+            eval_with("[EXISTS[#<_x>] + EXISTS[#<_mist>]]", &p).unwrap(),
+            2.0
+        );
+        assert_eq!(
+            p.set(&ParamRef::Name("_x".into()), 1.0),
+            Err(ErrorKind::ReadOnlyParameter { name: "_x".into() })
+        );
+        assert!(p.get(&ParamRef::Name("_mist".into())).is_err());
+        assert_eq!(
+            eval_with("[#<_value_returned> + #<_call_level>]", &p).unwrap(),
+            0.0
+        );
+        p.push_scope(&[]);
+        p.set_returned(Some(4.0));
+        assert_eq!(
+            eval_with("[#<_value> + #<_value_returned> + #<_call_level>]", &p).unwrap(),
+            6.0
+        );
+        // A global of one's own is no predefined one.
+        p.set(&ParamRef::Name("_xx".into()), 2.0).unwrap();
+        assert_eq!(eval_with("#<_xx>", &p).unwrap(), 2.0);
     }
 
     #[test]

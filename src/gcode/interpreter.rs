@@ -34,7 +34,7 @@ use nalgebra::Vector3;
 
 use super::block::{Block, BlockError, Code, as_index};
 use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
-use super::expr::{ParamRef, Params};
+use super::expr::Params;
 use super::lex::{
     Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
 };
@@ -48,6 +48,11 @@ use super::{
 mod cycles;
 pub use cycles::MAX_CYCLE_ITEMS;
 use cycles::{Cycle, CycleState, Spindle};
+
+// G5/G5.1, also a child module extending `State`.
+#[path = "splines.rs"]
+mod splines;
+pub use splines::{MAX_SPLINE_SEGMENTS, MIN_SPLINE_TOL_MM};
 
 /// Longest line accepted, in bytes (terminator excluded). It bounds the reader's memory. The
 /// bound of every file read line by line ([`crate::files::MAX_LINE_BYTES`]).
@@ -99,7 +104,13 @@ pub struct Setup {
     /// Above 0, the main program's text is kept in memory, within [`MAX_STORED_BYTES`].
     /// Default 0: M99 in the main program ends it.
     pub m99_restarts: u32,
+    /// Largest distance between a G5/G5.1 spline and the lines it is sampled into (the
+    /// planner's `chord_tol_mm`). Default [`DEFAULT_SPLINE_TOL_MM`].
+    pub spline_tol_mm: f64,
 }
+
+/// The default of [`Setup::spline_tol_mm`]: 1 µm, the planner's default chord tolerance.
+pub const DEFAULT_SPLINE_TOL_MM: f64 = 0.001;
 
 impl Setup {
     /// Defaults (LinuxCNC's): no work offsets, G28/G30 at machine zero, an empty tool table,
@@ -122,6 +133,7 @@ impl Setup {
             optional_stop: true,
             subroutine_path: Vec::new(),
             m99_restarts: 0,
+            spline_tol_mm: DEFAULT_SPLINE_TOL_MM,
         }
     }
 
@@ -145,6 +157,9 @@ impl Setup {
         }
         if !(self.arc_tolerance_rel > 0.0 && self.arc_tolerance_rel.is_finite()) {
             return bad("arc_tolerance_rel must be finite and greater than zero");
+        }
+        if !(self.spline_tol_mm >= MIN_SPLINE_TOL_MM && self.spline_tol_mm.is_finite()) {
+            return bad("spline_tol_mm must be finite and at least 1e-6 mm");
         }
         // A negative radius swaps the side of G41/G42 (LinuxCNC's negative diameter).
         let tools_ok = self.tools.iter().all(|(_, t)| {
@@ -179,6 +194,25 @@ enum Motion {
     Ccw,
     /// A canned cycle (G73, G74, G81…G86, G89).
     Cycle(Cycle),
+    /// G5.
+    Cubic,
+    /// G5.1.
+    Quadratic,
+}
+
+impl Motion {
+    /// The G code ×10, as LinuxCNC's `#<_motion_mode>` reads it.
+    fn tenths(self) -> f64 {
+        match self {
+            Motion::Rapid => 0.0,
+            Motion::Linear => 10.0,
+            Motion::Cw => 20.0,
+            Motion::Ccw => 30.0,
+            Motion::Cycle(c) => c.code()[1..].parse::<f64>().map_or(0.0, |g| g * 10.0),
+            Motion::Cubic => 50.0,
+            Motion::Quadratic => 51.0,
+        }
+    }
 }
 
 /// The modal state M70/M73 save and M72 restores (LinuxCNC's list, less what has no effect
@@ -244,6 +278,17 @@ struct State {
     used: u16,
     /// The modal state saved by M70/M73 at each call level (0: the main program).
     saved: Vec<Option<Saved>>,
+    /// G7 (X words are diameters) rather than G8.
+    diameter_mode: bool,
+    /// The start direction a G5 without I and J takes: the last G5's `−(P, Q)` (mm), while
+    /// G5 stays the motion mode.
+    spline_next: Option<nalgebra::Vector2<f64>>,
+    /// See [`Setup::spline_tol_mm`].
+    spline_tol_mm: f64,
+    /// The last S word (`#<_rpm>`).
+    speed_rpm: f64,
+    /// The current line of its file (`#<_line>`, LinuxCNC's sequence number).
+    line_number: f64,
 }
 
 const CHECKED: &str = "XYZIJKRPQDHL@^";
@@ -269,6 +314,16 @@ fn missing(col: usize, code: Code, letter: char, expected: &'static str) -> Bloc
             expected,
         },
     )
+}
+
+/// The R word of G10 L1/L10/L11 in mm: negative too (LinuxCNC takes it; under G41/G42 a
+/// negative radius swaps the side).
+fn tool_radius(r: Word, scale: f64) -> Result<f64, BlockError> {
+    let radius_mm = r.value * scale;
+    if radius_mm.abs() > MAX_TOOL_SIZE_MM {
+        return Err(invalid(r, "a tool radius of at most 10000 mm in magnitude"));
+    }
+    Ok(radius_mm)
 }
 
 fn invalid(word: Word, expected: &'static str) -> BlockError {
@@ -318,6 +373,11 @@ impl State {
             cycles: CycleState::default(),
             used: 0,
             saved: vec![None],
+            diameter_mode: false,
+            spline_next: None,
+            spline_tol_mm: setup.spline_tol_mm,
+            speed_rpm: 0.0,
+            line_number: 0.0,
         }
     }
 
@@ -351,6 +411,7 @@ impl State {
             .tools
             .get(self.loaded_tool)
             .map_or(0.0, |t| 2.0 * t.radius_mm / scale);
+        params.set_predefined(self.predefined(scale));
         for (n, v) in [
             (5070, 0.0),
             (5210, if self.g92_on { 1.0 } else { 0.0 }),
@@ -362,6 +423,63 @@ impl State {
         ] {
             params.set_system(n, v);
         }
+    }
+
+    /// The values of LinuxCNC's predefined named parameters kept here, in the order of
+    /// [`PREDEFINED`](super::expr::PREDEFINED), as `lookup_named_param` computes them.
+    fn predefined(&self, scale: f64) -> [f64; 33] {
+        let flag = |b: bool| if b { 1.0 } else { 0.0 };
+        let plane = match self.plane {
+            Plane::Xy => 170.0,
+            Plane::Zx => 180.0,
+            Plane::Yz => 190.0,
+        };
+        let ccomp = match self.comp {
+            CompState::Off => 400.0,
+            CompState::Left { .. } => 410.0,
+            CompState::Right { .. } => 420.0,
+        };
+        let coord = match self.coord {
+            k @ 0..=5 => 540.0 + 10.0 * k as f64,
+            k => 585.0 + k as f64,
+        };
+        let feed = self.feed_mm_s.map_or(0.0, |f| f * 60.0 / scale);
+        [
+            self.line_number,
+            self.motion.map_or(800.0, Motion::tenths),
+            plane,
+            ccomp,
+            flag(!self.inch),
+            flag(self.inch),
+            flag(!self.incremental),
+            flag(self.incremental),
+            flag(self.inverse_time),
+            flag(!self.inverse_time),
+            0.0,
+            coord,
+            flag(self.tool_offset_mm != Vector3::zeros()),
+            // LinuxCNC's code: `_retract_r_plane` is G99, `_retract_old_z` G98.
+            flag(self.retract_to_r),
+            flag(!self.retract_to_r),
+            1.0,
+            0.0,
+            flag(self.arc_absolute),
+            flag(self.diameter_mode),
+            flag(!self.diameter_mode),
+            flag(self.spindle != Spindle::Stopped),
+            flag(self.spindle == Spindle::Cw),
+            feed,
+            self.speed_rpm.abs(),
+            f64::from(self.loaded_tool),
+            self.selected_tool.map_or(-1.0, f64::from),
+            self.prog_mm.x / scale,
+            self.prog_mm.y / scale,
+            self.prog_mm.z / scale,
+            self.pos_mm.x / scale,
+            self.pos_mm.y / scale,
+            self.pos_mm.z / scale,
+            0.0,
+        ]
     }
 
     fn modal(&self) -> Modal {
@@ -640,6 +758,18 @@ impl State {
         let note = |out: &mut VecDeque<Item>, col: usize, text: String| {
             out.push_back(Item::Note(Note { line, col, text }));
         };
+        // G7/G8 first, as LinuxCNC's reader: under G7 (from this line on) every X word is a
+        // diameter, halved before any code uses it; I, K and R stay radii.
+        if let Some(code) = b.lathe_mode() {
+            self.diameter_mode = code.tenths == 70;
+        }
+        let halved;
+        let b = if self.diameter_mode && b.word('X').is_some() {
+            halved = b.with_x_halved();
+            &halved
+        } else {
+            b
+        };
 
         // Units first: every number of the line is in the units in force after it.
         if let Some(units) = b.units() {
@@ -675,6 +805,7 @@ impl State {
         };
 
         if let Some(s) = b.word('S') {
+            self.speed_rpm = s.value;
             note(
                 out,
                 s.col,
@@ -812,7 +943,13 @@ impl State {
                         // LinuxCNC: no limit; the planner caps it (`default_tolerance_mm`).
                         None => f64::INFINITY,
                     };
-                    let q = self.take(b, 'Q').map_or(p, |w| w.value * scale);
+                    let q = match self.take(b, 'Q') {
+                        Some(w) if w.value < 0.0 => {
+                            return Err(invalid(w, "a tolerance of 0 or more"));
+                        }
+                        Some(w) => w.value * scale,
+                        None => p,
+                    };
                     BlendMode::Blend { p_mm: p, q_mm: q }
                 }
             };
@@ -893,8 +1030,6 @@ impl State {
                 _ => {}
             }
         }
-
-        // G8 (lathe radius mode) is the only lathe mode: nothing to do.
 
         if consumer.is_none() {
             self.motion(
@@ -1093,11 +1228,7 @@ impl State {
                     .ok_or_else(|| invalid(p, "a tool number from 1 to 99999"))?;
                 let mut tool = self.tools.get(n).unwrap_or(Tool::NONE);
                 if let Some(r) = self.take(b, 'R') {
-                    let radius_mm = r.value * scale;
-                    if !(0.0..=MAX_TOOL_SIZE_MM).contains(&radius_mm) {
-                        return Err(invalid(r, "a tool radius from 0 to 10000 mm"));
-                    }
-                    tool.radius_mm = radius_mm;
+                    tool.radius_mm = tool_radius(r, scale)?;
                 }
                 if let Some(z) = self.take(b, 'Z') {
                     let length_mm = z.value * scale;
@@ -1135,27 +1266,7 @@ impl State {
                         self.rotations_deg[index] = r.value;
                     }
                 } else {
-                    if self.rotations_deg[index] != 0.0
-                        && (b.word('X').is_some() || b.word('Y').is_some())
-                    {
-                        return Err(err_at(
-                            l.col,
-                            ErrorKind::Unsupported {
-                                what: "G10 L20 on a rotated coordinate system".to_owned(),
-                                reason: "set rotated systems with G10 L2",
-                            },
-                        ));
-                    }
-                    let g92 = self.g92();
-                    for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
-                        if let Some(v) = self.take(b, letter) {
-                            self.work_offsets_mm[index][i] =
-                                self.pos_mm[i] - self.tool_offset_mm[i] - g92[i] - v.value * scale;
-                        }
-                    }
-                    if let Some(r) = self.take(b, 'R') {
-                        self.rotations_deg[index] = r.value;
-                    }
+                    self.g10_l20(b, index);
                 }
                 if !self.work_offsets_mm[index]
                     .iter()
@@ -1202,11 +1313,7 @@ impl State {
                     tool.length_mm = length_mm;
                 }
                 if let Some(r) = self.take(b, 'R') {
-                    let radius_mm = r.value * scale;
-                    if !(0.0..=MAX_TOOL_SIZE_MM).contains(&radius_mm) {
-                        return Err(invalid(r, "a tool radius from 0 to 10000 mm"));
-                    }
-                    tool.radius_mm = radius_mm;
+                    tool.radius_mm = tool_radius(r, scale)?;
                 }
                 self.tools.insert(n, tool);
             }
@@ -1218,6 +1325,38 @@ impl State {
             }
         }
         Ok(())
+    }
+
+    /// G10 L20: system `index`'s origin moves so that the current point reads the line's
+    /// X, Y, Z there (the axes not given keep their reading), with the rotation the line
+    /// leaves (R, else the system's own), G92 counted and the tool offset not, as LinuxCNC's
+    /// `find_current_in_system_without_tlo`. In a rotated system a given X or Y moves the
+    /// origin along both machine axes; R alone only turns the system about its origin.
+    fn g10_l20(&mut self, b: &Block, index: usize) {
+        let old_rotation = self.rotations_deg[index];
+        let old_origin = self.work_offsets_mm[index];
+        let g92 = self.g92();
+        let q = self.pos_mm - self.tool_offset_mm;
+        // The current point as it reads in system `index` now.
+        let mut p = rotate_xy(q - old_origin, -old_rotation) - g92;
+        let given = ['X', 'Y', 'Z'].map(|letter| self.take_mm(b, letter));
+        let rotation = self.take(b, 'R').map_or(old_rotation, |r| r.value);
+        for (i, v) in given.iter().enumerate() {
+            if let Some(v) = v {
+                p[i] = *v;
+            }
+        }
+        let origin = q - rotate_xy(p + g92, rotation);
+        let mut o = old_origin;
+        if given[0].is_some() || given[1].is_some() {
+            o.x = origin.x;
+            o.y = origin.y;
+        }
+        if given[2].is_some() {
+            o.z = origin.z;
+        }
+        self.work_offsets_mm[index] = o;
+        self.rotations_deg[index] = rotation;
     }
 
     /// G28 / G30: via the axis words' point (if any), then to the stored position.
@@ -1311,6 +1450,8 @@ impl State {
                 10 => Some(Motion::Linear),
                 20 => Some(Motion::Cw),
                 30 => Some(Motion::Ccw),
+                50 => Some(Motion::Cubic),
+                51 => Some(Motion::Quadratic),
                 t => match Cycle::from_tenths(t) {
                     Some(cycle) => Some(Motion::Cycle(cycle)),
                     None => {
@@ -1328,6 +1469,10 @@ impl State {
             && !matches!(self.motion, Some(Motion::Cycle(_)))
         {
             self.cycles.initial_mm = None;
+        }
+        // Only G5 right after G5 may leave I and J out.
+        if self.motion != Some(Motion::Cubic) {
+            self.spline_next = None;
         }
         let on_line = code.filter(|c| c.tenths != 800);
         if on_line.is_none() && first_axis.is_none() {
@@ -1401,6 +1546,9 @@ impl State {
                 let f = feed(self, (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
+            }
+            Motion::Cubic | Motion::Quadratic => {
+                self.spline(b, line, col, mode == Motion::Cubic, inverse_f, out)?;
             }
             Motion::Cycle(cycle) => {
                 self.canned_cycle(b, line, col, cycle, previous != Some(mode), out)?;
@@ -1862,6 +2010,12 @@ impl<R: BufRead> Interpreter<R> {
         self.state.inch
     }
 
+    /// Whether lathe diameter mode (G7: X words are diameters) is in force after the line
+    /// read last, rather than G8.
+    pub fn diameter_mode(&self) -> bool {
+        self.state.diameter_mode
+    }
+
     /// Whether inverse-time feed (G93) is in force after the line read last.
     pub fn inverse_time(&self) -> bool {
         self.state.inverse_time
@@ -2096,6 +2250,7 @@ impl<R: BufRead> Interpreter<R> {
     fn run_line(&mut self, line: usize, text: &str, in_frame: bool) -> Result<(), Error> {
         self.at = line;
         if text.contains('#') {
+            self.state.line_number = line as f64;
             self.state.system_parameters(&mut self.params);
         }
         let kind = self
@@ -2678,11 +2833,7 @@ impl<R: BufRead> Interpreter<R> {
                     }
                 }
                 self.leave_call(call)?;
-                if let Some(v) = c.values.first() {
-                    self.params
-                        .set(&ParamRef::Name("_value".into()), *v)
-                        .map_err(|k| self.error(c.col, k))?;
-                }
+                self.params.set_returned(c.values.first().copied());
             }
             If | While | Do | Repeat if !in_frame => {
                 // Run the whole structure from memory, this line first.

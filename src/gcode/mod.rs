@@ -29,12 +29,15 @@
 //!   G28.1/G30.1 (store the current position). Polar words on G0/G1: `@` distance, `^` angle
 //!   (degrees) about the work system's origin (G91: added to the current distance and angle).
 //!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
+//!   G5.1 (quadratic) and G5 (cubic) splines in G17, sampled into lines on the exact curve
+//!   within [`Setup::spline_tol_mm`] (`splines.rs`).
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
 //!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D L
 //!   (as LinuxCNC reads them: D0 the tool in the spindle, a negative diameter swaps the side,
-//!   L only in G18 and only 0 or 9), G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G8 (radius mode, no effect).
-//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off),
-//!   G10 L2/L20 P X Y Z R (work offsets and rotation), G52 (local offset, in the G92 register),
+//!   L only in G18 and only 0 or 9), G43 H/G43.1/G43.2/G44 H/G49, G54…G59.3, G7/G8 (under G7
+//!   X words are diameters, halved as they are read; I, K, R stay radii).
+//! - G4 P (dwell, seconds), G10 L1 P R Z (tool table), G10 L10/L11 P Z R (tool touch-off; R
+//!   negative too), G10 L2/L20 P X Y Z R (work offsets and rotation, L20 on rotated systems), G52 (local offset, in the G92 register),
 //!   G92/G92.1/G92.2/G92.3; line numbers `N`, fractional too.
 //! - M0/M1 (program stops), M2/M30 (end: nothing after them is read), M6 and M61 Q (set the
 //!   tool in the spindle), M70/M71/M72/M73 (save, invalidate, restore, auto-restore the modal
@@ -43,7 +46,8 @@
 //!
 //! - Parameters `#1`…`#4999` and `#<name>` (local to a call, global when the name starts with
 //!   `_`), LinuxCNC's system parameters #5070, #5161…, #5220, #5420… (read-only, see
-//!   `State::system_parameters`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
+//!   `State::system_parameters`), LinuxCNC's predefined named parameters `#<_x>`,
+//!   `#<_motion_mode>`... (read-only, `expr::PREDEFINED`), assignments (all of a line's take effect after it is read), expressions `[ ]` with
 //!   LinuxCNC's operators and functions, and O-word flow control: `sub`/`endsub`/`call`/`return`,
 //!   `if`/`elseif`/`else`/`endif`, `while`/`endwhile`, `do`/`while`, `repeat`/`endrepeat`,
 //!   `break`, `continue`; computed call labels (`o[#1+2] call`); subroutine files
@@ -55,8 +59,8 @@
 //!   (at most [`MAX_STORED_BYTES`]); everything else streams.
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
-//! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, splines,
-//! G7, polar words on arcs, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
+//! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, NURBS
+//! (G5.2/G5.3), polar words on arcs and splines, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
 //! tolerance, computed labels on anything but `call` are [`ErrorKind::Unsupported`]; a
 //! subroutine neither defined nor found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
@@ -69,6 +73,7 @@ mod expr;
 mod interpreter;
 mod lex;
 mod tool_table;
+// `splines.rs` and `cycles.rs` are children of `interpreter`.
 
 use std::fmt;
 use std::io::BufRead;
@@ -80,8 +85,9 @@ pub use element::{
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interpreter::{
-    Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES, MAX_LINE_BYTES, MAX_POSITION_MM,
-    MAX_STORED_BYTES, MIN_ARC_RADIUS_MM, Setup,
+    DEFAULT_SPLINE_TOL_MM, Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES,
+    MAX_LINE_BYTES, MAX_POSITION_MM, MAX_SPLINE_SEGMENTS, MAX_STORED_BYTES, MIN_ARC_RADIUS_MM,
+    MIN_SPLINE_TOL_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
 pub use tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
@@ -922,6 +928,52 @@ pub enum ErrorKind {
         code: &'static str,
         /// The limit.
         max: usize,
+    },
+    /// A G5/G5.1 spline outside the XY plane (LinuxCNC: "Splines must be in the XY plane").
+    #[error("{code} draws splines in the XY plane only: program G17 first (the plane is {plane})")]
+    SplinePlane {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The plane in force, e.g. `G18`.
+        plane: &'static str,
+    },
+    /// A G5/G5.1 spline with an axis word other than X and Y (LinuxCNC: "Splines may not have
+    /// motion in Z, A, B, or C").
+    #[error("{code} moves X and Y only: {letter} is not allowed on a spline")]
+    SplineAxis {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The letter.
+        letter: char,
+    },
+    /// A spline under cutter compensation (LinuxCNC: "Cannot convert spline with cutter
+    /// radius compensation").
+    #[error("{code} cannot run under cutter compensation: cancel it with G40 first")]
+    SplineWithCompensation {
+        /// G5 or G5.1.
+        code: &'static str,
+    },
+    /// A spline that would take more lines than [`MAX_SPLINE_SEGMENTS`] to stay within the
+    /// chord tolerance.
+    #[error(
+        "{code} would take {segments} lines to stay within the chord tolerance {tol_mm} mm (at most {max}): split the spline or raise [planner] chord_tol_mm"
+    )]
+    SplineTooLong {
+        /// G5 or G5.1.
+        code: &'static str,
+        /// The lines it would take.
+        segments: f64,
+        /// The tolerance.
+        tol_mm: f64,
+        /// The limit.
+        max: usize,
+    },
+    /// An assignment to one of LinuxCNC's predefined named parameters (LinuxCNC: "Cannot
+    /// assign to read-only parameter").
+    #[error("parameter #<{name}> is read-only: it is one of LinuxCNC's predefined parameters")]
+    ReadOnlyParameter {
+        /// The name.
+        name: String,
     },
     /// A tapping or boring cycle with the spindle not turning as it must (LinuxCNC's check).
     #[error("{code} needs the spindle turning {needed}: program {fix} before it")]
