@@ -209,7 +209,7 @@ fn chorded_curves_take_at_least_their_curvature_bound() {
 /// Issue 11's acceptance: the jerk-limited time of every chorded curve is within 1.10× of its
 /// `T_lb`.
 #[test]
-#[ignore = "issue 11: the jerk-limited mode takes 1.75–6.6× T_lb on these curves (measured 2026-11-25); the target is 1.10×"]
+#[ignore = "issue 11: the jerk-limited mode takes 1.41–3.68× T_lb on these curves (measured 2026-11-25, session 8; 1.75–6.6× before the smoothed vertex curvature); the target is 1.10×"]
 fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     let slow: Vec<String> = time_curves()
         .into_iter()

@@ -1333,10 +1333,15 @@ impl Planner {
         }
         // A polyline's curvature sits at its vertices: a change of it from one vertex to the
         // next is a step of the acceleration, as at an arc's end.
-        let dk_vertex = discrete_curvature(a, b) - a.kink_in;
+        let kink = discrete_curvature(a, b);
+        let dk_vertex = kink - a.kink_in;
+        // The curve the vertices approximate: its curvature averaged over this vertex and the
+        // one before. Rounding of the written coordinates makes each vertex's own turn noisy;
+        // the noise largely cancels between neighbours, the curve's turning does not.
+        let kink_mean = 0.5 * (kink + a.kink_in);
+        let kink_mean_norm = kink_mean.norm();
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
-        let shared = |c: f64, d: f64| shared_jump_mm_s(c, d, tk / l_mm);
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1349,11 +1354,22 @@ impl Planner {
             let noise_mm_s3 = |k: f64| k * mean_mm * mean_mm / (cfg.period_s * tk * tk);
             let d = du[i].abs();
             if d > 0.0 {
-                v = v.min(shared(tk * acc_budget, d));
+                // The vertex's own velocity step and the centripetal acceleration of the curve
+                // through it: `v·|Δuᵢ| + v²·κ̄ᵢ·T_k ≤ T_k·A_i` (never more than the sharing of
+                // the one-period rule among the `1 + v·T_k/L` junctions within a filter time,
+                // which takes `κ = |Δuᵢ|/L`).
+                let k_curve = (tk * kink_mean[i].abs() / d).min(tk / l_mm);
+                v = v.min(shared_jump_mm_s(tk * acc_budget, d, k_curve));
                 if noise_mm_s3(d / mean_mm) > jerk_budget {
                     v = v.min(tk * tk * jerk_budget / d);
                 }
-                v = v.min((l_mm * l_mm * jerk_budget / (d * du_norm)).cbrt());
+                // The jerk of following that curve, `v³·κ̄ᵢ·|κ̄| ≤ budget` (at most `|Δu|/L`
+                // each, the vertex's own turn over the shorter element).
+                let k_i = kink_mean[i].abs().min(d / l_mm);
+                let k_n = kink_mean_norm.min(du_norm / l_mm);
+                if k_i > 0.0 && k_n > 0.0 {
+                    v = v.min((jerk_budget / (k_i * k_n)).cbrt());
+                }
             }
             let k = dk[i].abs();
             if k > 0.0 {
