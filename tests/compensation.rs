@@ -994,3 +994,170 @@ proptest! {
         }
     }
 }
+
+/// Like [`check_path`], in three dimensions: (line, end, arc centre and clockwise flag).
+type Want3 = (u64, [f64; 3], Option<([f64; 3], bool)>);
+
+#[track_caller]
+fn check_path_xyz(path: &[Record], want: &[Want3]) {
+    let near = |a: [f64; 3], b: [f64; 3]| (0..3).all(|i| (a[i] - b[i]).abs() <= 0.001);
+    assert_eq!(path.len(), want.len(), "{path:#?}");
+    let mut at = [0.0; 3];
+    for (i, (got, want)) in path.iter().zip(want).enumerate() {
+        let (line, _, start, end, arc) = *got;
+        assert_eq!(start, at, "element {i} starts where the last ended");
+        at = end;
+        let (want_line, want_end, want_arc) = *want;
+        let arc_ok = match (arc, want_arc) {
+            (None, None) => true,
+            (Some((c, cw)), Some((wc, wcw))) => near(c, wc) && cw == wcw,
+            _ => false,
+        };
+        assert!(
+            line == want_line && near(end, want_end) && arc_ok,
+            "element {i}: got line {line} to {end:?} arc {arc:?}, want line {want_line} to \
+             {want_end:?} arc {want_arc:?}"
+        );
+    }
+}
+
+/// A straight entry into an acute inside corner (G41, radius 2), as LinuxCNC computes it, and
+/// a G40 exit move not in line with the last move.
+///
+/// Entry, line 5 (`convert_straight_comp1`): from the current point C = (7,0) to the
+/// programmed end P1 = (10,0), 3 mm > r; α = atan2(P1 − C) + π/2 = π/2, so the tool is sent
+/// to P1 + r (cos α, sin α) = (10,2).
+///
+/// Line 6 (`convert_straight_comp2`), from (10,0) to (0,10): θ = atan2((10,2) − (10,0)) =
+/// π/2, α = atan2(10, −10) = 3π/4; for LEFT θ < α so θ = 5π/2, β = θ − α − π/2 = 5π/4 >
+/// π + 0.01: concave. Line to line: the half corner (β + π)/2 = 9π/8, the retreat
+/// r / tan(9π/8) = 2 / tan(π/8) = 4.828427 along θ + π/2 = 3π (−X) from (10,2): the entry's
+/// end is moved to (5.171573, 2) (`move_endpoint_and_flush`; its direction check compares
+/// with the entry's normal, so running back past C is not a gouge there). The line ends at
+/// (0,10) + r (cos 5π/4, sin 5π/4) = (−1.414214, 8.585786).
+///
+/// Line 7, G40 (`convert_cutter_compensation_off`): the last move keeps its end, the
+/// interpreter's point becomes the programmed (0,10), and the G1 runs straight from the tool
+/// at (−1.414214, 8.585786) to (0,20). No outside corner: the same with either corner mode.
+/// The old code refused the entry as a gouge and joined the exit at the corner.
+#[test]
+fn a_straight_entry_into_an_acute_inside_corner_as_in_linuxcnc() {
+    let retreat = 2.0 / (std::f64::consts::PI / 8.0).tan();
+    let h = std::f64::consts::SQRT_2;
+    let want: [Want; 4] = [
+        (3, [7.0, 0.0], None),
+        (5, [10.0 - retreat, 2.0], None),
+        (6, [-h, 10.0 - h], None),
+        (7, [0.0, 20.0], None),
+    ];
+    check_path(&plan_path("comp_entry_acute.ngc", None), &want);
+    let dir = tempfile::tempdir().unwrap();
+    let machine = arc_corner_machine(dir.path());
+    check_path(&plan_path("comp_entry_acute.ngc", Some(&machine)), &want);
+}
+
+/// A straight entry onto an outside corner of 135° (G41, radius 2), and a G40 exit move not
+/// in line.
+///
+/// Entry, line 5 (`convert_straight_comp1`): C = (10,20), P1 = (20,20), α = 0 + π/2: the
+/// tool goes to (20,22).
+///
+/// Line 6 (`convert_straight_comp2`), from (20,20) to (30,10): θ = π/2, α = −π/4, β = θ − α −
+/// π/2 = π/4 > 0.01 and below π − 0.01: convex, an arc is needed. The entry keeps its end
+/// (20,22); `ARC_FEED` clockwise (turn −1 for LEFT) about the programmed corner (20,20) to
+/// (20,20) + r (cos π/4, sin π/4) = (21.414214, 21.414214); then the line to (30,10) + the
+/// same = (31.414214, 11.414214).
+///
+/// Line 7, G40: the last move keeps its end; the G1 runs to (40,10). The old code joined the
+/// exit to the last move as an inside corner (ending the last move short of its end).
+///
+/// With the default `outside_corners = "lines"` the corner is the C-type extension instead
+/// (not LinuxCNC's, a documented choice): both offsets run on to their intersection, y = 22
+/// with the line through (21.414214, 21.414214) along (1,−1): x = 20 + 2√2 − 2 = 20.828427.
+#[test]
+fn a_straight_entry_onto_an_outside_corner_as_in_linuxcnc() {
+    let h = std::f64::consts::SQRT_2;
+    let dir = tempfile::tempdir().unwrap();
+    let machine = arc_corner_machine(dir.path());
+    check_path(
+        &plan_path("comp_entry_obtuse.ngc", Some(&machine)),
+        &[
+            (3, [10.0, 20.0], None),
+            (5, [20.0, 22.0], None),
+            (6, [20.0 + h, 20.0 + h], Some(([20.0, 20.0], true))),
+            (6, [30.0 + h, 10.0 + h], None),
+            (7, [40.0, 10.0], None),
+        ],
+    );
+    check_path(
+        &plan_path("comp_entry_obtuse.ngc", None),
+        &[
+            (3, [10.0, 20.0], None),
+            (5, [18.0 + 2.0 * h, 22.0], None),
+            (6, [30.0 + h, 10.0 + h], None),
+            (7, [40.0, 10.0], None),
+        ],
+    );
+}
+
+/// G40 and then a move along the tool axis: that move is the exit, as in LinuxCNC (its G40
+/// ends the last move at its offset end (30,2) and puts the interpreter's point back on the
+/// programmed (30,0); the next move, whatever it is, runs from the tool to its programmed end).
+/// So the G0 Z5 of line 8 runs from (30,2,0) to (30,0,5); the rest is uncompensated, and the
+/// arc of line 11 is allowed (the straight moves before it cleared LinuxCNC's
+/// `arc_not_allowed`): clockwise about (45,5,0). The old code kept the axial move at the offset
+/// point and refused the arc as unsupported.
+#[test]
+fn after_g40_a_move_along_the_tool_axis_is_the_exit_move() {
+    check_path_xyz(
+        &plan_path("comp_cancel_axial.ngc", None),
+        &[
+            (3, [10.0, 0.0, 0.0], None),
+            (5, [20.0, 2.0, 0.0], None),
+            (6, [30.0, 2.0, 0.0], None),
+            (8, [30.0, 0.0, 5.0], None),
+            (9, [40.0, 5.0, 5.0], None),
+            (10, [40.0, 5.0, 0.0], None),
+            (11, [50.0, 5.0, 0.0], Some(([45.0, 5.0, 0.0], true))),
+        ],
+    );
+}
+
+/// The compensated items of `tests/programs/<program>`, or the first error.
+fn compensate_file(program: &str) -> Result<Vec<Item>, Error> {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/programs")
+            .join(program),
+    )
+    .unwrap();
+    let interp = Interpreter::new(text.as_bytes(), program, setup());
+    Compensator::new(interp, program, CompOptions::default()).collect()
+}
+
+/// What LinuxCNC refuses around straight entries and G40:
+/// - G41, G40 with no move between, then an arc: its G40 sets `arc_not_allowed` whenever a
+///   radius is in force ("The move just after exiting cutter compensation mode must be
+///   straight, not an arc"); the old code ran the arc uncompensated;
+/// - a straight entry not longer than the tool radius (`convert_straight_comp1`: "Length of
+///   cutter compensation entry move is not greater than the tool radius"): 1.5 mm with radius
+///   2; the old code accepted it.
+#[test]
+fn linuxcnc_refuses_an_arc_after_g40_and_a_short_straight_entry() {
+    let e = compensate_file("comp_g40_arc.ngc").unwrap_err();
+    assert_eq!((e.line, e.col), (6, 1), "{e}");
+    assert!(
+        matches!(e.kind, ErrorKind::CompensationEndOnArc { code: "G2" }),
+        "{e}"
+    );
+    let e = compensate_file("comp_entry_short.ngc").unwrap_err();
+    assert_eq!((e.line, e.col), (5, 1), "{e}");
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationEntryTooShort { code: "G1", length_mm, tool_radius_mm }
+                if length_mm == 1.5 && tool_radius_mm == 2.0
+        ),
+        "{e}"
+    );
+}

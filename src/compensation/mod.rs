@@ -411,18 +411,20 @@ where
                 }
             };
         };
+        let Some(key) = self.key(&e)? else {
+            // After G40 the next move of any kind leaves the offset path (LinuxCNC).
+            return self.cancel(open, e);
+        };
         if !in_plane(&e, open.key.plane) {
             self.open = Some(open);
             return self.hold(Item::Motion(e));
         }
-        match self.key(&e)? {
-            Some(key) if key == open.key => self.corner(open, e),
-            None => self.cancel(open, e),
-            Some(key) => {
-                self.open = Some(open);
-                self.finish()?;
-                self.start_up(e, key)
-            }
+        if key == open.key {
+            self.corner(open, e)
+        } else {
+            self.open = Some(open);
+            self.finish()?;
+            self.start_up(e, key)
         }
     }
 
@@ -432,6 +434,20 @@ where
             return self.start_up_arc(e, key, if cw { "G2" } else { "G3" });
         }
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
+        // LinuxCNC's `convert_straight_comp1` measures from the programmed start (its current
+        // point; after G40 the tool may still be at the last offset point).
+        let length_mm = (plane_point(&e.end_mm, key.plane) - plane_point(&e.start_mm, key.plane))
+            .norm();
+        if length_mm <= key.d.abs() {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryTooShort {
+                    code: if e.rapid { "G0" } else { "G1" },
+                    length_mm,
+                    tool_radius_mm: key.d.abs(),
+                },
+            ));
+        }
         // Its offset line begins one radius over from the programmed start.
         let (start, end) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
         let check_from = start.point;
@@ -613,49 +629,22 @@ where
         Ok(())
     }
 
-    /// The cancel move: join the open element to its offset line, then run to the programmed
-    /// end point.
+    /// The cancel move, as LinuxCNC's G40 makes it (`convert_cutter_compensation_off`, then
+    /// `convert_straight` with compensation off): the open element ends at its plain offset end
+    /// point (no corner join), and the first move after G40, whatever it is (one along the
+    /// tool axis too), runs straight from there to its programmed end point. An arc there is
+    /// an error; the interpreter refuses it first, this is for other item streams.
     fn cancel(&mut self, open: Open, e: Element) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
-            let code = if cw { "G2" } else { "G3" };
-            let after_g40 = self
-                .held
-                .iter()
-                .any(|i| matches!(i, Item::Motion(m) if m.comp == CompState::Off));
             return Err(self.error(
                 &e,
-                if after_g40 {
-                    // LinuxCNC takes the move along the tool axis after G40 as its exit move
-                    // (back to the programmed point in the plane too), then the arc; here
-                    // the cancel move is the first move in the plane.
-                    ErrorKind::Unsupported {
-                        what: format!(
-                            "{code} as the first move in the plane after G40 and a move along the tool axis"
-                        ),
-                        reason: "program a straight move in the plane right after G40",
-                    }
-                } else {
-                    // LinuxCNC: "the move just after exiting cutter compensation mode must be
-                    // straight, not an arc".
-                    ErrorKind::CompensationEndOnArc { code }
+                ErrorKind::CompensationEndOnArc {
+                    code: if cw { "G2" } else { "G3" },
                 },
             ));
         }
-        let key = open.key;
-        let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
-        let (start, _) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
-        let join = self.join(&open, &start, &e)?;
-        self.emit_open(&open, join.end1)?;
-        self.release(key.plane)?;
-        self.connect(&e, key.plane, &join.conns)?;
-        let to = plane_point(&e.end_mm, key.plane);
-        if (to - join.start2).dot(&start.tangent) < -GOUGE_TOLERANCE_MM {
-            return Err(self.gouge(
-                &e,
-                key.d,
-                "the cancel move is shorter than the corner before it takes (it would run backwards)",
-            ));
-        }
+        self.emit_open(&open, open.end.point)?;
+        self.release(open.key.plane)?;
         self.push(Element {
             start_mm: self.pos(),
             ..e
@@ -692,15 +681,13 @@ where
         let end_mm = plane_to_3d(end, e.end_mm[n], open.key.plane);
         match open.geo {
             Geo::Line { t, .. } => {
-                if (end - open.check_from).dot(&t) < -GOUGE_TOLERANCE_MM {
+                // A straight start-up move is never a gouge: LinuxCNC checks the direction of
+                // its (moved) end against the normal of the move, which it always keeps.
+                if !open.startup && (end - open.check_from).dot(&t) < -GOUGE_TOLERANCE_MM {
                     return Err(self.gouge(
                         e,
                         open.key.d,
-                        if open.startup {
-                            "the start-up move is shorter than the corner after it takes (it would run backwards)"
-                        } else {
-                            "this element is shorter than its corners take (its tool-centre path would run backwards)"
-                        },
+                        "this element is shorter than its corners take (its tool-centre path would run backwards)",
                     ));
                 }
                 self.push(Element {

@@ -220,6 +220,10 @@ struct State {
     feed_mm_s: Option<f64>,
     blend: BlendMode,
     comp: CompState,
+    /// G40 ended compensation with a radius, and no straight move came since: the next move
+    /// may not be an arc (LinuxCNC's `arc_not_allowed`: that move returns the tool from its
+    /// offset point to the programmed point).
+    arc_not_allowed: bool,
     tool_offset_mm: Vector3<f64>,
     coord: usize,
     work_offsets_mm: [Vector3<f64>; 9],
@@ -298,6 +302,7 @@ impl State {
                 q_mm: 0.0,
             },
             comp: CompState::Off,
+            arc_not_allowed: false,
             tool_offset_mm: Vector3::zeros(),
             coord: 0,
             work_offsets_mm: setup.work_offsets_mm,
@@ -962,6 +967,14 @@ impl State {
 
     fn cutter_comp(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
         if code.tenths == 400 {
+            // LinuxCNC's `convert_cutter_compensation_off`: with a radius in force, the next
+            // move (whatever it is) leaves the offset path, and must be straight.
+            if let CompState::Left { radius_mm, .. } | CompState::Right { radius_mm, .. } =
+                self.comp
+                && radius_mm != 0.0
+            {
+                self.arc_not_allowed = true;
+            }
             self.comp = CompState::Off;
             return Ok(());
         }
@@ -1388,6 +1401,7 @@ impl State {
             self.check_position(col, &m)?;
             let f = feed(self, (m - self.pos_mm).norm())?;
             self.push_line(line, col, rapid, m, f, out);
+            self.arc_not_allowed = false;
             self.resync();
             return Ok(());
         }
@@ -1401,11 +1415,20 @@ impl State {
                 let f = feed(self, (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
+                self.arc_not_allowed = false;
             }
             Motion::Cycle(cycle) => {
                 self.canned_cycle(b, line, col, cycle, previous != Some(mode), out)?;
             }
             Motion::Cw | Motion::Ccw => {
+                if self.arc_not_allowed {
+                    return Err(err_at(
+                        col,
+                        ErrorKind::CompensationEndOnArc {
+                            code: if mode == Motion::Cw { "G2" } else { "G3" },
+                        },
+                    ));
+                }
                 let element = self.arc(b, line, col, mode == Motion::Cw)?;
                 let mut element = element;
                 element.feed_mm_s = feed(self, element.length_mm())?;
