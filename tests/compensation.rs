@@ -120,8 +120,8 @@ fn square(code: &str, clockwise: bool) -> String {
 fn square_clockwise_with_g41_lies_2_mm_outside() {
     // Tool left of a clockwise path: outside. Each side on its offset line (x = −2, y = 22,
     // x = 22, y = −2); the right-angle corners (α = 90°) extended by the radius. Start-up:
-    // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2; the cancel
-    // (+Y then −X, inside) leaves from x = −2, y = 8.
+    // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2. G40, as
+    // in LinuxCNC: the last side ends at its offset end (−2,10), the exit runs from there.
     let path = comp_path(&square("G41", true), CompOptions::default());
     assert_polyline(
         &path,
@@ -132,7 +132,7 @@ fn square_clockwise_with_g41_lies_2_mm_outside() {
             (22.0, 22.0),
             (22.0, -2.0),
             (-2.0, -2.0),
-            (-2.0, 8.0),
+            (-2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -148,8 +148,8 @@ fn square_clockwise_with_g41_lies_2_mm_outside() {
 #[test]
 fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
     // Tool left of a counter-clockwise path: inside, on x = 2, y = 2, x = 18, y = 18, every
-    // corner shortened to the intersection. The start-up (+X then −Y) and the cancel (−Y
-    // then −X) are outside corners for the tool: extended by the radius.
+    // corner shortened to the intersection. The start-up (+X then −Y) is an outside corner
+    // for the tool: extended by the radius. The last side ends at its offset end (2,10).
     let path = comp_path(&square("G41", false), CompOptions::default());
     assert_polyline(
         &path,
@@ -160,7 +160,7 @@ fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
             (18.0, 2.0),
             (18.0, 18.0),
             (2.0, 18.0),
-            (2.0, 8.0),
+            (2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -179,7 +179,7 @@ fn square_with_g42_mirrors() {
             (18.0, 18.0),
             (18.0, 2.0),
             (2.0, 2.0),
-            (2.0, 12.0),
+            (2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -194,7 +194,7 @@ fn square_with_g42_mirrors() {
             (22.0, -2.0),
             (22.0, 22.0),
             (-2.0, 22.0),
-            (-2.0, 12.0),
+            (-2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -291,7 +291,7 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
     // G41 on the clockwise D: outside. Edge on x = −2, arc radius 12. The corners turn right
     // by 90° (α = 90°): the edge extends 2 mm to (−2,22), a straight connector along the
     // arc's tangent reaches the arc's offset start (0,22); at the bottom the arc ends at
-    // (0,−2), a connector to (−2,−2), the edge from there.
+    // (0,−2), a connector to (−2,−2), the edge from there to its offset end (−2,5) (G40).
     let path = comp_path(&d_shape("G41"), CompOptions::default());
     assert_eq!(path.len(), 7, "{path:#?}");
     assert_polyline(
@@ -306,7 +306,7 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
     assert!(close(path[3].end_mm, Vector3::new(0.0, -2.0, 0.0)));
     assert_polyline(
         &path[4..],
-        &[(0.0, -2.0), (-2.0, -2.0), (-2.0, 3.0), (-10.0, 5.0)],
+        &[(0.0, -2.0), (-2.0, -2.0), (-2.0, 5.0), (-10.0, 5.0)],
     );
 
     // The same with corner arcs: radius 2 about (0,20) and (0,0).
@@ -330,8 +330,8 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
 #[test]
 fn line_arc_joins_inside_meet_on_the_offset_circle() {
     // G42 on the clockwise D: inside. Edge on x = 2, arc radius 8 about (0,10); they meet
-    // where x = 2 cuts that circle: y = 10 ± √60. Start-up and cancel corners are outside
-    // for the tool (extended by the radius).
+    // where x = 2 cuts that circle: y = 10 ± √60. The start-up corner is outside for the
+    // tool (extended by the radius); the last edge ends at its offset end (2,5) (G40).
     let path = comp_path(&d_shape("G42"), CompOptions::default());
     assert_eq!(path.len(), 5, "{path:#?}");
     let r60 = 60f64.sqrt();
@@ -341,7 +341,7 @@ fn line_arc_joins_inside_meet_on_the_offset_circle() {
     assert!((g.start_radius_mm - 8.0).abs() < 1e-12);
     // Clockwise from atan2(√60, 2) to −atan2(√60, 2).
     assert!((g.sweep_rad - 2.0 * r60.atan2(2.0)).abs() < 1e-12);
-    assert_polyline(&path[3..], &[(2.0, 10.0 - r60), (2.0, 7.0), (-10.0, 5.0)]);
+    assert_polyline(&path[3..], &[(2.0, 10.0 - r60), (2.0, 5.0), (-10.0, 5.0)]);
 }
 
 /// A lens: the arc of the circle about (−6,0) from (0,−8) to (0,8) and the arc of the circle
@@ -437,7 +437,8 @@ fn pocket_with_fillets_cam_style() {
     // plunged before the start-up, entered from below the bottom edge. All joins but the
     // start-up and cancel are tangent: sides on x = 2, 58 and y = 2, 28, fillets about their
     // own centres with radius 5 − 2 = 3. The start-up (+Y into +X: outside for the tool,
-    // α = 90°) ends at (28,2); the cancel (+X into −Y, outside) leaves from (32,2).
+    // α = 90°) ends at (28,2); after G40 the last line ends at its offset end (30,2), and
+    // the exit runs from there (LinuxCNC).
     let text = "G21 G17 G90 G94\nG0 Z5\nG0 X30 Y-10\nG1 Z-1 F300\nG41 D1\nG1 X30 Y0 F600\n\
                 X55\nG3 X60 Y5 I0 J5\nG1 Y25\nG3 X55 Y30 I-5 J0\nG1 X5\nG3 X0 Y25 I0 J-5\n\
                 G1 Y5\nG3 X5 Y0 I5 J0\nG1 X30\nG40 Y-10\nG0 Z5\nM2\n";
@@ -450,8 +451,8 @@ fn pocket_with_fillets_cam_style() {
         (9, p(58.0, 5.0), p(58.0, 25.0)),
         (11, p(55.0, 28.0), p(5.0, 28.0)),
         (13, p(2.0, 25.0), p(2.0, 5.0)),
-        (15, p(5.0, 2.0), p(32.0, 2.0)),
-        (16, p(32.0, 2.0), p(30.0, -10.0)),
+        (15, p(5.0, 2.0), p(30.0, 2.0)),
+        (16, p(30.0, 2.0), p(30.0, -10.0)),
     ];
     let want_arcs = [
         (8, p(55.0, 5.0), p(55.0, 2.0), p(58.0, 5.0)),

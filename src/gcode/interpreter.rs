@@ -220,10 +220,10 @@ struct State {
     feed_mm_s: Option<f64>,
     blend: BlendMode,
     comp: CompState,
-    /// G40 ended compensation with a radius, and no straight move came since: the next move
-    /// may not be an arc (LinuxCNC's `arc_not_allowed`: that move returns the tool from its
-    /// offset point to the programmed point).
-    arc_not_allowed: bool,
+    /// The compensation G40 ended (with a radius), while no straight move came since: the
+    /// next move may not be an arc (LinuxCNC's `arc_not_allowed`: that move returns the tool
+    /// from its offset point to the programmed point).
+    ended_comp: Option<CompState>,
     tool_offset_mm: Vector3<f64>,
     coord: usize,
     work_offsets_mm: [Vector3<f64>; 9],
@@ -302,7 +302,7 @@ impl State {
                 q_mm: 0.0,
             },
             comp: CompState::Off,
-            arc_not_allowed: false,
+            ended_comp: None,
             tool_offset_mm: Vector3::zeros(),
             coord: 0,
             work_offsets_mm: setup.work_offsets_mm,
@@ -973,7 +973,7 @@ impl State {
                 self.comp
                 && radius_mm != 0.0
             {
-                self.arc_not_allowed = true;
+                self.ended_comp = Some(self.comp);
             }
             self.comp = CompState::Off;
             return Ok(());
@@ -1024,11 +1024,25 @@ impl State {
                 }
             }
         };
-        self.comp = if code.tenths / 10 == 41 {
+        let comp = if code.tenths / 10 == 41 {
             CompState::Left { tool, radius_mm }
         } else {
             CompState::Right { tool, radius_mm }
         };
+        if self.ended_comp == Some(comp) {
+            // The compensation stage sees the elements' comp states only, so it would take the
+            // next move as the continuation of the last run, where LinuxCNC starts a new one.
+            return Err(err_at(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!(
+                        "{code} right after G40 with the same side and radius and no move between"
+                    ),
+                    reason: "program a straight move between the G40 and the next G41/G42",
+                },
+            ));
+        }
+        self.comp = comp;
         Ok(())
     }
 
@@ -1401,7 +1415,7 @@ impl State {
             self.check_position(col, &m)?;
             let f = feed(self, (m - self.pos_mm).norm())?;
             self.push_line(line, col, rapid, m, f, out);
-            self.arc_not_allowed = false;
+            self.ended_comp = None;
             self.resync();
             return Ok(());
         }
@@ -1415,13 +1429,13 @@ impl State {
                 let f = feed(self, (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
-                self.arc_not_allowed = false;
+                self.ended_comp = None;
             }
             Motion::Cycle(cycle) => {
                 self.canned_cycle(b, line, col, cycle, previous != Some(mode), out)?;
             }
             Motion::Cw | Motion::Ccw => {
-                if self.arc_not_allowed {
+                if self.ended_comp.is_some() {
                     return Err(err_at(
                         col,
                         ErrorKind::CompensationEndOnArc {
