@@ -31,15 +31,53 @@
 //! breaks: α = 90° is extended (the two constructions coincide there); an exact reversal
 //! (α = 0° or 360°) goes round the tip (α = 0°), since the other reading has no intersection.
 //!
-//! # Start-up and cancel
+//! # Start-up and cancel, as LinuxCNC computes them
 //!
-//! The start-up move is the first move in the plane with G41/G42 in force; the cancel move is
-//! the first move in the plane with G40 in force after it. A straight start-up move runs from
-//! the current, uncompensated point to the point where its *offset line* (parallel to it, one
-//! radius over) joins the next element's offset by the corner rules above (so for a
-//! right-angle approach to an inside corner it ends one radius short, for an outside one one
-//! radius long, as in the source's figure 3-41); the cancel move mirrors it and ends at the
-//! programmed point.
+//! Read from LinuxCNC's `interp_convert.cc` and `interp_queue.cc` (`convert_straight_comp1`,
+//! `convert_straight_comp2`, `convert_cutter_compensation_off`, `move_endpoint_and_flush`);
+//! `tests/compensation.rs` checks each case against points computed by hand from them.
+//!
+//! - **Straight entry** (`convert_straight_comp1`): from the current point C to the programmed
+//!   end P, the tool goes to P + r·n, n the unit normal of C→P on the tool's side (left for
+//!   G41): the point offset perpendicular to the move's own direction, with no look-ahead.
+//!   C→P not longer than r is refused ("Length of cutter compensation entry move is not
+//!   greater than the tool radius": [`ErrorKind::CompensationEntryTooShort`]). C is the
+//!   interpreter's point, the programmed one: after G40 and G41/G42 with no move between the
+//!   tool still stands at the last offset point, and the move runs from there with the
+//!   direction taken from the programmed point (so here: `e.start_mm` for the direction,
+//!   the current output point for the start).
+//! - **The corner after it** is an ordinary corner (`convert_straight_comp2` and
+//!   `convert_arc_comp2` take the last move's direction from the programmed corner to the
+//!   tool, which after an entry is square to C→P). Convex (β > 0.01 rad): the entry keeps
+//!   its end P + r·n, then an `ARC_FEED` of radius r about the programmed corner (a straight
+//!   traverse for G0) to the next element's offset start. Concave line to line: the entry's
+//!   end moves back along C→P by r·tan(δ/2) (δ the turn), onto the intersection of the two
+//!   offset lines. This is the join of this module with [`OutsideCorners::Arc`]; with
+//!   [`OutsideCorners::Lines`] convex corners are extended or inserted instead (the
+//!   source's C-type, not LinuxCNC's). LinuxCNC's reversal check on the moved end compares it
+//!   with the entry's stored direction, which is the normal n, and always passes: an entry
+//!   shorter than the corner's retreat runs back past its start, and is no gouge (here
+//!   neither).
+//! - **G40** (`convert_cutter_compensation_off`): the last move keeps its plain offset end
+//!   (no corner join with what follows; queued moves along the tool axis stay there too), the
+//!   interpreter's point becomes the programmed one, and the next move, whatever it is (one
+//!   along the tool axis too), runs straight from the tool to its programmed end point. Here
+//!   that move is the first element with G40 in force, in the plane or not. The move right
+//!   after G40 may not be an arc (`arc_not_allowed`, set whenever a radius was in force, also
+//!   with no move between G41/G42 and G40; only a straight move clears it): the interpreter
+//!   refuses it with [`ErrorKind::CompensationEndOnArc`].
+//! - **What LinuxCNC refuses** and so do we: "Length of cutter compensation entry move is not
+//!   greater than the tool radius", "The move just after exiting cutter compensation mode must
+//!   be straight, not an arc", "Straight feed in concave corner cannot be reached by the tool
+//!   without gouging" and "Arc to straight motion makes a corner the compensated tool can't
+//!   fit in without gouging" (a move after the entry shorter than its corners take, an inside
+//!   corner the tool cannot reach: [`ErrorKind::CompensationGouge`]), "Tool radius not less
+//!   than arc radius with comp" ([`ErrorKind::CompensationArcTooSmall`]).
+//! - **Where we differ and say so**: G41/G42 with the same side and radius right after G40 with
+//!   no move between is unsupported (the elements carry only their comp state, so this stage
+//!   would continue the last run where LinuxCNC starts a new one). LinuxCNC refuses a first
+//!   move after G41/G42 with no motion in the plane (its entry length is 0); here it keeps
+//!   the programmed point and the first move in the plane is the entry.
 //!
 //! An arc may be the start-up move, as LinuxCNC makes it (`convert_arc_comp1`): from the
 //! current point to the programmed end moved one radius along the arc's radius there (inward
@@ -47,9 +85,7 @@
 //! that is equally far from both; the corner after it joins as after any arc. What LinuxCNC
 //! refuses is an error: an end point not farther than the radius from the start
 //! ([`ErrorKind::CompensationEntryArcTooShort`]), the tool inside an arc not larger than it,
-//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). An arc right after G40
-//! is an error as in LinuxCNC ([`ErrorKind::CompensationEndOnArc`]); after G40 and a move
-//! along the tool axis, which LinuxCNC takes as its exit move, it is unsupported. A move with no
+//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). A move with no
 //! motion in the plane (a Z plunge under G17) keeps the offset and is looked past: the corner
 //! joins the elements on either side of it, and join connectors come after it, right before the
 //! next element in the plane (as LinuxCNC queues them). A change of radius or side with no
@@ -436,8 +472,8 @@ where
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
         // LinuxCNC's `convert_straight_comp1` measures from the programmed start (its current
         // point; after G40 the tool may still be at the last offset point).
-        let length_mm = (plane_point(&e.end_mm, key.plane) - plane_point(&e.start_mm, key.plane))
-            .norm();
+        let length_mm =
+            (plane_point(&e.end_mm, key.plane) - plane_point(&e.start_mm, key.plane)).norm();
         if length_mm <= key.d.abs() {
             return Err(self.error(
                 &e,
