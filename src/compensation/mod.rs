@@ -62,7 +62,10 @@
 //!   (no corner join with what follows; queued moves along the tool axis stay there too), the
 //!   interpreter's point becomes the programmed one, and the next move, whatever it is (one
 //!   along the tool axis too), runs straight from the tool to its programmed end point. Here
-//!   that move is the first element with G40 in force, in the plane or not. The move right
+//!   that move is the first element with G40 in force, in the plane or not; the interpreter
+//!   keeps it even when its programmed length is 0 (G1 to the last programmed point, or a
+//!   G0/G1 with no axis words, which LinuxCNC also runs as a move to its current point). The
+//!   move right
 //!   after G40 may not be an arc (`arc_not_allowed`, set whenever a radius was in force, also
 //!   with no move between G41/G42 and G40; only a straight move clears it): the interpreter
 //!   refuses it with [`ErrorKind::CompensationEndOnArc`].

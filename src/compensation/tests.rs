@@ -1001,3 +1001,24 @@ mod random {
             .collect()
     }
 }
+
+#[test]
+fn the_exit_move_after_g40_may_be_to_the_programmed_point_itself() {
+    // LinuxCNC's G40 puts its point back on the programmed (10,0) while the tool stays at the
+    // offset end (10,2); a G1 to (10,0), or a G1 with no axis words, moves the tool there
+    // before the rise. Both were dropped as moves of no length before.
+    for exit in ["G40 G1 X10 Y0\n", "G40\nG1\n"] {
+        let m = motions(&run(&format!("{HEAD}{exit}G0 Z5\n")).unwrap());
+        assert_eq!(m.len(), 4, "{exit:?}: {m:#?}");
+        assert_line(&m[1], 5, v(0.0, 2.0, 0.0), v(10.0, 2.0, 0.0));
+        assert_eq!(
+            (m[2].start_mm, m[2].end_mm, m[2].comp),
+            (v(10.0, 2.0, 0.0), v(10.0, 0.0, 0.0), CompState::Off),
+            "{exit:?}"
+        );
+        assert_eq!(
+            (m[3].start_mm, m[3].end_mm),
+            (v(10.0, 0.0, 0.0), v(10.0, 0.0, 5.0))
+        );
+    }
+}

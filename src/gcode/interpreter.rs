@@ -1304,7 +1304,9 @@ impl State {
         feed_mm_s: Option<f64>,
         out: &mut VecDeque<Item>,
     ) {
-        if end_mm != self.pos_mm {
+        // The first straight move after G40 is kept even with no length: it is the exit move
+        // that takes the tool from its offset point back to the programmed point.
+        if end_mm != self.pos_mm || self.ended_comp.is_some() {
             out.push_back(Item::Motion(Element {
                 line,
                 col,
@@ -1420,8 +1422,15 @@ impl State {
             return Ok(());
         }
         match mode {
-            // G0/G1 alone only sets the mode.
-            Motion::Rapid | Motion::Linear if first_axis.is_none() => {}
+            // G0/G1 alone only sets the mode, but right after G40 it is a move to the current
+            // point, as in LinuxCNC: the exit move back to the programmed point.
+            Motion::Rapid | Motion::Linear if first_axis.is_none() => {
+                if self.ended_comp.is_some() && on_line.is_some() {
+                    let f = feed(self, 0.0)?;
+                    self.push_line(line, col, rapid, self.pos_mm, f, out);
+                    self.ended_comp = None;
+                }
+            }
             Motion::Rapid | Motion::Linear => {
                 let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
