@@ -120,8 +120,8 @@ fn square(code: &str, clockwise: bool) -> String {
 fn square_clockwise_with_g41_lies_2_mm_outside() {
     // Tool left of a clockwise path: outside. Each side on its offset line (x = −2, y = 22,
     // x = 22, y = −2); the right-angle corners (α = 90°) extended by the radius. Start-up:
-    // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2; the cancel
-    // (+Y then −X, inside) leaves from x = −2, y = 8.
+    // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2. G40, as
+    // in LinuxCNC: the last side ends at its offset end (−2,10), the exit runs from there.
     let path = comp_path(&square("G41", true), CompOptions::default());
     assert_polyline(
         &path,
@@ -132,7 +132,7 @@ fn square_clockwise_with_g41_lies_2_mm_outside() {
             (22.0, 22.0),
             (22.0, -2.0),
             (-2.0, -2.0),
-            (-2.0, 8.0),
+            (-2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -148,8 +148,8 @@ fn square_clockwise_with_g41_lies_2_mm_outside() {
 #[test]
 fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
     // Tool left of a counter-clockwise path: inside, on x = 2, y = 2, x = 18, y = 18, every
-    // corner shortened to the intersection. The start-up (+X then −Y) and the cancel (−Y
-    // then −X) are outside corners for the tool: extended by the radius.
+    // corner shortened to the intersection. The start-up (+X then −Y) is an outside corner
+    // for the tool: extended by the radius. The last side ends at its offset end (2,10).
     let path = comp_path(&square("G41", false), CompOptions::default());
     assert_polyline(
         &path,
@@ -160,7 +160,7 @@ fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
             (18.0, 2.0),
             (18.0, 18.0),
             (2.0, 18.0),
-            (2.0, 8.0),
+            (2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -179,7 +179,7 @@ fn square_with_g42_mirrors() {
             (18.0, 18.0),
             (18.0, 2.0),
             (2.0, 2.0),
-            (2.0, 12.0),
+            (2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -194,7 +194,7 @@ fn square_with_g42_mirrors() {
             (22.0, -2.0),
             (22.0, 22.0),
             (-2.0, 22.0),
-            (-2.0, 12.0),
+            (-2.0, 10.0),
             (-10.0, 10.0),
         ],
     );
@@ -291,7 +291,7 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
     // G41 on the clockwise D: outside. Edge on x = −2, arc radius 12. The corners turn right
     // by 90° (α = 90°): the edge extends 2 mm to (−2,22), a straight connector along the
     // arc's tangent reaches the arc's offset start (0,22); at the bottom the arc ends at
-    // (0,−2), a connector to (−2,−2), the edge from there.
+    // (0,−2), a connector to (−2,−2), the edge from there to its offset end (−2,5) (G40).
     let path = comp_path(&d_shape("G41"), CompOptions::default());
     assert_eq!(path.len(), 7, "{path:#?}");
     assert_polyline(
@@ -306,7 +306,7 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
     assert!(close(path[3].end_mm, Vector3::new(0.0, -2.0, 0.0)));
     assert_polyline(
         &path[4..],
-        &[(0.0, -2.0), (-2.0, -2.0), (-2.0, 3.0), (-10.0, 5.0)],
+        &[(0.0, -2.0), (-2.0, -2.0), (-2.0, 5.0), (-10.0, 5.0)],
     );
 
     // The same with corner arcs: radius 2 about (0,20) and (0,0).
@@ -330,8 +330,8 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
 #[test]
 fn line_arc_joins_inside_meet_on_the_offset_circle() {
     // G42 on the clockwise D: inside. Edge on x = 2, arc radius 8 about (0,10); they meet
-    // where x = 2 cuts that circle: y = 10 ± √60. Start-up and cancel corners are outside
-    // for the tool (extended by the radius).
+    // where x = 2 cuts that circle: y = 10 ± √60. The start-up corner is outside for the
+    // tool (extended by the radius); the last edge ends at its offset end (2,5) (G40).
     let path = comp_path(&d_shape("G42"), CompOptions::default());
     assert_eq!(path.len(), 5, "{path:#?}");
     let r60 = 60f64.sqrt();
@@ -341,7 +341,7 @@ fn line_arc_joins_inside_meet_on_the_offset_circle() {
     assert!((g.start_radius_mm - 8.0).abs() < 1e-12);
     // Clockwise from atan2(√60, 2) to −atan2(√60, 2).
     assert!((g.sweep_rad - 2.0 * r60.atan2(2.0)).abs() < 1e-12);
-    assert_polyline(&path[3..], &[(2.0, 10.0 - r60), (2.0, 7.0), (-10.0, 5.0)]);
+    assert_polyline(&path[3..], &[(2.0, 10.0 - r60), (2.0, 5.0), (-10.0, 5.0)]);
 }
 
 /// A lens: the arc of the circle about (−6,0) from (0,−8) to (0,8) and the arc of the circle
@@ -437,7 +437,8 @@ fn pocket_with_fillets_cam_style() {
     // plunged before the start-up, entered from below the bottom edge. All joins but the
     // start-up and cancel are tangent: sides on x = 2, 58 and y = 2, 28, fillets about their
     // own centres with radius 5 − 2 = 3. The start-up (+Y into +X: outside for the tool,
-    // α = 90°) ends at (28,2); the cancel (+X into −Y, outside) leaves from (32,2).
+    // α = 90°) ends at (28,2); after G40 the last line ends at its offset end (30,2), and
+    // the exit runs from there (LinuxCNC).
     let text = "G21 G17 G90 G94\nG0 Z5\nG0 X30 Y-10\nG1 Z-1 F300\nG41 D1\nG1 X30 Y0 F600\n\
                 X55\nG3 X60 Y5 I0 J5\nG1 Y25\nG3 X55 Y30 I-5 J0\nG1 X5\nG3 X0 Y25 I0 J-5\n\
                 G1 Y5\nG3 X5 Y0 I5 J0\nG1 X30\nG40 Y-10\nG0 Z5\nM2\n";
@@ -450,8 +451,8 @@ fn pocket_with_fillets_cam_style() {
         (9, p(58.0, 5.0), p(58.0, 25.0)),
         (11, p(55.0, 28.0), p(5.0, 28.0)),
         (13, p(2.0, 25.0), p(2.0, 5.0)),
-        (15, p(5.0, 2.0), p(32.0, 2.0)),
-        (16, p(32.0, 2.0), p(30.0, -10.0)),
+        (15, p(5.0, 2.0), p(30.0, 2.0)),
+        (16, p(30.0, 2.0), p(30.0, -10.0)),
     ];
     let want_arcs = [
         (8, p(55.0, 5.0), p(55.0, 2.0), p(58.0, 5.0)),
@@ -993,4 +994,171 @@ proptest! {
             prop_assert!((g.start_radius_mm - g.end_radius_mm).abs() < tol);
         }
     }
+}
+
+/// Like [`check_path`], in three dimensions: (line, end, arc centre and clockwise flag).
+type Want3 = (u64, [f64; 3], Option<([f64; 3], bool)>);
+
+#[track_caller]
+fn check_path_xyz(path: &[Record], want: &[Want3]) {
+    let near = |a: [f64; 3], b: [f64; 3]| (0..3).all(|i| (a[i] - b[i]).abs() <= 0.001);
+    assert_eq!(path.len(), want.len(), "{path:#?}");
+    let mut at = [0.0; 3];
+    for (i, (got, want)) in path.iter().zip(want).enumerate() {
+        let (line, _, start, end, arc) = *got;
+        assert_eq!(start, at, "element {i} starts where the last ended");
+        at = end;
+        let (want_line, want_end, want_arc) = *want;
+        let arc_ok = match (arc, want_arc) {
+            (None, None) => true,
+            (Some((c, cw)), Some((wc, wcw))) => near(c, wc) && cw == wcw,
+            _ => false,
+        };
+        assert!(
+            line == want_line && near(end, want_end) && arc_ok,
+            "element {i}: got line {line} to {end:?} arc {arc:?}, want line {want_line} to \
+             {want_end:?} arc {want_arc:?}"
+        );
+    }
+}
+
+/// A straight entry into an acute inside corner (G41, radius 2), as LinuxCNC computes it, and
+/// a G40 exit move not in line with the last move.
+///
+/// Entry, line 5 (`convert_straight_comp1`): from the current point C = (7,0) to the
+/// programmed end P1 = (10,0), 3 mm > r; α = atan2(P1 − C) + π/2 = π/2, so the tool is sent
+/// to P1 + r (cos α, sin α) = (10,2).
+///
+/// Line 6 (`convert_straight_comp2`), from (10,0) to (0,10): θ = atan2((10,2) − (10,0)) =
+/// π/2, α = atan2(10, −10) = 3π/4; for LEFT θ < α so θ = 5π/2, β = θ − α − π/2 = 5π/4 >
+/// π + 0.01: concave. Line to line: the half corner (β + π)/2 = 9π/8, the retreat
+/// r / tan(9π/8) = 2 / tan(π/8) = 4.828427 along θ + π/2 = 3π (−X) from (10,2): the entry's
+/// end is moved to (5.171573, 2) (`move_endpoint_and_flush`; its direction check compares
+/// with the entry's normal, so running back past C is not a gouge there). The line ends at
+/// (0,10) + r (cos 5π/4, sin 5π/4) = (−1.414214, 8.585786).
+///
+/// Line 7, G40 (`convert_cutter_compensation_off`): the last move keeps its end, the
+/// interpreter's point becomes the programmed (0,10), and the G1 runs straight from the tool
+/// at (−1.414214, 8.585786) to (0,20). No outside corner: the same with either corner mode.
+/// The old code refused the entry as a gouge and joined the exit at the corner.
+#[test]
+fn a_straight_entry_into_an_acute_inside_corner_as_in_linuxcnc() {
+    let retreat = 2.0 / (std::f64::consts::PI / 8.0).tan();
+    let h = std::f64::consts::SQRT_2;
+    let want: [Want; 4] = [
+        (3, [7.0, 0.0], None),
+        (5, [10.0 - retreat, 2.0], None),
+        (6, [-h, 10.0 - h], None),
+        (7, [0.0, 20.0], None),
+    ];
+    check_path(&plan_path("comp_entry_acute.ngc", None), &want);
+    let dir = tempfile::tempdir().unwrap();
+    let machine = arc_corner_machine(dir.path());
+    check_path(&plan_path("comp_entry_acute.ngc", Some(&machine)), &want);
+}
+
+/// A straight entry onto an outside corner of 135° (G41, radius 2), and a G40 exit move not
+/// in line.
+///
+/// Entry, line 5 (`convert_straight_comp1`): C = (10,20), P1 = (20,20), α = 0 + π/2: the
+/// tool goes to (20,22).
+///
+/// Line 6 (`convert_straight_comp2`), from (20,20) to (30,10): θ = π/2, α = −π/4, β = θ − α −
+/// π/2 = π/4 > 0.01 and below π − 0.01: convex, an arc is needed. The entry keeps its end
+/// (20,22); `ARC_FEED` clockwise (turn −1 for LEFT) about the programmed corner (20,20) to
+/// (20,20) + r (cos π/4, sin π/4) = (21.414214, 21.414214); then the line to (30,10) + the
+/// same = (31.414214, 11.414214).
+///
+/// Line 7, G40: the last move keeps its end; the G1 runs to (40,10). The old code joined the
+/// exit to the last move as an inside corner (ending the last move short of its end).
+///
+/// With the default `outside_corners = "lines"` the corner is the C-type extension instead
+/// (not LinuxCNC's, a documented choice): both offsets run on to their intersection, y = 22
+/// with the line through (21.414214, 21.414214) along (1,−1): x = 20 + 2√2 − 2 = 20.828427.
+#[test]
+fn a_straight_entry_onto_an_outside_corner_as_in_linuxcnc() {
+    let h = std::f64::consts::SQRT_2;
+    let dir = tempfile::tempdir().unwrap();
+    let machine = arc_corner_machine(dir.path());
+    check_path(
+        &plan_path("comp_entry_obtuse.ngc", Some(&machine)),
+        &[
+            (3, [10.0, 20.0], None),
+            (5, [20.0, 22.0], None),
+            (6, [20.0 + h, 20.0 + h], Some(([20.0, 20.0], true))),
+            (6, [30.0 + h, 10.0 + h], None),
+            (7, [40.0, 10.0], None),
+        ],
+    );
+    check_path(
+        &plan_path("comp_entry_obtuse.ngc", None),
+        &[
+            (3, [10.0, 20.0], None),
+            (5, [18.0 + 2.0 * h, 22.0], None),
+            (6, [30.0 + h, 10.0 + h], None),
+            (7, [40.0, 10.0], None),
+        ],
+    );
+}
+
+/// G40 and then a move along the tool axis: that move is the exit, as in LinuxCNC (its G40
+/// ends the last move at its offset end (30,2) and puts the interpreter's point back on the
+/// programmed (30,0); the next move, whatever it is, runs from the tool to its programmed end).
+/// So the G0 Z5 of line 8 runs from (30,2,0) to (30,0,5); the rest is uncompensated, and the
+/// arc of line 11 is allowed (the straight moves before it cleared LinuxCNC's
+/// `arc_not_allowed`): clockwise about (45,5,0). The old code kept the axial move at the offset
+/// point and refused the arc as unsupported.
+#[test]
+fn after_g40_a_move_along_the_tool_axis_is_the_exit_move() {
+    check_path_xyz(
+        &plan_path("comp_cancel_axial.ngc", None),
+        &[
+            (3, [10.0, 0.0, 0.0], None),
+            (5, [20.0, 2.0, 0.0], None),
+            (6, [30.0, 2.0, 0.0], None),
+            (8, [30.0, 0.0, 5.0], None),
+            (9, [40.0, 5.0, 5.0], None),
+            (10, [40.0, 5.0, 0.0], None),
+            (11, [50.0, 5.0, 0.0], Some(([45.0, 5.0, 0.0], true))),
+        ],
+    );
+}
+
+/// The compensated items of `tests/programs/<program>`, or the first error.
+fn compensate_file(program: &str) -> Result<Vec<Item>, Error> {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/programs")
+            .join(program),
+    )
+    .unwrap();
+    let interp = Interpreter::new(text.as_bytes(), program, setup());
+    Compensator::new(interp, program, CompOptions::default()).collect()
+}
+
+/// What LinuxCNC refuses around straight entries and G40:
+/// - G41, G40 with no move between, then an arc: its G40 sets `arc_not_allowed` whenever a
+///   radius is in force ("The move just after exiting cutter compensation mode must be
+///   straight, not an arc"); the old code ran the arc uncompensated;
+/// - a straight entry not longer than the tool radius (`convert_straight_comp1`: "Length of
+///   cutter compensation entry move is not greater than the tool radius"): 1.5 mm with radius
+///   2; the old code accepted it.
+#[test]
+fn linuxcnc_refuses_an_arc_after_g40_and_a_short_straight_entry() {
+    let e = compensate_file("comp_g40_arc.ngc").unwrap_err();
+    assert_eq!((e.line, e.col), (6, 1), "{e}");
+    assert!(
+        matches!(e.kind, ErrorKind::CompensationEndOnArc { code: "G2" }),
+        "{e}"
+    );
+    let e = compensate_file("comp_entry_short.ngc").unwrap_err();
+    assert_eq!((e.line, e.col), (5, 1), "{e}");
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationEntryTooShort { code: "G1", length_mm, tool_radius_mm }
+                if length_mm == 1.5 && tool_radius_mm == 2.0
+        ),
+        "{e}"
+    );
 }

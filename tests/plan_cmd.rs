@@ -319,13 +319,13 @@ fn g41_on_a_clockwise_square_runs_two_millimetres_outside_with_extended_corners(
     assert!(near(left.1, [18.0, 42.0, 0.0]) && near(top.0, left.1));
     assert!(near(top.1, [42.0, 42.0, 0.0]) && near(right.0, top.1));
     assert!(near(right.1, [42.0, 18.0, 0.0]) && near(bottom.0, right.1));
-    // Start-up (45° inside corner with the left side: shortened) and cancel (the same with the
-    // bottom side): the diagonal's offset meets the side's offset at 18 + 2√2 …
-    // (the diagonal's offset is y = x + 2√2).
+    // Start-up (45° inside corner with the left side: shortened): the diagonal's offset
+    // (y = x + 2√2) meets the side's offset at 18 + 2√2. G40 as in LinuxCNC: the bottom side
+    // ends at its offset end (20, 18), with no corner join to the exit move.
     let meet = 18.0 + 2.0 * std::f64::consts::SQRT_2;
     assert!((left.0[1] - meet).abs() < 1e-9, "{left:?}");
-    assert!((bottom.1[0] - meet).abs() < 1e-9, "{bottom:?}");
-    // … and nothing else: start-up, four sides, cancel back at the programmed (10, 10).
+    assert!(near(bottom.1, [20.0, 18.0, 0.0]), "{bottom:?}");
+    // … and nothing else: start-up, four sides, the exit back at the programmed (10, 10).
     assert_eq!(path.len(), 1 + 1 + 4 + 1, "{path:?}");
     assert!(near(path.last().unwrap().3, [10.0, 10.0, 0.0]));
 }

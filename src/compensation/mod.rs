@@ -31,15 +31,56 @@
 //! breaks: α = 90° is extended (the two constructions coincide there); an exact reversal
 //! (α = 0° or 360°) goes round the tip (α = 0°), since the other reading has no intersection.
 //!
-//! # Start-up and cancel
+//! # Start-up and cancel, as LinuxCNC computes them
 //!
-//! The start-up move is the first move in the plane with G41/G42 in force; the cancel move is
-//! the first move in the plane with G40 in force after it. A straight start-up move runs from
-//! the current, uncompensated point to the point where its *offset line* (parallel to it, one
-//! radius over) joins the next element's offset by the corner rules above (so for a
-//! right-angle approach to an inside corner it ends one radius short, for an outside one one
-//! radius long, as in the source's figure 3-41); the cancel move mirrors it and ends at the
-//! programmed point.
+//! Read from LinuxCNC's `interp_convert.cc` and `interp_queue.cc` (`convert_straight_comp1`,
+//! `convert_straight_comp2`, `convert_cutter_compensation_off`, `move_endpoint_and_flush`);
+//! `tests/compensation.rs` checks each case against points computed by hand from them.
+//!
+//! - **Straight entry** (`convert_straight_comp1`): from the current point C to the programmed
+//!   end P, the tool goes to P + r·n, n the unit normal of C→P on the tool's side (left for
+//!   G41): the point offset perpendicular to the move's own direction, with no look-ahead.
+//!   C→P not longer than r is refused ("Length of cutter compensation entry move is not
+//!   greater than the tool radius": [`ErrorKind::CompensationEntryTooShort`]). C is the
+//!   interpreter's point, the programmed one: after G40 and G41/G42 with no move between the
+//!   tool still stands at the last offset point, and the move runs from there with the
+//!   direction taken from the programmed point (so here: `e.start_mm` for the direction,
+//!   the current output point for the start).
+//! - **The corner after it** is an ordinary corner (`convert_straight_comp2` and
+//!   `convert_arc_comp2` take the last move's direction from the programmed corner to the
+//!   tool, which after an entry is square to C→P). Convex (β > 0.01 rad): the entry keeps
+//!   its end P + r·n, then an `ARC_FEED` of radius r about the programmed corner (a straight
+//!   traverse for G0) to the next element's offset start. Concave line to line: the entry's
+//!   end moves back along C→P by r·tan(δ/2) (δ the turn), onto the intersection of the two
+//!   offset lines. This is the join of this module with [`OutsideCorners::Arc`]; with
+//!   [`OutsideCorners::Lines`] convex corners are extended or inserted instead (the
+//!   source's C-type, not LinuxCNC's). LinuxCNC's reversal check on the moved end compares it
+//!   with the entry's stored direction, which is the normal n, and always passes: an entry
+//!   shorter than the corner's retreat runs back past its start, and is no gouge (here
+//!   neither).
+//! - **G40** (`convert_cutter_compensation_off`): the last move keeps its plain offset end
+//!   (no corner join with what follows; queued moves along the tool axis stay there too), the
+//!   interpreter's point becomes the programmed one, and the next move, whatever it is (one
+//!   along the tool axis too), runs straight from the tool to its programmed end point. Here
+//!   that move is the first element with G40 in force, in the plane or not; the interpreter
+//!   keeps it even when its programmed length is 0 (G1 to the last programmed point, or a
+//!   G0/G1 with no axis words, which LinuxCNC also runs as a move to its current point). The
+//!   move right
+//!   after G40 may not be an arc (`arc_not_allowed`, set whenever a radius was in force, also
+//!   with no move between G41/G42 and G40; only a straight move clears it): the interpreter
+//!   refuses it with [`ErrorKind::CompensationEndOnArc`].
+//! - **What LinuxCNC refuses** and so do we: "Length of cutter compensation entry move is not
+//!   greater than the tool radius", "The move just after exiting cutter compensation mode must
+//!   be straight, not an arc", "Straight feed in concave corner cannot be reached by the tool
+//!   without gouging" and "Arc to straight motion makes a corner the compensated tool can't
+//!   fit in without gouging" (a move after the entry shorter than its corners take, an inside
+//!   corner the tool cannot reach: [`ErrorKind::CompensationGouge`]), "Tool radius not less
+//!   than arc radius with comp" ([`ErrorKind::CompensationArcTooSmall`]).
+//! - **Where we differ and say so**: G41/G42 with the same side and radius right after G40 with
+//!   no move between is unsupported (the elements carry only their comp state, so this stage
+//!   would continue the last run where LinuxCNC starts a new one). LinuxCNC refuses a first
+//!   move after G41/G42 with no motion in the plane (its entry length is 0); here it keeps
+//!   the programmed point and the first move in the plane is the entry.
 //!
 //! An arc may be the start-up move, as LinuxCNC makes it (`convert_arc_comp1`): from the
 //! current point to the programmed end moved one radius along the arc's radius there (inward
@@ -47,9 +88,7 @@
 //! that is equally far from both; the corner after it joins as after any arc. What LinuxCNC
 //! refuses is an error: an end point not farther than the radius from the start
 //! ([`ErrorKind::CompensationEntryArcTooShort`]), the tool inside an arc not larger than it,
-//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). An arc right after G40
-//! is an error as in LinuxCNC ([`ErrorKind::CompensationEndOnArc`]); after G40 and a move
-//! along the tool axis, which LinuxCNC takes as its exit move, it is unsupported. A move with no
+//! and no such centre ([`ErrorKind::CompensationEntryArcNoCentre`]). A move with no
 //! motion in the plane (a Z plunge under G17) keeps the offset and is looked past: the corner
 //! joins the elements on either side of it, and join connectors come after it, right before the
 //! next element in the plane (as LinuxCNC queues them). A change of radius or side with no
@@ -411,18 +450,20 @@ where
                 }
             };
         };
+        let Some(key) = self.key(&e)? else {
+            // After G40 the next move of any kind leaves the offset path (LinuxCNC).
+            return self.cancel(open, e);
+        };
         if !in_plane(&e, open.key.plane) {
             self.open = Some(open);
             return self.hold(Item::Motion(e));
         }
-        match self.key(&e)? {
-            Some(key) if key == open.key => self.corner(open, e),
-            None => self.cancel(open, e),
-            Some(key) => {
-                self.open = Some(open);
-                self.finish()?;
-                self.start_up(e, key)
-            }
+        if key == open.key {
+            self.corner(open, e)
+        } else {
+            self.open = Some(open);
+            self.finish()?;
+            self.start_up(e, key)
         }
     }
 
@@ -432,6 +473,20 @@ where
             return self.start_up_arc(e, key, if cw { "G2" } else { "G3" });
         }
         let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
+        // LinuxCNC's `convert_straight_comp1` measures from the programmed start (its current
+        // point; after G40 the tool may still be at the last offset point).
+        let length_mm =
+            (plane_point(&e.end_mm, key.plane) - plane_point(&e.start_mm, key.plane)).norm();
+        if length_mm <= key.d.abs() {
+            return Err(self.error(
+                &e,
+                ErrorKind::CompensationEntryTooShort {
+                    code: if e.rapid { "G0" } else { "G1" },
+                    length_mm,
+                    tool_radius_mm: key.d.abs(),
+                },
+            ));
+        }
         // Its offset line begins one radius over from the programmed start.
         let (start, end) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
         let check_from = start.point;
@@ -613,49 +668,22 @@ where
         Ok(())
     }
 
-    /// The cancel move: join the open element to its offset line, then run to the programmed
-    /// end point.
+    /// The cancel move, as LinuxCNC's G40 makes it (`convert_cutter_compensation_off`, then
+    /// `convert_straight` with compensation off): the open element ends at its plain offset end
+    /// point (no corner join), and the first move after G40, whatever it is (one along the
+    /// tool axis too), runs straight from there to its programmed end point. An arc there is
+    /// an error; the interpreter refuses it first, this is for other item streams.
     fn cancel(&mut self, open: Open, e: Element) -> Result<(), Error> {
         if let ElementKind::Arc { cw, .. } = e.kind {
-            let code = if cw { "G2" } else { "G3" };
-            let after_g40 = self
-                .held
-                .iter()
-                .any(|i| matches!(i, Item::Motion(m) if m.comp == CompState::Off));
             return Err(self.error(
                 &e,
-                if after_g40 {
-                    // LinuxCNC takes the move along the tool axis after G40 as its exit move
-                    // (back to the programmed point in the plane too), then the arc; here
-                    // the cancel move is the first move in the plane.
-                    ErrorKind::Unsupported {
-                        what: format!(
-                            "{code} as the first move in the plane after G40 and a move along the tool axis"
-                        ),
-                        reason: "program a straight move in the plane right after G40",
-                    }
-                } else {
-                    // LinuxCNC: "the move just after exiting cutter compensation mode must be
-                    // straight, not an arc".
-                    ErrorKind::CompensationEndOnArc { code }
+                ErrorKind::CompensationEndOnArc {
+                    code: if cw { "G2" } else { "G3" },
                 },
             ));
         }
-        let key = open.key;
-        let geo = Geo::of(&e, key.plane).map_err(|w| self.geometry_error(&e, w))?;
-        let (start, _) = geo.offset(key.d).map_err(|k| self.error(&e, k))?;
-        let join = self.join(&open, &start, &e)?;
-        self.emit_open(&open, join.end1)?;
-        self.release(key.plane)?;
-        self.connect(&e, key.plane, &join.conns)?;
-        let to = plane_point(&e.end_mm, key.plane);
-        if (to - join.start2).dot(&start.tangent) < -GOUGE_TOLERANCE_MM {
-            return Err(self.gouge(
-                &e,
-                key.d,
-                "the cancel move is shorter than the corner before it takes (it would run backwards)",
-            ));
-        }
+        self.emit_open(&open, open.end.point)?;
+        self.release(open.key.plane)?;
         self.push(Element {
             start_mm: self.pos(),
             ..e
@@ -692,15 +720,13 @@ where
         let end_mm = plane_to_3d(end, e.end_mm[n], open.key.plane);
         match open.geo {
             Geo::Line { t, .. } => {
-                if (end - open.check_from).dot(&t) < -GOUGE_TOLERANCE_MM {
+                // A straight start-up move is never a gouge: LinuxCNC checks the direction of
+                // its (moved) end against the normal of the move, which it always keeps.
+                if !open.startup && (end - open.check_from).dot(&t) < -GOUGE_TOLERANCE_MM {
                     return Err(self.gouge(
                         e,
                         open.key.d,
-                        if open.startup {
-                            "the start-up move is shorter than the corner after it takes (it would run backwards)"
-                        } else {
-                            "this element is shorter than its corners take (its tool-centre path would run backwards)"
-                        },
+                        "this element is shorter than its corners take (its tool-centre path would run backwards)",
                     ));
                 }
                 self.push(Element {

@@ -236,23 +236,24 @@ fn g42_mirrors_g41() {
 }
 
 #[test]
-fn start_up_and_cancel_follow_the_corner_rules() {
+fn start_up_follows_the_corner_rules_and_g40_leaves_from_the_offset_end() {
     // Start-up along +X into +Y (inside, α = 270°): the start-up offset line y = 2 meets the
-    // offset x = −2 of the first element at (−2, 2). Cancel from +Y into −X (inside again):
-    // x = −2 meets y = 10 − 2 = 8 at (−2, 8), then to the programmed (−10, 10).
+    // offset x = −2 of the first element at (−2, 2). G40 as in LinuxCNC: no corner with the
+    // exit move; the last element ends at its offset end (−2, 10), the exit runs from there
+    // to the programmed (−10, 10).
     let text = "G0 X-10 Y0\nG41.1 D4\nG1 X0 Y0 F600\nY10\nG40 X-10\n";
     let m = motions(&run(text).unwrap());
     assert_eq!(m.len(), 3, "{m:#?}");
     assert_line(&m[0], 3, v(-10.0, 0.0, 0.0), v(-2.0, 2.0, 0.0));
-    assert_line(&m[1], 4, v(-2.0, 2.0, 0.0), v(-2.0, 8.0, 0.0));
-    assert_line(&m[2], 5, v(-2.0, 8.0, 0.0), v(-10.0, 10.0, 0.0));
-    // The same under G42: outside corners, extended by one radius.
+    assert_line(&m[1], 4, v(-2.0, 2.0, 0.0), v(-2.0, 10.0, 0.0));
+    assert_line(&m[2], 5, v(-2.0, 10.0, 0.0), v(-10.0, 10.0, 0.0));
+    // The same under G42: the start-up's corner is outside, extended by one radius.
     let text = "G0 X-10 Y0\nG42.1 D4\nG1 X0 Y0 F600\nY10\nG40 X-10\n";
     let m = motions(&run(text).unwrap());
     assert_eq!(m.len(), 3, "{m:#?}");
     assert_line(&m[0], 3, v(-10.0, 0.0, 0.0), v(2.0, -2.0, 0.0));
-    assert_line(&m[1], 4, v(2.0, -2.0, 0.0), v(2.0, 12.0, 0.0));
-    assert_line(&m[2], 5, v(2.0, 12.0, 0.0), v(-10.0, 10.0, 0.0));
+    assert_line(&m[1], 4, v(2.0, -2.0, 0.0), v(2.0, 10.0, 0.0));
+    assert_line(&m[2], 5, v(2.0, 10.0, 0.0), v(-10.0, 10.0, 0.0));
 }
 
 #[test]
@@ -471,11 +472,18 @@ fn errors_name_the_line() {
         e.to_string(),
         "t.ngc:6:5: G2 cannot end cutter compensation: the first move after G40 must be a straight G0 or G1 move"
     );
-    // After G40 and a move along the tool axis LinuxCNC accepts an arc (its exit move is the
-    // axial one, which also returns to the programmed point in the plane): unsupported here.
-    let e = err(&format!("{HEAD}G40\nG0 Z5\nG2 X20 Y0 I5 J0\n"));
-    assert_eq!((e.line, e.col), (8, 1));
-    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+    // After G40 and a move along the tool axis an arc is allowed, as in LinuxCNC: the axial
+    // move is the exit move (from the offset end (10,2) back to the programmed (10,0) while
+    // rising), and the arc runs uncompensated from there.
+    let m = motions(&run(&format!("{HEAD}G40\nG0 Z5\nG2 X20 Y0 I5 J0\n")).unwrap());
+    assert_eq!(m.len(), 4, "{m:#?}");
+    assert_line(&m[1], 5, v(0.0, 2.0, 0.0), v(10.0, 2.0, 0.0));
+    assert_line(&m[2], 7, v(10.0, 2.0, 0.0), v(10.0, 0.0, 5.0));
+    assert_eq!(
+        (m[3].line, m[3].start_mm, m[3].end_mm),
+        (8, v(10.0, 0.0, 5.0), v(20.0, 0.0, 5.0))
+    );
+    assert!(matches!(m[3].kind, ElementKind::Arc { cw: true, .. }));
     // Tool too big for an inside arc: R 2 counter-clockwise under G41 leaves radius 0.
     let e = err(&format!("{HEAD}G3 X14 Y0 I2 J0\n"));
     assert_eq!(e.line, 6);
@@ -495,10 +503,22 @@ fn errors_name_the_line() {
     let e = err(&format!("{HEAD}G3 X4 Y0 I-3 J0\n"));
     assert_eq!(e.line, 6);
     assert!(matches!(e.kind, ErrorKind::CompensationGouge { .. }), "{e}");
-    // A start-up move shorter than the inside corner after it takes.
+    // A straight start-up move not longer than the tool radius (LinuxCNC's
+    // `convert_straight_comp1` refuses it; one that is longer is never a gouge there).
     let e = err("G0 X-1 Y0\nG41.1 D4\nG1 X0 Y0 F600\nY10\n");
-    assert_eq!(e.line, 3);
-    assert!(matches!(e.kind, ErrorKind::CompensationGouge { .. }));
+    assert_eq!((e.line, e.col), (3, 1));
+    assert!(
+        matches!(
+            e.kind,
+            ErrorKind::CompensationEntryTooShort { code: "G1", length_mm, tool_radius_mm }
+                if length_mm == 1.0 && tool_radius_mm == 2.0
+        ),
+        "{e}"
+    );
+    assert_eq!(
+        e.to_string(),
+        "t.ngc:3:1: G1 cannot start cutter compensation: it is 1.0000 mm long in the plane, not more than the tool radius 2.0000 mm (start farther away)"
+    );
 }
 
 #[test]
@@ -585,10 +605,18 @@ fn entry_arcs_linuxcnc_refuses_are_errors_naming_the_line() {
         ),
         "{e}"
     );
-    // A new run started on an arc right after another run, with no move between: the tool is
-    // at the last run's offset point (10,2), not at the arc's start (10,0).
+    // A new run started on an arc right after G40, with no move between: LinuxCNC's G40
+    // forbids an arc as the next move whatever comes between.
     let e = err(&format!("{HEAD}G40\nG42.1 D4\nG2 X20 Y-10 I0 J-10\n"));
     assert_eq!((e.line, e.col), (8, 1));
+    assert!(
+        matches!(e.kind, ErrorKind::CompensationEndOnArc { code: "G2" }),
+        "{e}"
+    );
+    // The same side and radius again right after G40: here the compensation stage would
+    // continue the last run, where LinuxCNC starts a new one.
+    let e = err(&format!("{HEAD}G40\nG41.1 D4\nG1 X20 Y10\n"));
+    assert_eq!((e.line, e.col), (7, 1));
     assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
 }
 
@@ -971,5 +999,26 @@ mod random {
                 _ => None,
             })
             .collect()
+    }
+}
+
+#[test]
+fn the_exit_move_after_g40_may_be_to_the_programmed_point_itself() {
+    // LinuxCNC's G40 puts its point back on the programmed (10,0) while the tool stays at the
+    // offset end (10,2); a G1 to (10,0), or a G1 with no axis words, moves the tool there
+    // before the rise. Both were dropped as moves of no length before.
+    for exit in ["G40 G1 X10 Y0\n", "G40\nG1\n"] {
+        let m = motions(&run(&format!("{HEAD}{exit}G0 Z5\n")).unwrap());
+        assert_eq!(m.len(), 4, "{exit:?}: {m:#?}");
+        assert_line(&m[1], 5, v(0.0, 2.0, 0.0), v(10.0, 2.0, 0.0));
+        assert_eq!(
+            (m[2].start_mm, m[2].end_mm, m[2].comp),
+            (v(10.0, 2.0, 0.0), v(10.0, 0.0, 0.0), CompState::Off),
+            "{exit:?}"
+        );
+        assert_eq!(
+            (m[3].start_mm, m[3].end_mm),
+            (v(10.0, 0.0, 0.0), v(10.0, 0.0, 5.0))
+        );
     }
 }

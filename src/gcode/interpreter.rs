@@ -254,6 +254,10 @@ struct State {
     feed_mm_s: Option<f64>,
     blend: BlendMode,
     comp: CompState,
+    /// The compensation G40 ended (with a radius), while no straight move came since: the
+    /// next move may not be an arc (LinuxCNC's `arc_not_allowed`: that move returns the tool
+    /// from its offset point to the programmed point).
+    ended_comp: Option<CompState>,
     tool_offset_mm: Vector3<f64>,
     coord: usize,
     work_offsets_mm: [Vector3<f64>; 9],
@@ -353,6 +357,7 @@ impl State {
                 q_mm: 0.0,
             },
             comp: CompState::Off,
+            ended_comp: None,
             tool_offset_mm: Vector3::zeros(),
             coord: 0,
             work_offsets_mm: setup.work_offsets_mm,
@@ -1097,6 +1102,14 @@ impl State {
 
     fn cutter_comp(&mut self, b: &Block, code: Code, scale: f64) -> Result<(), BlockError> {
         if code.tenths == 400 {
+            // LinuxCNC's `convert_cutter_compensation_off`: with a radius in force, the next
+            // move (whatever it is) leaves the offset path, and must be straight.
+            if let CompState::Left { radius_mm, .. } | CompState::Right { radius_mm, .. } =
+                self.comp
+                && radius_mm != 0.0
+            {
+                self.ended_comp = Some(self.comp);
+            }
             self.comp = CompState::Off;
             return Ok(());
         }
@@ -1146,11 +1159,25 @@ impl State {
                 }
             }
         };
-        self.comp = if code.tenths / 10 == 41 {
+        let comp = if code.tenths / 10 == 41 {
             CompState::Left { tool, radius_mm }
         } else {
             CompState::Right { tool, radius_mm }
         };
+        if self.ended_comp == Some(comp) {
+            // The compensation stage sees the elements' comp states only, so it would take the
+            // next move as the continuation of the last run, where LinuxCNC starts a new one.
+            return Err(err_at(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!(
+                        "{code} right after G40 with the same side and radius and no move between"
+                    ),
+                    reason: "program a straight move between the G40 and the next G41/G42",
+                },
+            ));
+        }
+        self.comp = comp;
         Ok(())
     }
 
@@ -1416,7 +1443,9 @@ impl State {
         feed_mm_s: Option<f64>,
         out: &mut VecDeque<Item>,
     ) {
-        if end_mm != self.pos_mm {
+        // The first straight move after G40 is kept even with no length: it is the exit move
+        // that takes the tool from its offset point back to the programmed point.
+        if end_mm != self.pos_mm || self.ended_comp.is_some() {
             out.push_back(Item::Motion(Element {
                 line,
                 col,
@@ -1533,12 +1562,20 @@ impl State {
             self.check_position(col, &m)?;
             let f = feed(self, (m - self.pos_mm).norm())?;
             self.push_line(line, col, rapid, m, f, out);
+            self.ended_comp = None;
             self.resync();
             return Ok(());
         }
         match mode {
-            // G0/G1 alone only sets the mode.
-            Motion::Rapid | Motion::Linear if first_axis.is_none() => {}
+            // G0/G1 alone only sets the mode, but right after G40 it is a move to the current
+            // point, as in LinuxCNC: the exit move back to the programmed point.
+            Motion::Rapid | Motion::Linear if first_axis.is_none() => {
+                if self.ended_comp.is_some() && on_line.is_some() {
+                    let f = feed(self, 0.0)?;
+                    self.push_line(line, col, rapid, self.pos_mm, f, out);
+                    self.ended_comp = None;
+                }
+            }
             Motion::Rapid | Motion::Linear => {
                 let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
@@ -1546,6 +1583,7 @@ impl State {
                 let f = feed(self, (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
+                self.ended_comp = None;
             }
             Motion::Cubic | Motion::Quadratic => {
                 self.spline(b, line, col, mode == Motion::Cubic, inverse_f, out)?;
@@ -1554,6 +1592,14 @@ impl State {
                 self.canned_cycle(b, line, col, cycle, previous != Some(mode), out)?;
             }
             Motion::Cw | Motion::Ccw => {
+                if self.ended_comp.is_some() {
+                    return Err(err_at(
+                        col,
+                        ErrorKind::CompensationEndOnArc {
+                            code: if mode == Motion::Cw { "G2" } else { "G3" },
+                        },
+                    ));
+                }
                 let element = self.arc(b, line, col, mode == Motion::Cw)?;
                 let mut element = element;
                 element.feed_mm_s = feed(self, element.length_mm())?;

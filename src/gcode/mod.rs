@@ -851,6 +851,20 @@ pub enum ErrorKind {
         /// The tool radius.
         tool_radius_mm: f64,
     },
+    /// A straight start-up move of cutter compensation not longer in the plane than the tool
+    /// radius (LinuxCNC's `convert_straight_comp1` refuses it: "Length of cutter compensation
+    /// entry move is not greater than the tool radius").
+    #[error(
+        "{code} cannot start cutter compensation: it is {length_mm:.4} mm long in the plane, not more than the tool radius {tool_radius_mm:.4} mm (start farther away)"
+    )]
+    CompensationEntryTooShort {
+        /// G0 or G1.
+        code: &'static str,
+        /// Length in the compensation plane, from the programmed start to the programmed end.
+        length_mm: f64,
+        /// The tool radius.
+        tool_radius_mm: f64,
+    },
     /// An arc as the start-up move of cutter compensation for which no tool-centre arc runs
     /// from the current point to the offset end point with its centre on the end point's
     /// radius (LinuxCNC: "tool radius not less than arc radius with comp").
