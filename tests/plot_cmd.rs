@@ -88,12 +88,14 @@ fn an_svg_plot_is_valid_and_has_the_four_panels() {
         assert!(svg.contains(title), "no panel {title:?}");
     }
     assert!(svg.contains("time (s)"));
-    // Each axis is named in the legends.
+    // Each axis is named in the legends, once per mode.
     for axis in ["X", "Y", "Z"] {
-        assert!(
-            svg.contains(&format!("\n{axis}\n</text>")),
-            "no legend for {axis}"
-        );
+        for mode in ["trapezoid", "s-curve"] {
+            assert!(
+                svg.contains(&format!("\n{axis} {mode}\n</text>")),
+                "no legend for {axis} {mode}"
+            );
+        }
     }
 }
 
