@@ -194,6 +194,10 @@ fn the_plot_shows_the_program_in_both_modes() {
         assert_eq!(colours.len(), expected, "panel {panel}: {lines:?}");
         colours.sort();
         colours.dedup();
-        assert_eq!(colours.len(), expected, "panel {panel}: colours {colours:?}");
+        assert_eq!(
+            colours.len(),
+            expected,
+            "panel {panel}: colours {colours:?}"
+        );
     }
 }
