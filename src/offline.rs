@@ -299,7 +299,7 @@ pub fn plan_stream<R: BufRead>(
         }
     }
     if let Some(mut plot) = plot {
-        match other.map(|o| o.and_then(|o| o.finish().map_err(|(m, e)| (m, e.to_string())))) {
+        match other.map(|o| o.and_then(OtherMode::finish)) {
             Some(Ok((mode, program_s, trace))) => plot.add_run(mode, program_s, trace),
             Some(Err((mode, reason))) => plot.add_failed_run(mode, &reason),
             None => {}
@@ -644,9 +644,9 @@ impl OtherMode {
     }
 
     /// Ends the plan: its mode, program time and trace.
-    fn finish(mut self) -> Result<(ProfileKind, f64, Trace), (ProfileKind, OfflineError)> {
+    fn finish(mut self) -> Result<(ProfileKind, f64, Trace), OtherFailure> {
         let mode = self.mode;
-        let result = (|| {
+        let result: Result<_, OfflineError> = (|| {
             self.planner.finish().map_err(|e| self.plan_error(e))?;
             while let Some(seg) = self.planner.pop() {
                 self.setpoints.push(seg)?;
@@ -658,8 +658,8 @@ impl OtherMode {
         match result {
             Ok((program_s, Some(trace))) => Ok((mode, program_s, trace)),
             // Not reached: `new` gives the setpoints a trace.
-            Ok((_, None)) => Err((mode, OfflineError::Plot("no trace was kept".into()))),
-            Err(e) => Err((mode, e)),
+            Ok((_, None)) => Err((mode, "no trace was kept".into())),
+            Err(e) => Err((mode, e.to_string())),
         }
     }
 }

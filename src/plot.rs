@@ -119,7 +119,7 @@ pub struct Trace {
 enum Outcome {
     Planned {
         program_s: f64,
-        trace: Trace,
+        trace: Box<Trace>,
     },
     /// The plan failed (a typed error, shown by its message); nothing of it is drawn.
     Failed {
@@ -293,7 +293,10 @@ impl PlotRecorder {
         }
         self.runs.push(Run {
             mode,
-            outcome: Outcome::Planned { program_s, trace },
+            outcome: Outcome::Planned {
+                program_s,
+                trace: Box::new(trace),
+            },
         });
     }
 
@@ -387,7 +390,7 @@ impl PlotRecorder {
         let runs = self.ordered_runs();
         let traces = || {
             runs.iter().filter_map(|r| match &r.outcome {
-                Outcome::Planned { trace, .. } => Some(trace),
+                Outcome::Planned { trace, .. } => Some(&**trace),
                 Outcome::Failed { .. } => None,
             })
         };
