@@ -1,8 +1,11 @@
 //! `canmotion plan --plot FILE.svg|FILE.png`: the path feed and each axis's velocity,
 //! acceleration and jerk against time, by finite differences of the interpolated setpoints (the
 //! stream `--setpoints` writes), in four stacked panels with the axis limits as dashed lines.
+//! The program is drawn in both modes: the machine's own [`ProfileKind`] and [`other_mode`]
+//! (trapezoid against jerk-limited), each run a [`Trace`], two series per quantity, the legend
+//! naming each mode with its program time (or why it could not be planned).
 //!
-//! Memory is bounded whatever the program's length: the samples go into at most [`COLUMNS`]
+//! Memory is bounded whatever the program's length: each run's samples go into at most [`COLUMNS`]
 //! time buckets, each keeping the smallest and largest value of every series; when the buckets
 //! are full, neighbours merge and each bucket covers twice the time. Every extreme survives the
 //! merge, so a one-cycle spike is still drawn.
