@@ -19,8 +19,8 @@ use crate::gateway::{GatewayError, check_element, limits};
 use crate::gcode::{Element, ElementKind, Interpreter, Item};
 use crate::interpolator::filter::AxisFilter;
 use crate::interpolator::{Interpolator, Status};
-use crate::planner::{Planner, Segment, SegmentPath};
-use crate::plot::PlotRecorder;
+use crate::planner::{Limits, Planner, PlannerConfig, ProfileKind, Segment, SegmentPath};
+use crate::plot::{PlotRecorder, Trace};
 
 /// What to write besides the summary.
 #[derive(Debug, Clone, Default)]
@@ -29,7 +29,9 @@ pub struct PlanOptions {
     pub path_out: Option<PathBuf>,
     /// The interpolated setpoints, one CSV row per cycle.
     pub setpoints_out: Option<PathBuf>,
-    /// A plot of the setpoints' feed, velocity, acceleration and jerk (`.svg` or `.png`).
+    /// A plot of the setpoints' feed, velocity, acceleration and jerk (`.svg` or `.png`), of
+    /// the program planned in the machine's mode and in the other one (trapezoid or
+    /// jerk-limited, see [`crate::plot::other_mode`]).
     pub plot_out: Option<PathBuf>,
     /// Feed override applied at planning time, as a fraction (`None`: 100 %): every
     /// programmed feed is scaled by it and capped by the machine's limits as usual; rapids
@@ -195,7 +197,7 @@ pub fn plan_stream<R: BufRead>(
             }
         })?;
     let mut path_out = opts.path_out.as_deref().map(Out::create).transpose()?;
-    let plot = opts
+    let mut plot = opts
         .plot_out
         .as_deref()
         .map(|file| -> Result<PlotRecorder, OfflineError> {
@@ -208,7 +210,7 @@ pub fn plan_stream<R: BufRead>(
         Some(Setpoints::new(
             machine,
             opts.setpoints_out.as_deref(),
-            plot,
+            plot.as_ref().map(|_| Trace::new(machine)),
             start_mm,
             name,
             planner.smoothing(),
@@ -216,6 +218,12 @@ pub fn plan_stream<R: BufRead>(
     } else {
         None
     };
+    // The same program in the other mode, for the plot only: planned from the same items, side
+    // by side, so a program read once (stdin) is planned twice too. Its failure is shown in the
+    // plot, never the command's.
+    let mut other = plot
+        .as_ref()
+        .map(|_| OtherMode::new(machine, &plan_limits, start_mm, name));
     let mut summary = PlanSummary {
         feed_override: opts.feed_override,
         elements: 0,
@@ -264,6 +272,11 @@ pub fn plan_stream<R: BufRead>(
                 sp.push(seg)?;
             }
         }
+        if let Some(Ok(o)) = other.as_mut()
+            && let Err(e) = o.push(&item)
+        {
+            other = Some(Err((o.mode, e.to_string())));
+        }
     }
     planner.finish().map_err(|source| GatewayError::Plan {
         file: name.to_string(),
@@ -277,10 +290,23 @@ pub fn plan_stream<R: BufRead>(
     }
     summary.program_s = planner.time_s();
     if let Some(sp) = setpoints {
-        let cycles = sp.finish()?;
+        let (cycles, trace) = sp.finish()?;
         if opts.setpoints_out.is_some() {
             summary.cycles = Some(cycles);
         }
+        if let (Some(plot), Some(trace)) = (plot.as_mut(), trace) {
+            plot.add_run(machine.planner.profile, summary.program_s, trace);
+        }
+    }
+    if let Some(mut plot) = plot {
+        match other.map(|o| o.and_then(OtherMode::finish)) {
+            Some(Ok((mode, program_s, trace))) => plot.add_run(mode, program_s, trace),
+            Some(Err((mode, reason))) => plot.add_failed_run(mode, &reason),
+            None => {}
+        }
+        let file = plot.file().to_path_buf();
+        let bytes = plot.render().map_err(OfflineError::Plot)?;
+        crate::files::write_output(&file, &bytes)?;
     }
     if let Some(out) = path_out {
         out.finish()?;
@@ -411,7 +437,7 @@ impl PlanSummary {
 /// into the CSV file and the plot, whichever were asked for.
 struct Setpoints {
     out: Option<Out>,
-    plot: Option<PlotRecorder>,
+    plot: Option<Trace>,
     /// The row being written, one position per machine axis.
     row_mm: Vec<f64>,
     interp: Interpolator,
@@ -428,7 +454,7 @@ impl Setpoints {
     fn new(
         machine: &Machine,
         file: Option<&Path>,
-        plot: Option<PlotRecorder>,
+        plot: Option<Trace>,
         start_mm: Vector3<f64>,
         name: &str,
         smoothing: Option<crate::planner::Smoothing>,
@@ -535,7 +561,8 @@ impl Setpoints {
         Ok(out.write_all(s.as_bytes())?)
     }
 
-    fn finish(mut self) -> Result<u64, OfflineError> {
+    /// Ends the stream: the cycles written, and the plot's trace if there is one.
+    fn finish(mut self) -> Result<(u64, Option<Trace>), OfflineError> {
         self.interp.close();
         self.drain()?;
         // The end waits for the filters, as in `run`: their output reaches the end exactly.
@@ -546,11 +573,93 @@ impl Setpoints {
         if let Some(out) = self.out {
             out.finish()?;
         }
-        if let Some(plot) = self.plot {
-            let file = plot.file().to_path_buf();
-            let bytes = plot.render().map_err(OfflineError::Plot)?;
-            crate::files::write_output(&file, &bytes)?;
+        Ok((cycles, self.plot))
+    }
+}
+
+/// The program planned and sampled a second time in the other mode, for the plot: the same
+/// machine and limits, only [`PlannerConfig::profile`] differs.
+struct OtherMode {
+    mode: ProfileKind,
+    planner: Planner,
+    setpoints: Setpoints,
+    name: String,
+}
+
+/// What [`OtherMode`] keeps of a failure: its mode, and the message.
+type OtherFailure = (ProfileKind, String);
+
+impl OtherMode {
+    fn new(
+        machine: &Machine,
+        plan_limits: &Limits,
+        start_mm: Vector3<f64>,
+        name: &str,
+    ) -> Result<OtherMode, OtherFailure> {
+        let mode = crate::plot::other_mode(machine.planner.profile);
+        let config = PlannerConfig {
+            profile: mode,
+            ..machine.planner
+        };
+        let fail = |e: OfflineError| (mode, e.to_string());
+        let planner = Planner::with_config(start_mm, plan_limits, &config)
+            .map_err(|source| {
+                OfflineError::from(GatewayError::Plan {
+                    file: name.to_string(),
+                    source,
+                })
+            })
+            .map_err(fail)?;
+        let setpoints = Setpoints::new(
+            machine,
+            None,
+            Some(Trace::new(machine)),
+            start_mm,
+            name,
+            planner.smoothing(),
+        )
+        .map_err(fail)?;
+        Ok(OtherMode {
+            mode,
+            planner,
+            setpoints,
+            name: name.to_string(),
+        })
+    }
+
+    fn plan_error(&self, source: crate::planner::PlanError) -> OfflineError {
+        GatewayError::Plan {
+            file: self.name.clone(),
+            source,
         }
-        Ok(cycles)
+        .into()
+    }
+
+    fn push(&mut self, item: &Item) -> Result<(), OfflineError> {
+        self.planner.push(item).map_err(|e| self.plan_error(e))?;
+        while let Some(seg) = self.planner.pop() {
+            self.setpoints.push(seg)?;
+        }
+        Ok(())
+    }
+
+    /// Ends the plan: its mode, program time and trace.
+    fn finish(mut self) -> Result<(ProfileKind, f64, Trace), OtherFailure> {
+        let mode = self.mode;
+        let result: Result<_, OfflineError> = (|| {
+            self.planner.finish().map_err(|e| self.plan_error(e))?;
+            while let Some(seg) = self.planner.pop() {
+                self.setpoints.push(seg)?;
+            }
+            let program_s = self.planner.time_s();
+            let (_, trace) = self.setpoints.finish()?;
+            Ok((program_s, trace))
+        })();
+        match result {
+            Ok((program_s, Some(trace))) => Ok((mode, program_s, trace)),
+            // Not reached: `new` gives the setpoints a trace.
+            Ok((_, None)) => Err((mode, "no trace was kept".into())),
+            Err(e) => Err((mode, e.to_string())),
+        }
     }
 }

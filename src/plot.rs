@@ -1,8 +1,11 @@
 //! `canmotion plan --plot FILE.svg|FILE.png`: the path feed and each axis's velocity,
 //! acceleration and jerk against time, by finite differences of the interpolated setpoints (the
 //! stream `--setpoints` writes), in four stacked panels with the axis limits as dashed lines.
+//! The program is drawn in both modes: the machine's own [`ProfileKind`] and [`other_mode`]
+//! (trapezoid against jerk-limited), each run a [`Trace`], two series per quantity, the legend
+//! naming each mode with its program time (or why it could not be planned).
 //!
-//! Memory is bounded whatever the program's length: the samples go into at most [`COLUMNS`]
+//! Memory is bounded whatever the program's length: each run's samples go into at most [`COLUMNS`]
 //! time buckets, each keeping the smallest and largest value of every series; when the buckets
 //! are full, neighbours merge and each bucket covers twice the time. Every extreme survives the
 //! merge, so a one-cycle spike is still drawn.
@@ -18,6 +21,7 @@ use std::path::{Path, PathBuf};
 use plotters::prelude::*;
 
 use crate::config::Machine;
+use crate::planner::ProfileKind;
 
 /// Time buckets kept (about one per pixel column of the plot).
 pub const COLUMNS: usize = 1200;
@@ -92,20 +96,14 @@ impl Bucket {
     }
 }
 
-/// Collects the setpoint stream, cycle by cycle, and draws it at the end.
+/// One run's setpoint stream, cycle by cycle, decimated into at most [`COLUMNS`] buckets.
 ///
 /// Series: 0 the path feed, then per machine axis `k`: `1 + 3k` velocity, `2 + 3k`
 /// acceleration, `3 + 3k` jerk.
 #[derive(Debug)]
-pub struct PlotRecorder {
-    file: PathBuf,
-    format: PlotFormat,
+pub struct Trace {
     period_s: f64,
-    names: Vec<String>,
     xyz: Vec<Option<usize>>,
-    max_vel_mm_s: Vec<f64>,
-    max_acc_mm_s2: Vec<f64>,
-    max_jerk_mm_s3: Vec<f64>,
     prev_mm: Option<Vec<f64>>,
     prev_vel_mm_s: Option<Vec<f64>>,
     prev_acc_mm_s2: Option<Vec<f64>>,
@@ -119,21 +117,74 @@ pub struct PlotRecorder {
     acc: Vec<f64>,
 }
 
-impl PlotRecorder {
-    /// A recorder for `machine`'s axes that will draw into `file` (its extension picks the
-    /// format).
-    pub fn new(machine: &Machine, file: &Path) -> Result<PlotRecorder, String> {
-        let format = PlotFormat::of(file)?;
+/// What became of one mode's plan.
+#[derive(Debug)]
+enum Outcome {
+    Planned {
+        program_s: f64,
+        trace: Box<Trace>,
+    },
+    /// The plan failed (a typed error, shown by its message); nothing of it is drawn.
+    Failed {
+        reason: String,
+    },
+}
+
+/// One mode's run, as the plot shows it.
+#[derive(Debug)]
+struct Run {
+    mode: ProfileKind,
+    outcome: Outcome,
+}
+
+/// The name of a planner mode in the legend.
+pub fn mode_label(mode: ProfileKind) -> &'static str {
+    match mode {
+        ProfileKind::Trapezoid => "trapezoid",
+        ProfileKind::SCurve => "s-curve (jerk-limited)",
+        ProfileKind::Smooth => "smooth (jerk-limited)",
+    }
+}
+
+/// The short name of a mode, after an axis's name in the legend.
+fn mode_short(mode: ProfileKind) -> &'static str {
+    match mode {
+        ProfileKind::Trapezoid => "trapezoid",
+        ProfileKind::SCurve => "s-curve",
+        ProfileKind::Smooth => "smooth",
+    }
+}
+
+/// The mode the plot compares a machine's own mode with: the jerk-limited S-curve for a
+/// trapezoid machine, the trapezoid for a jerk-limited one.
+pub fn other_mode(mode: ProfileKind) -> ProfileKind {
+    match mode {
+        ProfileKind::Trapezoid => ProfileKind::SCurve,
+        ProfileKind::SCurve | ProfileKind::Smooth => ProfileKind::Trapezoid,
+    }
+}
+
+/// Collects the runs of one program (each mode's [`Trace`]) and draws them together at the end.
+#[derive(Debug)]
+pub struct PlotRecorder {
+    file: PathBuf,
+    format: PlotFormat,
+    period_s: f64,
+    names: Vec<String>,
+    xyz: Vec<Option<usize>>,
+    max_vel_mm_s: Vec<f64>,
+    max_acc_mm_s2: Vec<f64>,
+    max_jerk_mm_s3: Vec<f64>,
+    runs: Vec<Run>,
+}
+
+impl Trace {
+    /// An empty trace of `machine`'s axes.
+    pub fn new(machine: &Machine) -> Trace {
         let n = machine.axes.len();
-        Ok(PlotRecorder {
-            file: file.to_path_buf(),
-            format,
+        Trace {
             period_s: machine.cycle_s(),
-            names: machine.axes.iter().map(|a| a.name.clone()).collect(),
             xyz: machine.axes.iter().map(|a| a.xyz()).collect(),
-            max_vel_mm_s: machine.axes.iter().map(|a| a.max_vel_mm_s).collect(),
-            max_acc_mm_s2: machine.axes.iter().map(|a| a.max_acc_mm_s2).collect(),
-            max_jerk_mm_s3: machine.axes.iter().map(|a| a.max_jerk_mm_s3).collect(),
             prev_mm: None,
             prev_vel_mm_s: None,
             prev_acc_mm_s2: None,
@@ -143,13 +194,16 @@ impl PlotRecorder {
             buckets: Vec::with_capacity(COLUMNS),
             vel: vec![0.0; n],
             acc: vec![0.0; n],
-        })
+        }
     }
 
     fn series(&self) -> usize {
-        1 + 3 * self.names.len()
+        1 + 3 * self.xyz.len()
     }
 
+    fn t_end_s(&self) -> f64 {
+        self.buckets.last().map_or(0.0, |b| b.t1_s)
+    }
     /// The setpoint of every machine axis for the next cycle.
     pub fn push(&mut self, position_mm: &[f64]) {
         let t_s = self.samples as f64 * self.period_s;
@@ -215,6 +269,59 @@ impl PlotRecorder {
             self.width *= 2;
         }
     }
+}
+
+impl PlotRecorder {
+    /// A recorder for `machine`'s axes that will draw into `file` (its extension picks the
+    /// format).
+    pub fn new(machine: &Machine, file: &Path) -> Result<PlotRecorder, String> {
+        let format = PlotFormat::of(file)?;
+        Ok(PlotRecorder {
+            file: file.to_path_buf(),
+            format,
+            period_s: machine.cycle_s(),
+            names: machine.axes.iter().map(|a| a.name.clone()).collect(),
+            xyz: machine.axes.iter().map(|a| a.xyz()).collect(),
+            max_vel_mm_s: machine.axes.iter().map(|a| a.max_vel_mm_s).collect(),
+            max_acc_mm_s2: machine.axes.iter().map(|a| a.max_acc_mm_s2).collect(),
+            max_jerk_mm_s3: machine.axes.iter().map(|a| a.max_jerk_mm_s3).collect(),
+            runs: Vec::with_capacity(2),
+        })
+    }
+
+    /// Adds the run of `mode`, `program_s` long by its plan, sampled into `trace`.
+    pub fn add_run(&mut self, mode: ProfileKind, program_s: f64, mut trace: Trace) {
+        if let Some((b, _)) = trace.current.take() {
+            trace.buckets.push(b);
+        }
+        self.runs.push(Run {
+            mode,
+            outcome: Outcome::Planned {
+                program_s,
+                trace: Box::new(trace),
+            },
+        });
+    }
+
+    /// Records that `mode` could not be planned, and why: the legend says so, the other runs
+    /// are drawn as usual.
+    pub fn add_failed_run(&mut self, mode: ProfileKind, reason: &str) {
+        // One line of the legend: the first line of the message, shortened.
+        let mut reason: String = reason
+            .lines()
+            .next()
+            .unwrap_or("")
+            .chars()
+            .take(90)
+            .collect();
+        if reason.is_empty() {
+            reason.push_str("no reason given");
+        }
+        self.runs.push(Run {
+            mode,
+            outcome: Outcome::Failed { reason },
+        });
+    }
 
     /// The file the picture is for.
     pub fn file(&self) -> &Path {
@@ -223,10 +330,7 @@ impl PlotRecorder {
 
     /// Draws the picture: the bytes of the SVG or PNG file. The caller writes them with
     /// [`crate::files::write_output`], like every other output.
-    pub fn render(mut self) -> Result<Vec<u8>, String> {
-        if let Some((b, _)) = self.current.take() {
-            self.buckets.push(b);
-        }
+    pub fn render(self) -> Result<Vec<u8>, String> {
         static REGISTER: std::sync::Once = std::sync::Once::new();
         REGISTER.call_once(|| {
             // The embedded font is valid: this cannot fail.
@@ -255,6 +359,10 @@ impl PlotRecorder {
                 let mut encoder = png::Encoder::new(&mut bytes, w, h);
                 encoder.set_color(png::ColorType::Rgb);
                 encoder.set_depth(png::BitDepth::Eight);
+                // A plot is mostly flat colour: the best compression keeps the file small
+                // (about 5× smaller than the default here) at a few tens of ms.
+                encoder.set_compression(png::Compression::Best);
+                encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
                 let mut writer = encoder.write_header().map_err(|e| err(e.to_string()))?;
                 writer
                     .write_image_data(&rgb)
@@ -263,6 +371,13 @@ impl PlotRecorder {
                 Ok(bytes)
             }
         }
+    }
+
+    /// The runs in drawing order: the trapezoid first, under the jerk-limited run.
+    fn ordered_runs(&self) -> Vec<&Run> {
+        let mut runs: Vec<&Run> = self.runs.iter().collect();
+        runs.sort_by_key(|r| r.mode != ProfileKind::Trapezoid);
+        runs
     }
 
     fn draw<DB: DrawingBackend>(
@@ -275,11 +390,14 @@ impl PlotRecorder {
         let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
         root.fill(&WHITE).map_err(e)?;
         let panels = root.split_evenly((4, 1));
-        let t_end_s = self
-            .buckets
-            .last()
-            .map_or(self.period_s, |b| b.t1_s)
-            .max(self.period_s);
+        let runs = self.ordered_runs();
+        let traces = || {
+            runs.iter().filter_map(|r| match &r.outcome {
+                Outcome::Planned { trace, .. } => Some(&**trace),
+                Outcome::Failed { .. } => None,
+            })
+        };
+        let t_end_s = traces().map(Trace::t_end_s).fold(self.period_s, f64::max);
         let n = self.names.len();
         let max_feed_mm_s = self
             .xyz
@@ -289,9 +407,9 @@ impl PlotRecorder {
             .map(|(_, v)| *v)
             .fold(0.0, f64::max);
         for (p, area) in panels.iter().enumerate() {
-            // (series, label, colour index, limit)
-            let lines: Vec<(usize, String, usize, Option<f64>)> = match p {
-                0 => vec![(0, "feed".to_string(), 0, Some(max_feed_mm_s))],
+            // (series, axis label or None for the feed, colour index, limit)
+            let lines: Vec<(usize, Option<&str>, usize, f64)> = match p {
+                0 => vec![(0, None, FEED, max_feed_mm_s)],
                 _ => (0..n)
                     .map(|k| {
                         let limit = match p {
@@ -299,23 +417,21 @@ impl PlotRecorder {
                             2 => self.max_acc_mm_s2[k],
                             _ => self.max_jerk_mm_s3[k],
                         };
-                        (p + 3 * k, self.names[k].clone(), k, Some(limit))
+                        (p + 3 * k, Some(self.names[k].as_str()), k, limit)
                     })
                     .collect(),
             };
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
             for (s, _, _, limit) in &lines {
-                for b in &self.buckets {
+                for b in traces().flat_map(|t| &t.buckets) {
                     if b.lo[*s] <= b.hi[*s] {
                         lo = lo.min(b.lo[*s]);
                         hi = hi.max(b.hi[*s]);
                     }
                 }
-                if let Some(l) = limit {
-                    hi = hi.max(*l);
-                    if p > 0 {
-                        lo = lo.min(-*l);
-                    }
+                hi = hi.max(*limit);
+                if p > 0 {
+                    lo = lo.min(-*limit);
                 }
             }
             if p == 0 {
@@ -340,33 +456,63 @@ impl PlotRecorder {
                 .label_style(("sans-serif", 13))
                 .draw()
                 .map_err(e)?;
-            for (s, label, colour, limit) in &lines {
-                let colour = Palette99::pick(*colour).to_rgba();
-                let points = self
-                    .buckets
-                    .iter()
-                    .filter(|b| b.lo[*s] <= b.hi[*s])
-                    .flat_map(|b| {
-                        let t = 0.5 * (b.t0_s + b.t1_s);
-                        [(t, b.lo[*s]), (t, b.hi[*s])]
-                    });
-                chart
-                    .draw_series(LineSeries::new(points, colour))
-                    .map_err(e)?
-                    .label(label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
-                if let Some(l) = limit {
-                    let style = colour.stroke_width(1);
-                    for v in if p == 0 { vec![*l] } else { vec![*l, -*l] } {
-                        chart
-                            .draw_series(DashedLineSeries::new(
-                                [(0.0, v), (t_end_s, v)],
-                                6,
-                                4,
-                                style,
-                            ))
-                            .map_err(e)?;
-                    }
+            for (s, axis, colour, limit) in &lines {
+                for run in &runs {
+                    let colour = run_colour(*colour, run.mode);
+                    let label = match (axis, &run.outcome) {
+                        (None, Outcome::Planned { program_s, .. }) => {
+                            // The first run is the machine's mode: its setpoints and summary
+                            // are the command's.
+                            let own = if std::ptr::eq(*run, &self.runs[0]) {
+                                ", the machine's mode"
+                            } else {
+                                ""
+                            };
+                            format!("{}: {program_s:.3} s{own}", mode_label(run.mode))
+                        }
+                        (None, Outcome::Failed { reason }) => {
+                            format!("{}: not planned: {reason}", mode_label(run.mode))
+                        }
+                        (Some(a), _) => format!("{a} {}", mode_short(run.mode)),
+                    };
+                    let Outcome::Planned { trace, .. } = &run.outcome else {
+                        // Named in the feed panel's legend only, with why.
+                        if axis.is_none() {
+                            chart
+                                .draw_series(LineSeries::new(std::iter::empty(), colour))
+                                .map_err(e)?
+                                .label(label)
+                                .legend(move |(x, y)| {
+                                    PathElement::new(vec![(x, y), (x + 16, y)], colour)
+                                });
+                        }
+                        continue;
+                    };
+                    let points = trace
+                        .buckets
+                        .iter()
+                        .filter(|b| b.lo[*s] <= b.hi[*s])
+                        .flat_map(|b| {
+                            let t = 0.5 * (b.t0_s + b.t1_s);
+                            [(t, b.lo[*s]), (t, b.hi[*s])]
+                        });
+                    chart
+                        .draw_series(LineSeries::new(points, colour))
+                        .map_err(e)?
+                        .label(label)
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 16, y)], colour.stroke_width(3))
+                        });
+                }
+                let style = base_colour(*colour).stroke_width(1);
+                for v in if p == 0 {
+                    vec![*limit]
+                } else {
+                    vec![*limit, -*limit]
+                } {
+                    chart
+                        .draw_series(DashedLineSeries::new([(0.0, v), (t_end_s, v)], 6, 4, style))
+                        .map_err(e)?;
                 }
             }
             chart
@@ -378,6 +524,42 @@ impl PlotRecorder {
                 .map_err(e)?;
         }
         Ok(())
+    }
+}
+
+/// The colour index of the path feed.
+const FEED: usize = usize::MAX;
+
+/// Colours of the axes, in order (more axes than colours reuse them).
+const AXIS_COLOURS: [(u8, u8, u8); 6] = [
+    (31, 119, 180),
+    (214, 39, 40),
+    (44, 160, 44),
+    (148, 103, 189),
+    (255, 127, 14),
+    (23, 190, 207),
+];
+
+/// The colour of axis `index`, or of the feed ([`FEED`]).
+fn base_colour(index: usize) -> RGBColor {
+    let (r, g, b) = if index == FEED {
+        (40, 40, 40)
+    } else {
+        AXIS_COLOURS[index % AXIS_COLOURS.len()]
+    };
+    RGBColor(r, g, b)
+}
+
+/// A run's colour: the jerk-limited run in the full colour, the trapezoid run (drawn under it)
+/// in a light tint of it, so the two of each series tell apart.
+fn run_colour(index: usize, mode: ProfileKind) -> RGBColor {
+    let c = base_colour(index);
+    match mode {
+        ProfileKind::Trapezoid => {
+            let tint = |v: u8| ((u16::from(v) * 45 + 255 * 55) / 100) as u8;
+            RGBColor(tint(c.0), tint(c.1), tint(c.2))
+        }
+        ProfileKind::SCurve | ProfileKind::Smooth => c,
     }
 }
 
@@ -397,20 +579,62 @@ mod tests {
         let machine = Machine::demo();
         let mut r = PlotRecorder::new(&machine, Path::new("x.svg")).unwrap();
         let n = machine.axes.len();
-        let mut p = vec![0.0; n];
-        for c in 0..100_000u64 {
-            // X moves 0.1 mm per cycle except one cycle with a 1 mm step.
-            p[0] += if c == 77_777 { 1.0 } else { 0.1 };
-            r.push(&p);
+        // Both modes' runs, each decimated on its own: the recorder holds at most two traces
+        // of `COLUMNS` buckets, whatever the programs' lengths.
+        for (mode, spike) in [
+            (ProfileKind::Trapezoid, 77_777),
+            (ProfileKind::SCurve, 12_345),
+        ] {
+            let mut t = Trace::new(&machine);
+            let mut p = vec![0.0; n];
+            for c in 0..100_000u64 {
+                // X moves 0.1 mm per cycle except one cycle with a 1 mm step.
+                p[0] += if c == spike { 1.0 } else { 0.1 };
+                t.push(&p);
+            }
+            assert!(t.buckets.len() <= COLUMNS);
+            let peak = t.buckets.iter().map(|b| b.hi[1]).fold(f64::MIN, f64::max);
+            assert!((peak - 1.0 / machine.cycle_s()).abs() < 1e-6, "{peak}");
+            r.add_run(mode, 100.0, t);
         }
-        assert!(r.buckets.len() <= COLUMNS);
-        let peak = r.buckets.iter().map(|b| b.hi[1]).fold(f64::MIN, f64::max);
-        assert!((peak - 1.0 / machine.cycle_s()).abs() < 1e-6, "{peak}");
+        assert_eq!(r.runs.len(), 2);
         assert_eq!(PlotFormat::of(Path::new("a.PNG")), Ok(PlotFormat::Png));
         assert!(
             PlotFormat::of(Path::new("a.pdf"))
                 .unwrap_err()
                 .contains("--plot")
+        );
+    }
+
+    #[test]
+    fn a_mode_that_failed_to_plan_is_named_in_the_legend_and_the_other_still_drawn() {
+        let machine = Machine::demo();
+        let mut r = PlotRecorder::new(&machine, Path::new("x.svg")).unwrap();
+        let mut t = Trace::new(&machine);
+        let mut p = vec![0.0; machine.axes.len()];
+        for c in 0..500 {
+            p[0] = 0.0005 * f64::from(c).powi(2);
+            t.push(&p);
+        }
+        r.add_run(ProfileKind::Trapezoid, 0.5, t);
+        r.add_failed_run(ProfileKind::SCurve, "p.ngc: no jerk limit\nsecond line");
+        let svg = String::from_utf8(r.render().unwrap()).unwrap();
+        assert!(svg.contains("trapezoid: 0.500 s"), "{svg}");
+        assert!(
+            svg.contains("s-curve (jerk-limited): not planned: p.ngc: no jerk limit"),
+            "{svg}"
+        );
+        assert!(!svg.contains("second line"));
+    }
+
+    #[test]
+    fn the_other_mode_is_the_trapezoid_or_the_s_curve() {
+        assert_eq!(other_mode(ProfileKind::Trapezoid), ProfileKind::SCurve);
+        assert_eq!(other_mode(ProfileKind::SCurve), ProfileKind::Trapezoid);
+        assert_eq!(other_mode(ProfileKind::Smooth), ProfileKind::Trapezoid);
+        assert_ne!(
+            run_colour(0, ProfileKind::Trapezoid),
+            run_colour(0, ProfileKind::SCurve)
         );
     }
 }

@@ -88,12 +88,14 @@ fn an_svg_plot_is_valid_and_has_the_four_panels() {
         assert!(svg.contains(title), "no panel {title:?}");
     }
     assert!(svg.contains("time (s)"));
-    // Each axis is named in the legends.
+    // Each axis is named in the legends, once per mode.
     for axis in ["X", "Y", "Z"] {
-        assert!(
-            svg.contains(&format!("\n{axis}\n</text>")),
-            "no legend for {axis}"
-        );
+        for mode in ["trapezoid", "s-curve"] {
+            assert!(
+                svg.contains(&format!("\n{axis} {mode}\n</text>")),
+                "no legend for {axis} {mode}"
+            );
+        }
     }
 }
 
@@ -122,4 +124,80 @@ fn another_extension_is_refused_naming_the_flag() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("--plot"), "{stderr}");
     assert!(!file.exists());
+}
+
+/// The long polylines (the data, not the dashes of the limits nor the legend's marks) of each
+/// of the four stacked panels, as (panel, stroke colour).
+fn data_polylines(svg: &str) -> Vec<(usize, String)> {
+    let panel_px = 1300 / 4;
+    svg.split("<polyline")
+        .skip(1)
+        .filter_map(|p| {
+            let tag = &p[..p.find('>')?];
+            let stroke = tag.split("stroke=\"").nth(1)?.split('"').next()?;
+            let points = tag.split("points=\"").nth(1)?.split('"').next()?;
+            let pts: Vec<&str> = points.split_whitespace().collect();
+            if pts.len() < 20 {
+                return None;
+            }
+            let y: usize = pts[0].split(',').nth(1)?.parse().ok()?;
+            Some((y / panel_px, stroke.to_string()))
+        })
+        .collect()
+}
+
+#[test]
+fn the_plot_shows_the_program_in_both_modes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (file, out) = plan_plot(dir.path(), "plot.svg");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let svg = std::fs::read_to_string(&file).unwrap();
+    // The summary is the machine's own mode (the demo machine's): its program time is in
+    // that run's legend entry.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let time = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("program time"))
+        .and_then(|l| l.split_whitespace().next())
+        .expect("no program time in the summary");
+    let own = match canmotion::config::Machine::demo().planner.profile {
+        canmotion::planner::ProfileKind::Trapezoid => "trapezoid",
+        _ => "(jerk-limited)",
+    };
+    let legend: Vec<&str> = svg
+        .split("</text>")
+        .filter_map(|t| t.rsplit('>').next())
+        .map(str::trim)
+        .collect();
+    for label in ["trapezoid", "s-curve (jerk-limited)"] {
+        let entry = legend
+            .iter()
+            .find(|t| t.starts_with(label) && t.contains(" s"))
+            .unwrap_or_else(|| panic!("no legend entry {label:?} with its time in {legend:?}"));
+        if entry.contains(own) {
+            assert!(entry.contains(&format!("{time} s")), "{entry} vs {time}");
+        }
+    }
+    // Two series per panel: the feed once per mode, every axis once per mode, each in its own
+    // colour.
+    let lines = data_polylines(&svg);
+    for (panel, expected) in [(0, 2), (1, 6), (2, 6), (3, 6)] {
+        let mut colours: Vec<&String> = lines
+            .iter()
+            .filter(|(p, _)| *p == panel)
+            .map(|(_, c)| c)
+            .collect();
+        assert_eq!(colours.len(), expected, "panel {panel}: {lines:?}");
+        colours.sort();
+        colours.dedup();
+        assert_eq!(
+            colours.len(),
+            expected,
+            "panel {panel}: colours {colours:?}"
+        );
+    }
 }
