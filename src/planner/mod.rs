@@ -842,8 +842,9 @@ struct Unsettled {
     at_mm: Vector3<f64>,
     /// The move's direction at its end.
     tangent: Vector3<f64>,
-    /// How far it travelled in its last `2·T_k` (the span of the axis filters).
-    reach_mm: f64,
+    /// Its distance from its end point at each of the axis filters' last `2·N_k − 1`
+    /// samples before it stopped (index `k`: `k + 1` periods before), then zeros.
+    behind_mm: [f64; MAX_FILTER_TAPS],
     /// The deviation the axis filters may take at its end.
     tol_mm: f64,
 }
@@ -1148,15 +1149,18 @@ impl Planner {
             // output mixes the last `2·T_k` of it with the first of this move, which cuts the
             // corner by at most the shorter of the two stretches (times the sine of the turn,
             // up to a right angle). Where that could leave the tolerance they settle first.
-            let span_s = 2.0 * smoothing.axis_s(self.config.period_s);
-            let reach_mm = profile.at(span_s).s_mm.min(u.reach_mm);
             let t = self.window[i].tangent_start;
             let turn = if u.tangent.dot(&t) < 0.0 {
                 1.0
             } else {
                 u.tangent.cross(&t).norm()
             };
-            if u.tol_mm > 0.0 && reach_mm * turn > u.tol_mm {
+            let cut_mm = corner_cut_mm(
+                &u.behind_mm,
+                |k| profile.at(k as f64 * self.config.period_s).s_mm,
+                smoothing,
+            );
+            if u.tol_mm > 0.0 && cut_mm * turn > u.tol_mm {
                 self.settle_axes()?;
             } else {
                 self.axes_unsettled = None;
@@ -1176,15 +1180,19 @@ impl Planner {
         self.time_s = end_s;
         self.ready.push_back(seg);
         if alone.is_some() {
-            let span_s = self
-                .smoothing
-                .map_or(0.0, |sm| 2.0 * sm.axis_s(self.config.period_s));
             let duration_s = profile.duration_s();
+            let mut behind_mm = [0.0; MAX_FILTER_TAPS];
+            for (k, d) in behind_mm.iter_mut().enumerate() {
+                *d = seg.length_mm
+                    - profile
+                        .at(duration_s - (k + 1) as f64 * self.config.period_s)
+                        .s_mm;
+            }
             self.axes_unsettled = Some(Unsettled {
                 line,
                 at_mm: seg.end_mm,
                 tangent: self.window[i].tangent_end,
-                reach_mm: seg.length_mm - profile.at(duration_s - span_s).s_mm,
+                behind_mm,
                 tol_mm: self.filter_tolerance_mm(self.window[i].blend),
             });
         } else if let Some(smoothing) = self.smoothing
@@ -1844,6 +1852,45 @@ fn share_acceleration(a: &mut Pending, b: &mut Pending) {
             p.limits = lower;
         }
     }
+}
+
+/// Most taps of the axis filters' combined kernel the corner-cut estimate follows (two moving
+/// averages of `N_k` samples: `2·N_k − 1` taps); longer filters are estimated from the first
+/// ones, which over-estimates the cut (their later taps would weigh points nearer the corner).
+const MAX_FILTER_TAPS: usize = 63;
+
+/// How far the axis filters' output strays from the path where one move stops and the next
+/// starts at once from the same point: the output is a weighted mean (the triangle kernel of
+/// the two moving averages) of points `behind_mm[k]` before the corner on the first leg and
+/// `ahead(k)` after it on the second; at each step its distance from the nearer leg is at most
+/// `min(α·ā, (1 − α)·b̄)` times the sine of the turn (`α`, `ā`: the first leg's weight and
+/// mean distance). The largest over the steps, without the sine.
+fn corner_cut_mm(
+    behind_mm: &[f64; MAX_FILTER_TAPS],
+    ahead: impl Fn(usize) -> f64,
+    smoothing: Smoothing,
+) -> f64 {
+    let n = smoothing.axis_periods.max(1);
+    let taps = (2 * n - 1).min(MAX_FILTER_TAPS);
+    // Weights of the triangle kernel: `min(k + 1, 2n − 1 − k)/n²`.
+    let w = |k: usize| (k + 1).min(2 * n - 1 - k) as f64 / (n * n) as f64;
+    let ahead_mm: Vec<f64> = (0..=taps).map(&ahead).collect();
+    let mut worst: f64 = 0.0;
+    // Output step `m`: tap `k` sees the input `m − k` samples after the corner (`< 0`: before).
+    for m in 0..=taps {
+        let (mut sa, mut sb) = (0.0, 0.0);
+        for k in 0..taps {
+            let at = m as isize - k as isize;
+            if at < 0 {
+                sa += w(k) * behind_mm[(-at - 1) as usize];
+            } else {
+                sb += w(k) * ahead_mm[at as usize];
+            }
+        }
+        // α·ā = sa and (1 − α)·b̄ = sb (the weights sum to 1).
+        worst = worst.max(sa.min(sb));
+    }
+    worst
 }
 
 /// The discrete curvature `Δu/L̄` of the vertex from `a` into `b`: the turn of the tangent
