@@ -12,7 +12,7 @@ use tokio::sync::mpsc;
 
 use super::GatewayError;
 use crate::bus::{AsyncPort, Bus, Filter, Frame};
-use crate::canopen::sdo_client::{Mode, Outcome, SdoClient, SdoError, Step};
+use crate::canopen::sdo_client::{Mode, Outcome, SdoClient, Step};
 use crate::canopen::{Emcy, NmtState, cob};
 
 /// How long an SDO server may take to answer one request.
@@ -214,21 +214,7 @@ impl NodeIo {
                 for f in out.drain(..) {
                     let _ = self.send(&Frame::new(req, &f).expect("id")).await;
                 }
-                return result.map_err(|e| match e {
-                    SdoError::Aborted { code } => GatewayError::SdoAbort {
-                        node,
-                        index,
-                        sub,
-                        code,
-                    },
-                    SdoError::TimedOut { .. } => GatewayError::SdoTimeout { node, index, sub },
-                    source @ SdoError::Protocol { .. } => GatewayError::SdoClient {
-                        node,
-                        index,
-                        sub,
-                        source,
-                    },
-                });
+                return result.map_err(|e| GatewayError::from_sdo(node, index, sub, e));
             }
         }
     }

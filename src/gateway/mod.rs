@@ -254,6 +254,34 @@ pub enum GatewayError {
     Resume(String),
 }
 
+impl GatewayError {
+    /// The failure of an SDO transfer with `node` on `index:sub`: the node's abort as
+    /// [`GatewayError::SdoAbort`], the client's own time-out or protocol error as itself.
+    pub fn from_sdo(
+        node: u8,
+        index: u16,
+        sub: u8,
+        error: crate::canopen::sdo_client::SdoError,
+    ) -> GatewayError {
+        use crate::canopen::sdo_client::SdoError;
+        match error {
+            SdoError::Aborted { code } => GatewayError::SdoAbort {
+                node,
+                index,
+                sub,
+                code,
+            },
+            SdoError::TimedOut { .. } => GatewayError::SdoTimeout { node, index, sub },
+            source @ SdoError::Protocol { .. } => GatewayError::SdoClient {
+                node,
+                index,
+                sub,
+                source,
+            },
+        }
+    }
+}
+
 /// Why and when the motion stopped.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MotionFailure {

@@ -10,7 +10,6 @@ use super::GatewayError;
 use super::io::NodeIo;
 use crate::bus::{AsyncPort, Bus, Filter, Frame};
 use crate::canopen::cob;
-use crate::canopen::sdo_client::SdoError;
 use crate::config::Machine;
 use crate::master::startup::{Sequence, StartupError, Step};
 
@@ -151,21 +150,7 @@ fn gateway_error(e: StartupError, bus: &str) -> GatewayError {
             index,
             sub,
             error,
-        } => match error {
-            SdoError::Aborted { code } => GatewayError::SdoAbort {
-                node,
-                index,
-                sub,
-                code,
-            },
-            SdoError::TimedOut { .. } => GatewayError::SdoTimeout { node, index, sub },
-            source @ SdoError::Protocol { .. } => GatewayError::SdoClient {
-                node,
-                index,
-                sub,
-                source,
-            },
-        },
+        } => GatewayError::from_sdo(node, index, sub, error),
         StartupError::SdoLength {
             node,
             index,
