@@ -1279,66 +1279,15 @@ impl Interpolator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gcode::{BlendMode, CompState, Element, ElementKind, Item, Plane};
-    use crate::planner::{Limits, PlanError, plan_items};
+    use crate::planner::Limits;
+    use crate::planner::tests::{Move, feed, plan_moves, v};
     use proptest::prelude::*;
-
-    /// A straight move as the old G0/G1 front end gave it: a target, the start implied.
-    #[derive(Debug, Clone, Copy)]
-    struct Move {
-        line: usize,
-        rapid: bool,
-        target_mm: Vector3<f64>,
-        feed_mm_s: Option<f64>,
-    }
-
-    /// Plans straight moves from `start_mm`, each starting where the previous one ended.
-    fn plan_moves(
-        start_mm: Vector3<f64>,
-        moves: &[Move],
-        limits: &Limits,
-    ) -> Result<Plan, PlanError> {
-        let mut from = start_mm;
-        let items: Vec<Item> = moves
-            .iter()
-            .map(|m| {
-                let e = Element {
-                    line: m.line,
-                    col: 1,
-                    kind: ElementKind::Line,
-                    rapid: m.rapid,
-                    start_mm: from,
-                    end_mm: m.target_mm,
-                    feed_mm_s: m.feed_mm_s,
-                    blend: BlendMode::ExactStop,
-                    comp: CompState::Off,
-                    plane: Plane::Xy,
-                };
-                from = m.target_mm;
-                Item::Motion(e)
-            })
-            .collect();
-        plan_items(start_mm, &items, limits)
-    }
-
-    fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
-        Vector3::new(x, y, z)
-    }
 
     fn limits() -> Limits {
         Limits {
             max_vel_mm_s: v(100.0, 100.0, 50.0),
             max_acc_mm_s2: v(1000.0, 1000.0, 500.0),
             max_feed_mm_s: 100.0,
-        }
-    }
-
-    fn feed(line: usize, target_mm: Vector3<f64>, feed_mm_s: f64) -> Move {
-        Move {
-            line,
-            rapid: false,
-            target_mm,
-            feed_mm_s: Some(feed_mm_s),
         }
     }
 

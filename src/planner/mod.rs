@@ -2078,7 +2078,7 @@ fn arc_limits(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
 
     /// The trapezoid of a moving segment: its phases and its acceleration.
     struct Parts {
@@ -2107,15 +2107,15 @@ mod tests {
 
     /// A straight move as the old G0/G1 front end gave it: a target, the start implied.
     #[derive(Debug, Clone, Copy)]
-    struct Move {
-        line: usize,
-        rapid: bool,
-        target_mm: Vector3<f64>,
-        feed_mm_s: Option<f64>,
+    pub(crate) struct Move {
+        pub(crate) line: usize,
+        pub(crate) rapid: bool,
+        pub(crate) target_mm: Vector3<f64>,
+        pub(crate) feed_mm_s: Option<f64>,
     }
 
     /// Plans straight moves from `start_mm`, each starting where the previous one ended.
-    fn plan_moves(
+    pub(crate) fn plan_moves(
         start_mm: Vector3<f64>,
         moves: &[Move],
         limits: &Limits,
@@ -2143,7 +2143,7 @@ mod tests {
         plan_items(start_mm, &items, limits)
     }
 
-    fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
+    pub(crate) fn v(x: f64, y: f64, z: f64) -> Vector3<f64> {
         Vector3::new(x, y, z)
     }
 
@@ -2155,7 +2155,7 @@ mod tests {
         }
     }
 
-    fn feed(line: usize, target_mm: Vector3<f64>, feed_mm_s: f64) -> Move {
+    pub(crate) fn feed(line: usize, target_mm: Vector3<f64>, feed_mm_s: f64) -> Move {
         Move {
             line,
             rapid: false,
