@@ -144,6 +144,68 @@ pub enum Phase {
     Disabling,
     /// Finished (see [`CyclicMaster::failure`]).
     Done,
+    /// A service master ([`CyclicMaster::service`]) with its drives disabled: SYNC and the
+    /// RPDOs go on (the drives stay Operational), each setpoint tracks position actual, and the
+    /// drives are held in Switch on disabled. A fault stop ends here rather than in
+    /// [`Phase::Done`], with its failure kept until [`CyclicMaster::reset_alarm`].
+    Disabled,
+    /// A service master with some axes under the drive's own control (homing, CiA 402 mode 6;
+    /// see [`AxisControl`]); the other axes hold.
+    DriveControl,
+}
+
+/// Who commands an axis of a service master.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AxisControl {
+    /// The master: one setpoint per cycle (IP or CSP, statusword bit 12 set).
+    Cyclic,
+    /// Handed over to the drive: controlword bit 4 cleared, the setpoint tracks position
+    /// actual, so that the drive can change its mode of operation (0x6060) without a jump.
+    Released,
+    /// The drive's own operation runs (homing: controlword bit 4 = homing operation start);
+    /// statusword bits 10, 12 and 13 are that mode's ([`DriveOpStatus`]), not alarms.
+    DriveOp,
+    /// Back to the cyclic mode: setpoint = position actual and controlword bit 4 set, waiting
+    /// for statusword bit 12 (IP active / following) before the axis is [`AxisControl::Cyclic`].
+    Rearming,
+}
+
+/// Where a drive's own operation ([`AxisControl::DriveOp`]: homing) stands, from statusword
+/// bits 10, 12 and 13 (CiA 402-2, homing mode).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DriveOpStatus {
+    /// No statusword yet that answers the start.
+    InProgress,
+    /// Bits 12 (homing attained) and 10 (target reached).
+    Attained,
+    /// Bit 13 (homing error), with the statusword.
+    Error {
+        /// 0x6041.
+        statusword: u16,
+    },
+}
+
+/// Why a service master refused a request.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum Refusal {
+    /// The request needs another phase (e.g. `enable` while enabled).
+    #[error("not possible while {phase:?}")]
+    Phase {
+        /// The phase the master is in.
+        phase: Phase,
+    },
+    /// An alarm stands: it must be reset first.
+    #[error("an alarm stands; reset it first")]
+    Alarm,
+    /// A drive reset or the bus was lost: the drives must be started up again.
+    #[error("a drive reset or the bus was lost; the drives must be started up again")]
+    NeedsStartUp,
+    /// The motion does not start where the axes are.
+    #[error("the motion starts {distance_mm:.6} mm away from where the axes stand")]
+    StartMismatch {
+        /// The distance between the two.
+        distance_mm: f64,
+    },
 }
 
 /// The latest feedback of one axis.
@@ -217,6 +279,17 @@ pub struct CyclicMaster {
     stop_asked: Option<Alarm>,
     /// The run ended in a fault stop (see [`Self::fault_stop`]).
     fault_stop: bool,
+    /// A service master: it stays up between motions (see [`Self::service`]).
+    service: bool,
+    /// Per axis, who commands it (always [`AxisControl::Cyclic`] outside a service master).
+    control: Vec<AxisControl>,
+    /// Per axis, the cycle its control last changed.
+    control_since: Vec<u64>,
+    /// Per axis, whether its setpoints are checked against its travel (off for an axis that
+    /// is not homed: its travel limits mean nothing yet).
+    check_travel: Vec<bool>,
+    /// An abort (service master): hold, then drop the motion and hold position, enabled.
+    aborting: bool,
 }
 
 impl CyclicMaster {
@@ -260,8 +333,251 @@ impl CyclicMaster {
             override_wanted: (1.0, false),
             stop_asked: None,
             fault_stop: false,
+            service: false,
+            control: vec![AxisControl::Cyclic; n],
+            control_since: vec![0; n],
+            check_travel: vec![true; n],
+            aborting: false,
             axes,
         }
+    }
+
+    /// A master that stays up (`canmotion serve`): it starts in [`Phase::Disabled`]
+    /// ([`Self::enable`] walks the drives to Operation enabled); a motion that ends, or an
+    /// [`Self::abort`], leaves the drives enabled and holding in [`Phase::Armed`] for the next
+    /// one; [`Self::disable`] goes back to [`Phase::Disabled`]; a fault stop ends in
+    /// [`Phase::Disabled`] with its failure, until [`Self::reset_alarm`]. Homing runs through
+    /// [`Self::release`], [`Self::start_drive_op`], [`Self::end_drive_op`] and
+    /// [`Self::rearm`].
+    pub fn service(machine: &Machine) -> CyclicMaster {
+        let mut m = CyclicMaster::new(machine);
+        m.service = true;
+        for e in &mut m.enablers {
+            e.set_bits(0);
+            e.set_target(Target::SwitchOnDisabled);
+        }
+        m.phase = Phase::Disabled;
+        m
+    }
+
+    /// Service master: walk the drives to Operation enabled, then arm ([`Phase::Armed`]).
+    pub fn enable(&mut self) -> Result<(), Refusal> {
+        self.check_no_alarm()?;
+        if self.phase != Phase::Disabled {
+            return Err(Refusal::Phase { phase: self.phase });
+        }
+        for e in &mut self.enablers {
+            e.set_bits(0);
+            e.set_target(Target::OperationEnabled);
+        }
+        self.control.iter_mut().for_each(|c| *c = AxisControl::Cyclic);
+        self.motion = None;
+        self.set_phase(Phase::Enabling);
+        Ok(())
+    }
+
+    /// Service master, holding ([`Phase::Armed`], no motion): walk the drives to Switch on
+    /// disabled ([`Phase::Disabled`]).
+    pub fn disable(&mut self) -> Result<(), Refusal> {
+        match self.phase {
+            Phase::Armed if self.motion.is_none() => {
+                self.start_disabling();
+                Ok(())
+            }
+            Phase::Enabling | Phase::Arming => {
+                self.start_disabling();
+                Ok(())
+            }
+            Phase::Disabled | Phase::Disabling => Ok(()),
+            phase => Err(Refusal::Phase { phase }),
+        }
+    }
+
+    fn check_no_alarm(&self) -> Result<(), Refusal> {
+        if self.reset.iter().any(|r| *r) || (self.failure.is_some() && self.phase == Phase::Done)
+        {
+            return Err(Refusal::NeedsStartUp);
+        }
+        if self.failure.is_some() {
+            return Err(Refusal::Alarm);
+        }
+        Ok(())
+    }
+
+    /// Service master: the standing alarm is cleared once the drives are disabled; from the
+    /// next cycle the drives in Fault get a fault reset (CiA 402 transition 15) towards Switch
+    /// on disabled. Refused while stopping, and when a drive reset or the bus was lost (the
+    /// drives must be started up again).
+    pub fn reset_alarm(&mut self) -> Result<(), Refusal> {
+        if self.reset.iter().any(|r| *r) || self.phase == Phase::Done {
+            return Err(Refusal::NeedsStartUp);
+        }
+        if self.phase != Phase::Disabled {
+            return Err(Refusal::Phase { phase: self.phase });
+        }
+        self.failure = None;
+        self.failure_cycle = None;
+        self.fault_stop = false;
+        self.stop_asked = None;
+        self.aborting = false;
+        self.frozen.iter_mut().for_each(|f| *f = false);
+        self.override_wanted.1 = false;
+        Ok(())
+    }
+
+    /// Service master: stop the motion on the path (a feed hold with the motion's override
+    /// ramp), then drop it and hold there, enabled ([`Phase::Armed`]). A motion without an
+    /// override ramp stops along its direction within the axes' limits. Nothing to do when no
+    /// motion runs.
+    pub fn abort(&mut self) {
+        if !self.service {
+            return;
+        }
+        match self.phase {
+            Phase::Streaming => {
+                self.aborting = true;
+                let held = self.motion.as_mut().is_some_and(|m| m.hold().is_ok());
+                if !held {
+                    self.begin_stopping();
+                }
+            }
+            Phase::Armed if self.motion.is_some() => self.motion = None,
+            _ => {}
+        }
+    }
+
+    /// Service master, idle: start `interp`, which must start where the axes hold (within
+    /// 1 nm).
+    pub fn start_motion(&mut self, interp: Interpolator) -> Result<(), Refusal> {
+        self.check_no_alarm()?;
+        if !self.is_idle() {
+            return Err(Refusal::Phase { phase: self.phase });
+        }
+        let here = self.armed_mm.unwrap_or_default();
+        let distance_mm = (interp.last_mm() - here).norm();
+        if distance_mm > 1e-6 {
+            return Err(Refusal::StartMismatch { distance_mm });
+        }
+        self.line = None;
+        self.supply_motion(interp);
+        Ok(())
+    }
+
+    /// Whether an abort is under way.
+    pub fn is_aborting(&self) -> bool {
+        self.aborting
+    }
+
+    /// Service master: whether it holds, enabled, with no motion (ready for one).
+    pub fn is_idle(&self) -> bool {
+        self.phase == Phase::Armed && self.motion.is_none()
+    }
+
+    /// Per axis, who commands it.
+    pub fn axis_control(&self, i: usize) -> AxisControl {
+        self.control[i]
+    }
+
+    /// Whether axis `i`'s setpoints are checked against its travel (default on).
+    pub fn set_travel_checked(&mut self, i: usize, checked: bool) {
+        if let Some(c) = self.check_travel.get_mut(i) {
+            *c = checked;
+        }
+    }
+
+    /// Service master, idle or under drive control: hand the axes of `mask` (bit i = axis i)
+    /// to their drives ([`AxisControl::Released`]).
+    pub fn release(&mut self, mask: u32) -> Result<(), Refusal> {
+        self.check_no_alarm()?;
+        if !(self.is_idle() || self.phase == Phase::DriveControl) {
+            return Err(Refusal::Phase { phase: self.phase });
+        }
+        for i in self.axes_of(mask) {
+            if self.control[i] == AxisControl::Cyclic {
+                self.enablers[i].set_bits(0);
+                self.set_control(i, AxisControl::Released);
+            }
+        }
+        if self.control.iter().any(|c| *c != AxisControl::Cyclic) {
+            self.set_phase(Phase::DriveControl);
+        }
+        Ok(())
+    }
+
+    /// Whether every axis of `mask` is released and has reported since with statusword bit
+    /// 12 clear (its IP mode inactive): its mode of operation may change now.
+    pub fn released(&self, mask: u32) -> bool {
+        self.axes_of(mask).all(|i| {
+            self.control[i] == AxisControl::Released
+                && self.fb[i].is_some_and(|f| {
+                    f.cycle > self.control_since[i] + 1
+                        && (self.axes[i].mode == AxisMode::Csp
+                            || f.statusword & swb::OP_MODE_SPECIFIC_12 == 0)
+                })
+        })
+    }
+
+    /// Start the drive's own operation on the released axes of `mask` (homing: the rising
+    /// edge of controlword bit 4 once the drive is in mode 6).
+    pub fn start_drive_op(&mut self, mask: u32) {
+        for i in self.axes_of(mask) {
+            if self.control[i] == AxisControl::Released {
+                self.enablers[i].set_bits(cwb::IP_ENABLE);
+                self.set_control(i, AxisControl::DriveOp);
+            }
+        }
+    }
+
+    /// Where the drive's operation on axis `i` stands ([`None`] unless it is one).
+    pub fn drive_op_status(&self, i: usize) -> Option<DriveOpStatus> {
+        if self.control.get(i) != Some(&AxisControl::DriveOp) {
+            return None;
+        }
+        let fb = self.fb[i].filter(|f| f.cycle > self.control_since[i] + 1);
+        Some(match fb {
+            Some(f) if f.statusword & swb::OP_MODE_SPECIFIC_13 != 0 => DriveOpStatus::Error {
+                statusword: f.statusword,
+            },
+            Some(f)
+                if f.statusword & (swb::OP_MODE_SPECIFIC_12 | swb::TARGET_REACHED)
+                    == swb::OP_MODE_SPECIFIC_12 | swb::TARGET_REACHED =>
+            {
+                DriveOpStatus::Attained
+            }
+            _ => DriveOpStatus::InProgress,
+        })
+    }
+
+    /// End the drive's operation on the axes of `mask` (controlword bit 4 cleared: the axes
+    /// are [`AxisControl::Released`] again, their setpoints at position actual).
+    pub fn end_drive_op(&mut self, mask: u32) {
+        for i in self.axes_of(mask) {
+            if self.control[i] == AxisControl::DriveOp {
+                self.enablers[i].set_bits(0);
+                self.set_control(i, AxisControl::Released);
+            }
+        }
+    }
+
+    /// Back to the cyclic mode on the released axes of `mask`, once their drives are in it
+    /// again (0x6061 confirmed): bumpless, from position actual; the master is
+    /// [`Phase::Armed`] once every axis answered with statusword bit 12.
+    pub fn rearm(&mut self, mask: u32) {
+        for i in self.axes_of(mask) {
+            if self.control[i] == AxisControl::Released {
+                self.enablers[i].set_bits(cwb::IP_ENABLE);
+                self.set_control(i, AxisControl::Rearming);
+            }
+        }
+    }
+
+    fn set_control(&mut self, i: usize, c: AxisControl) {
+        self.control[i] = c;
+        self.control_since[i] = self.cycle;
+    }
+
+    fn axes_of(&self, mask: u32) -> impl Iterator<Item = usize> + use<> {
+        (0..self.axes.len()).filter(move |i| mask & (1 << i) != 0)
     }
 
     /// The axes.
@@ -465,8 +781,12 @@ impl CyclicMaster {
                     self.fail(alarm);
                 }
             }
-            Phase::Enabling | Phase::Arming | Phase::Armed => self.fail(alarm),
-            Phase::Settling | Phase::Stopping | Phase::Disabling | Phase::Done => {}
+            Phase::Enabling | Phase::Arming | Phase::Armed | Phase::DriveControl => self.fail(alarm),
+            Phase::Settling
+            | Phase::Stopping
+            | Phase::Disabling
+            | Phase::Done
+            | Phase::Disabled => {}
         }
     }
 
@@ -494,29 +814,68 @@ impl CyclicMaster {
     fn fail(&mut self, alarm: Alarm) {
         self.fail_message(alarm);
         match self.phase {
-            Phase::Streaming | Phase::Settling | Phase::Armed | Phase::Arming => {
-                // Stop along the current direction: every axis decelerates so that all reach
-                // rest at the same time, each within its own acceleration limit.
-                let t_stop = self
-                    .axes
-                    .iter()
-                    .enumerate()
-                    .map(|(i, a)| {
-                        let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
-                        v.abs() / a.max_acc_mm_s2
-                    })
-                    .fold(0.0, f64::max);
+            Phase::Streaming
+            | Phase::Settling
+            | Phase::Armed
+            | Phase::Arming
+            | Phase::DriveControl => {
+                // An axis under its drive's control is stopped by the drive when it is
+                // disabled; it holds its position actual meanwhile.
                 for i in 0..self.axes.len() {
-                    let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
-                    let stopped = self.frozen[i] || t_stop == 0.0;
-                    self.stop_vel[i] = if stopped { 0.0 } else { v };
-                    // v(t) = v0 (1 − t / t_stop) on every axis: the direction of motion holds.
-                    self.stop_acc[i] = if stopped { 0.0 } else { v.abs() / t_stop };
+                    if self.control[i] != AxisControl::Cyclic {
+                        self.sp_mm[i][1] = self.sp_mm[i][0];
+                    }
                 }
-                self.set_phase(Phase::Stopping);
+                self.begin_stopping();
             }
             Phase::Enabling => self.start_disabling(),
-            Phase::Stopping | Phase::Disabling | Phase::Done => {}
+            Phase::Stopping | Phase::Disabling | Phase::Done | Phase::Disabled => {}
+        }
+    }
+
+    /// Stop along the current direction: every axis decelerates so that all reach rest at the
+    /// same time, each within its own acceleration limit.
+    fn begin_stopping(&mut self) {
+        let t_stop = self
+            .axes
+            .iter()
+            .enumerate()
+            .map(|(i, a)| {
+                let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
+                v.abs() / a.max_acc_mm_s2
+            })
+            .fold(0.0, f64::max);
+        for i in 0..self.axes.len() {
+            let v = (self.sp_mm[i][0] - self.sp_mm[i][1]) / self.period_s;
+            let stopped = self.frozen[i] || t_stop == 0.0;
+            self.stop_vel[i] = if stopped { 0.0 } else { v };
+            // v(t) = v0 (1 − t / t_stop) on every axis: the direction of motion holds.
+            self.stop_acc[i] = if stopped { 0.0 } else { v.abs() / t_stop };
+        }
+        self.set_phase(Phase::Stopping);
+    }
+
+    /// Service master, at rest after a motion, an abort or homing: hold there, enabled.
+    fn back_to_armed(&mut self) {
+        self.motion = None;
+        self.aborting = false;
+        self.override_wanted.1 = false;
+        let mut p = Vector3::zeros();
+        for (i, a) in self.axes.iter().enumerate() {
+            if let Some(k) = a.xyz {
+                p[k] = self.sp_mm[i][0];
+            }
+        }
+        self.armed_mm = Some(p);
+        self.set_phase(Phase::Armed);
+    }
+
+    /// The statusword bits that are alarms for axis `i`: fault, and bit 13 (following error in
+    /// IP/CSP) unless its drive runs its own operation (homing error there, not an alarm).
+    fn alarm_bits(&self, i: usize) -> u16 {
+        match self.control[i] {
+            AxisControl::Cyclic | AxisControl::Rearming => swb::FAULT | swb::OP_MODE_SPECIFIC_13,
+            AxisControl::Released | AxisControl::DriveOp => swb::FAULT,
         }
     }
 
@@ -549,7 +908,7 @@ impl CyclicMaster {
                 // leaves the reaction to the drive): either way the axis is not where it
                 // should be.
                 Some(fb)
-                    if fb.statusword & (swb::FAULT | swb::OP_MODE_SPECIFIC_13) != 0
+                    if fb.statusword & self.alarm_bits(i) != 0
                         && matches!(
                             self.phase,
                             Phase::Arming
@@ -557,6 +916,7 @@ impl CyclicMaster {
                                 | Phase::Streaming
                                 | Phase::Settling
                                 | Phase::Stopping
+                                | Phase::DriveControl
                         )
                         || fb.statusword & swb::FAULT != 0 && self.phase == Phase::Enabling =>
                 {
@@ -720,6 +1080,68 @@ impl CyclicMaster {
                     }
                 }
             }
+            Phase::Disabled => {
+                for i in 0..n {
+                    if let Some(p) = actual_mm[i] {
+                        self.sp_mm[i] = [p; 3];
+                    }
+                    // A standing alarm keeps a faulted drive in Fault until it is reset.
+                    match states[i] {
+                        Some(State::Fault) if self.failure.is_some() => {}
+                        Some(s) if !self.reset[i] => {
+                            let _ = self.enablers[i].update(s);
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            Phase::DriveControl => {
+                for i in 0..n {
+                    if let Some(s) = states[i] {
+                        let _ = self.enablers[i].update(s);
+                    }
+                    match self.control[i] {
+                        AxisControl::Cyclic => {}
+                        AxisControl::Released | AxisControl::DriveOp => {
+                            // The drive moves the axis: the setpoint follows it, so that the
+                            // return to the cyclic mode is bumpless.
+                            if let Some(p) = actual_mm[i] {
+                                self.sp_mm[i] = [p; 3];
+                            }
+                        }
+                        AxisControl::Rearming => {
+                            let since = self.control_since[i];
+                            let following = self.fb[i].is_some_and(|f| {
+                                f.cycle > since + 1
+                                    && f.statusword & swb::OP_MODE_SPECIFIC_12 != 0
+                            });
+                            if following {
+                                self.control[i] = AxisControl::Cyclic;
+                            } else if let Some(p) = actual_mm[i] {
+                                self.sp_mm[i] = [p; 3];
+                                let a = &self.axes[i];
+                                let t = (self.cycle - since) as f64 * self.period_s;
+                                if t > a.enable_timeout_s() {
+                                    let mut late = LateAxes::default();
+                                    late.push(LateAxis {
+                                        axis: a.letter,
+                                        node: a.node,
+                                        state: states[i],
+                                        enable_timeout_ms: a.enable_timeout_ms,
+                                    });
+                                    self.fail(Alarm::Bit12Timeout { late });
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                }
+                if self.phase == Phase::DriveControl
+                    && self.control.iter().all(|c| *c == AxisControl::Cyclic)
+                {
+                    self.back_to_armed();
+                }
+            }
             Phase::Armed if self.motion.is_some() => {
                 for (f, h) in self.filters.iter_mut().zip(&self.sp_mm) {
                     if let Some(f) = f {
@@ -773,7 +1195,7 @@ impl CyclicMaster {
                 let prev = self.sp_mm[i][1];
                 let step = (target - prev).abs();
                 // Last line of defence; the plan is checked against these before motion starts.
-                if !(a.min_mm..=a.max_mm).contains(&target) {
+                if self.check_travel[i] && !(a.min_mm..=a.max_mm).contains(&target) {
                     let alarm = Alarm::OutsideTravel {
                         axis: a.letter,
                         setpoint_mm: target,
@@ -802,6 +1224,17 @@ impl CyclicMaster {
             if self.phase == Phase::Streaming && status == Some(Status::Finished) && filtered {
                 self.set_phase(Phase::Settling);
             }
+            // An abort: once held at standstill, settle where it stopped and hold there.
+            if self.phase == Phase::Streaming
+                && self.aborting
+                && filtered
+                && self
+                    .motion
+                    .as_ref()
+                    .is_some_and(Interpolator::is_standing_still)
+            {
+                self.set_phase(Phase::Settling);
+            }
             // A stop on the path: once held at standstill, settle where it stopped and disable.
             if self.phase == Phase::Streaming
                 && filtered
@@ -821,7 +1254,9 @@ impl CyclicMaster {
                         && (f.position - self.axes[i].to_counts(self.sp_mm[i][0])).abs() <= 1
                 })
             });
-            if settled {
+            if settled && self.service && self.stop_asked.is_none() && self.failure.is_none() {
+                self.back_to_armed();
+            } else if settled {
                 for e in &mut self.enablers {
                     e.set_bits(0);
                 }
@@ -851,7 +1286,9 @@ impl CyclicMaster {
                 self.sp_mm[i][0] = next;
                 moving |= nv != 0.0;
             }
-            if !moving {
+            if !moving && self.service && self.aborting && self.failure.is_none() {
+                self.set_phase(Phase::Settling);
+            } else if !moving {
                 self.start_disabling();
             }
         } else if self.phase == Phase::Disabling {
@@ -870,7 +1307,14 @@ impl CyclicMaster {
                 }
             }
             if all || self.phase_time_s() > STATE_TIMEOUT_S {
-                self.set_phase(Phase::Done);
+                if self.service {
+                    self.motion = None;
+                    self.aborting = false;
+                    self.control.iter_mut().for_each(|c| *c = AxisControl::Cyclic);
+                    self.set_phase(Phase::Disabled);
+                } else {
+                    self.set_phase(Phase::Done);
+                }
             }
         }
 
@@ -917,7 +1361,7 @@ impl CyclicMaster {
                 }
                 let a = &self.axes[i];
                 let cw = self.enablers[i].controlword();
-                let cw = if a.mode == AxisMode::Csp {
+                let cw = if a.mode == AxisMode::Csp && self.control[i] != AxisControl::DriveOp {
                     cw & !cwb::IP_ENABLE
                 } else {
                     cw
@@ -944,6 +1388,9 @@ mod tests {
         pos: i32,
         fault: bool,
         silent: bool,
+        /// In homing mode (6): bit 4 homes to this position (and sets bits 12 and 10), or
+        /// with `None`, reports a homing error (bit 13).
+        homing: Option<Option<i32>>,
     }
 
     impl FakeDrive {
@@ -957,12 +1404,20 @@ mod tests {
                 pos,
                 fault: false,
                 silent: false,
+                homing: None,
             }
         }
         fn statusword(&self) -> u16 {
             let mut sw = self.psm.statusword();
-            if self.psm.is_operation_enabled() && self.cw & cwb::IP_ENABLE != 0 {
-                sw |= swb::OP_MODE_SPECIFIC_12;
+            let bit4 = self.psm.is_operation_enabled() && self.cw & cwb::IP_ENABLE != 0;
+            match self.homing {
+                Some(Some(home)) if bit4 && self.pos == home => {
+                    sw |= swb::OP_MODE_SPECIFIC_12 | swb::TARGET_REACHED;
+                }
+                Some(None) if bit4 => sw |= swb::OP_MODE_SPECIFIC_13,
+                Some(_) => {}
+                None if bit4 => sw |= swb::OP_MODE_SPECIFIC_12,
+                None => {}
             }
             sw
         }
@@ -1007,7 +1462,16 @@ mod tests {
                     let dr = &mut self.drives[i];
                     dr.cw = u16::from_le_bytes([d[a.cw_off], d[a.cw_off + 1]]);
                     dr.psm.on_controlword(dr.cw);
-                    if dr.statusword() & swb::OP_MODE_SPECIFIC_12 != 0 {
+                    if let Some(home) = dr.homing {
+                        // Homing: the drive moves by itself, 1 count per cycle.
+                        if let Some(h) = home
+                            && dr.psm.is_operation_enabled()
+                            && dr.cw & cwb::IP_ENABLE != 0
+                        {
+                            dr.pos += (h - dr.pos).signum();
+                        }
+                        dr.latched = dr.pos;
+                    } else if dr.statusword() & swb::OP_MODE_SPECIFIC_12 != 0 {
                         dr.pos = dr.latched;
                         dr.latched =
                             i32::from_le_bytes(d[a.sp_off..a.sp_off + 4].try_into().unwrap());
@@ -1377,5 +1841,182 @@ mod tests {
             ),
             "{f}"
         );
+    }
+
+    fn service_rig() -> Rig {
+        let m = Machine::demo();
+        let mut r = Rig::with(&m);
+        r.master = CyclicMaster::service(&m);
+        r
+    }
+
+    fn with_ramp(i: Interpolator) -> Interpolator {
+        let m = Machine::demo();
+        let ramp = crate::interpolator::OverrideRamp::for_machine(
+            &crate::gateway::limits(&m),
+            &m.planner,
+        )
+        .unwrap();
+        i.with_override_ramp(ramp)
+    }
+
+    #[test]
+    fn a_service_master_stays_enabled_between_motions_until_disabled() {
+        let mut r = service_rig();
+        for _ in 0..20 {
+            r.step();
+        }
+        // Disabled: SYNC and RPDOs go on, the setpoints track position actual.
+        assert_eq!(r.master.phase(), Phase::Disabled);
+        assert_eq!(r.master.setpoint_counts(), vec![1000, -2000, 0]);
+        assert!(r.frames.len() == 4);
+        // Not before it is enabled.
+        let here = Vector3::new(1.0, -2.0, 0.0);
+        assert!(matches!(
+            r.master.start_motion(motion(here, "G1 X10 F3000\n")),
+            Err(Refusal::Phase { .. })
+        ));
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+        assert!(r.master.is_idle());
+        // A motion from elsewhere is refused.
+        assert!(matches!(
+            r.master.start_motion(motion(Vector3::zeros(), "G1 X10 F3000\n")),
+            Err(Refusal::StartMismatch { .. })
+        ));
+        r.master
+            .start_motion(motion(here, "G1 X10 F3000\n"))
+            .unwrap();
+        r.step();
+        assert_eq!(r.master.phase(), Phase::Streaming);
+        r.run_until(Phase::Armed, 5000);
+        // Holding where the motion ended, enabled, the drives following.
+        assert!(r.master.is_idle());
+        assert_eq!(r.master.setpoint_counts(), vec![10_000, -2000, 0]);
+        assert!(r.drives.iter().all(|d| d.psm.is_operation_enabled()));
+        // A second motion from there.
+        let here = r.master.armed_mm().unwrap();
+        assert_eq!(here, Vector3::new(10.0, -2.0, 0.0));
+        r.master
+            .start_motion(motion(here, "G1 Y3 F3000\n"))
+            .unwrap();
+        r.step();
+        r.run_until(Phase::Armed, 5000);
+        assert_eq!(r.master.setpoint_counts(), vec![10_000, 3000, 0]);
+        assert_eq!(r.master.failure(), None);
+        r.master.disable().unwrap();
+        r.run_until(Phase::Disabled, 100);
+        assert!(r.drives.iter().all(|d| !d.psm.is_operation_enabled()));
+        // And enabled again.
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+    }
+
+    #[test]
+    fn an_abort_stops_on_the_path_and_keeps_the_drives_enabled() {
+        let mut r = service_rig();
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+        let here = r.master.armed_mm().unwrap();
+        r.master
+            .start_motion(with_ramp(motion(here, "G1 X100 F6000\n")))
+            .unwrap();
+        for _ in 0..100 {
+            r.step();
+        }
+        r.master.abort();
+        assert!(r.master.is_aborting());
+        r.run_until(Phase::Armed, 2000);
+        assert_eq!(r.master.failure(), None);
+        let x = r.master.setpoint_mm()[0];
+        assert!(x > 1.5 && x < 100.0, "stopped at {x}");
+        // On the path: Y and Z never moved.
+        assert!(
+            r.records
+                .iter()
+                .filter(|c| matches!(c.phase, Phase::Streaming | Phase::Settling))
+                .all(|c| c.cmd_mm[1] == -2.0 && c.cmd_mm[2] == 0.0)
+        );
+        assert!(r.drives.iter().all(|d| d.psm.is_operation_enabled()));
+        assert!(!r.master.is_aborting());
+    }
+
+    #[test]
+    fn a_fault_leaves_a_service_master_disabled_with_its_alarm_until_reset() {
+        let mut r = service_rig();
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+        r.drives[1].fault = true;
+        r.run_until(Phase::Disabled, 200);
+        assert!(matches!(
+            r.master.failure().map(|f| &f.alarm),
+            Some(Alarm::DriveFault { node: 2, .. })
+        ));
+        // The drive stays in Fault while the alarm stands.
+        r.drives[1].fault = false;
+        for _ in 0..20 {
+            r.step();
+        }
+        assert_eq!(r.drives[1].psm.state(), State::Fault);
+        assert_eq!(r.master.enable(), Err(Refusal::Alarm));
+        r.master.reset_alarm().unwrap();
+        for _ in 0..40 {
+            r.step();
+        }
+        assert_eq!(r.drives[1].psm.state(), State::SwitchOnDisabled);
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+        assert_eq!(r.master.failure(), None);
+    }
+
+    #[test]
+    fn homing_hands_an_axis_to_its_drive_and_back_without_a_jump() {
+        let mut r = service_rig();
+        r.master.enable().unwrap();
+        r.run_until(Phase::Armed, 40);
+        // Z (axis 2) homes; X and Y hold.
+        r.master.release(0b100).unwrap();
+        assert_eq!(r.master.phase(), Phase::DriveControl);
+        for _ in 0..3 {
+            r.step();
+        }
+        assert!(r.master.released(0b100));
+        // The mode changes to homing (SDO, not modelled here), then bit 4 starts it.
+        r.drives[2].homing = Some(Some(25));
+        r.master.start_drive_op(0b100);
+        let mut n = 0;
+        while r.master.drive_op_status(2) != Some(DriveOpStatus::Attained) {
+            assert_eq!(r.master.drive_op_status(2), Some(DriveOpStatus::InProgress));
+            r.step();
+            n += 1;
+            assert!(n < 100);
+            // The setpoint follows the drive's own motion.
+            let sp = r.master.setpoint_counts()[2];
+            assert!((sp - r.drives[2].pos).abs() <= 1, "{sp} {}", r.drives[2].pos);
+        }
+        assert_eq!(r.drives[2].pos, 25);
+        r.master.end_drive_op(0b100);
+        r.step();
+        r.drives[2].homing = None;
+        r.master.rearm(0b100);
+        r.run_until(Phase::Armed, 20);
+        assert_eq!(r.master.setpoint_counts(), vec![1000, -2000, 25]);
+        assert_eq!(r.master.armed_mm().unwrap()[2], 25.0 / 2000.0);
+        assert_eq!(r.master.failure(), None);
+        // A homing error is the drive's answer, not an alarm.
+        r.master.release(0b001).unwrap();
+        for _ in 0..3 {
+            r.step();
+        }
+        r.drives[0].homing = Some(None);
+        r.master.start_drive_op(0b001);
+        for _ in 0..3 {
+            r.step();
+        }
+        assert!(matches!(
+            r.master.drive_op_status(0),
+            Some(DriveOpStatus::Error { statusword }) if statusword & swb::OP_MODE_SPECIFIC_13 != 0
+        ));
+        assert_eq!(r.master.failure(), None);
     }
 }
