@@ -952,6 +952,7 @@ pub fn compensate_program(program: &Program, options: CompOptions) -> Result<Pro
         items,
         notes: program.notes.clone(),
         end: program.end,
+        carry: program.carry.clone(),
     })
 }
 

@@ -149,7 +149,7 @@ impl Spindle {
 }
 
 /// A sticky cycle value as written (program units), with the units it was written in.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Written {
     value: f64,
     inch: bool,
@@ -167,7 +167,7 @@ impl Written {
 
 /// What canned cycles keep from line to line (LinuxCNC's `cycle_r`, `cycle_cc`, `cycle_q`,
 /// `cycle_p`, `cycle_il`).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(super) struct CycleState {
     r: Option<Written>,
     bottom: Option<Written>,

@@ -108,7 +108,7 @@ pub(super) enum ParamRef {
     Name(String),
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct Scope {
     /// `#1` … `#30`.
     locals: [f64; 30],
@@ -125,7 +125,7 @@ impl Scope {
 }
 
 /// The parameter store: global numbered and named parameters, and a scope per call level.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub(super) struct Params {
     numbered: HashMap<u32, f64>,
     global: HashMap<String, f64>,
@@ -268,6 +268,22 @@ impl Params {
             }
         }
         Ok(())
+    }
+
+    /// What lives on into the next interpretation on the machine (`gcode::Carry`): the
+    /// numbered parameters, the named globals, the main program's scope and the last return
+    /// value; not the call scopes, nor the system and predefined values (the next
+    /// interpreter sets them from its own state).
+    pub fn carried(&self) -> Params {
+        Params {
+            numbered: self.numbered.clone(),
+            global: self.global.clone(),
+            scopes: vec![self.scopes.first().cloned().unwrap_or_else(Scope::new)],
+            system: HashMap::new(),
+            predefined: [0.0; PREDEFINED.len()],
+            return_value: self.return_value,
+            value_returned: self.value_returned,
+        }
     }
 
     /// Enters a subroutine: new locals, `#1`… set to the call's arguments.

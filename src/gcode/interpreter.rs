@@ -49,6 +49,11 @@ mod cycles;
 pub use cycles::MAX_CYCLE_ITEMS;
 use cycles::{Cycle, CycleState, Spindle};
 
+// The state carried from one interpretation to the next (`serve`'s MDI lines and jobs).
+#[path = "carry.rs"]
+mod carry;
+pub use carry::Carry;
+
 // G5/G5.1, also a child module extending `State`.
 #[path = "splines.rs"]
 mod splines;
@@ -107,6 +112,12 @@ pub struct Setup {
     /// Largest distance between a G5/G5.1 spline and the lines it is sampled into (the
     /// planner's `chord_tol_mm`). Default [`DEFAULT_SPLINE_TOL_MM`].
     pub spline_tol_mm: f64,
+    /// The state an earlier interpretation on this machine left ([`Program::carry`](super::Program::carry),
+    /// [`Interpreter::carry`]): the modal state, offsets, tools and parameters start from it,
+    /// and its work offsets, G28/G30 positions, tool table and loaded tool replace this
+    /// setup's. The position is still [`Setup::start_mm`] (where the machine is). Default
+    /// `None`: the defaults above, as at power-on.
+    pub carry: Option<Carry>,
 }
 
 /// The default of [`Setup::spline_tol_mm`]: 1 µm, the planner's default chord tolerance.
@@ -134,6 +145,7 @@ impl Setup {
             subroutine_path: Vec::new(),
             m99_restarts: 0,
             spline_tol_mm: DEFAULT_SPLINE_TOL_MM,
+            carry: None,
         }
     }
 
@@ -234,7 +246,7 @@ struct Modal {
 }
 
 /// A saved modal state, and whether it comes back when its subroutine returns (M73).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 struct Saved {
     modal: Modal,
     auto_restore: bool,
@@ -1976,15 +1988,21 @@ pub struct Interpreter<R> {
     code_seen: bool,
     done: bool,
     pending_error: Option<Error>,
+    /// An MDI line ([`Interpreter::mdi`]): what needs later lines is refused.
+    mdi: bool,
 }
+
+/// The name an MDI line goes by in errors and items' file (`MDI:1:7: ...`).
+pub const MDI_FILE: &str = "MDI";
 
 impl<R: BufRead> Interpreter<R> {
     /// An interpreter reading `reader` (named `file` in errors), starting from `setup`.
     ///
     /// A bad setup (a position that is not finite, a tolerance ≤ 0) is reported as the first
     /// item, an error at line 0.
-    pub fn new(reader: R, file: impl Into<String>, setup: Setup) -> Interpreter<R> {
+    pub fn new(reader: R, file: impl Into<String>, mut setup: Setup) -> Interpreter<R> {
         let file = file.into();
+        let carry = setup.carry.take();
         let pending_error = setup.validate().err().map(|kind| Error {
             file: file.clone(),
             line: 0,
@@ -1995,13 +2013,20 @@ impl<R: BufRead> Interpreter<R> {
         let main_file: Rc<str> = Rc::from(file.as_str());
         let subroutine_path = setup.subroutine_path.clone();
         let restarts_left = setup.m99_restarts;
+        let start_mm = setup.start_mm;
+        let block_delete = setup.block_delete;
+        let mut state = State::new(setup);
+        let params = match carry {
+            Some(carry) => state.resume(carry),
+            None => Params::default(),
+        };
         Interpreter {
             reader,
             file,
-            start_mm: setup.start_mm,
-            block_delete: setup.block_delete,
-            state: State::new(setup),
-            params: Params::default(),
+            start_mm,
+            block_delete,
+            state,
+            params,
             scanner: Scanner::default(),
             buf: Vec::new(),
             line_text: String::new(),
@@ -2026,7 +2051,31 @@ impl<R: BufRead> Interpreter<R> {
             code_seen: false,
             done: false,
             pending_error,
+            mdi: false,
         }
+    }
+
+    /// An interpreter of MDI input (`canmotion serve`'s `mdi` command): `reader` holds one
+    /// line (or a few, each a block), named [`MDI_FILE`] in errors, run from `setup` (with
+    /// [`Setup::carry`] set to what the last MDI line or program left).
+    ///
+    /// What needs lines that MDI input does not have is refused as
+    /// [`ErrorKind::Unsupported`] with its line and column: subroutine definitions (`o… sub`,
+    /// `O100` subprograms), M98/M99, and cutter compensation (G41/G42/G41.1/G42.1: the
+    /// compensation stage joins an offset element to the *next* one, which an MDI line
+    /// never has, and cancels compensation at the end of each stream, so every MDI move
+    /// would be an entry move; LinuxCNC's path would differ, so none is made). G40 is
+    /// accepted. `o<name> call` of a subroutine file is accepted.
+    pub fn mdi(reader: R, setup: Setup) -> Interpreter<R> {
+        let mut interpreter = Interpreter::new(reader, MDI_FILE, setup);
+        interpreter.mdi = true;
+        interpreter
+    }
+
+    /// What this interpretation leaves for the next one on the machine, as of the line read
+    /// last: after M2/M30, with their resets. Give it to the next [`Setup::carry`].
+    pub fn carry(&self) -> Carry {
+        self.state.carry(&self.params)
     }
 
     /// The name given for the source.
@@ -2342,6 +2391,9 @@ impl<R: BufRead> Interpreter<R> {
                 if !self.scanner.words.is_empty() {
                     let block =
                         Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
+                    if self.mdi && !in_frame {
+                        self.check_mdi(&block)?;
+                    }
                     let first_item = self.queue.len();
                     flow = self
                         .state
@@ -2364,6 +2416,9 @@ impl<R: BufRead> Interpreter<R> {
                 match flow {
                     Flow::Next => {}
                     Flow::End(end) => {
+                        if matches!(end, ProgramEnd::M2 { .. } | ProgramEnd::M30 { .. }) {
+                            self.state.program_end();
+                        }
                         self.queue.push_back(Item::End(end));
                         self.done = true;
                     }
@@ -2377,6 +2432,30 @@ impl<R: BufRead> Interpreter<R> {
                     self.control(control, line, text, in_frame, pending)?;
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Refuses in MDI input what needs lines it does not have (see [`Interpreter::mdi`]);
+    /// lines of a subroutine file called from MDI run as in a program.
+    fn check_mdi(&self, b: &Block) -> Result<(), Error> {
+        if let Some(code) = b.comp().filter(|c| c.tenths != 400) {
+            return Err(self.error(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!("cutter compensation in MDI ({code})"),
+                    reason: "compensation joins each move to the next one, which an MDI line does not have: run it in a program",
+                },
+            ));
+        }
+        if let Some(code) = b.stop().filter(|c| matches!(c.tenths, 980 | 990)) {
+            return Err(self.error(
+                code.col,
+                ErrorKind::Unsupported {
+                    what: format!("{code} in MDI"),
+                    reason: "numbered subprograms live in a program file: run it as a program",
+                },
+            ));
         }
         Ok(())
     }
@@ -2590,6 +2669,15 @@ impl<R: BufRead> Interpreter<R> {
     /// `O<number>` after the program started: stores the lines up to and including the next
     /// line with M99 as subprogram `number` and goes on after them.
     fn define_m98(&mut self, number: u32, in_frame: bool) -> Result<(), Error> {
+        if self.mdi && !in_frame {
+            return Err(self.error(
+                1,
+                ErrorKind::Unsupported {
+                    what: "subprogram definitions in MDI".to_owned(),
+                    reason: "numbered subprograms live in a program file: run it as a program",
+                },
+            ));
+        }
         let label = Label::Number(number);
         let mut body = Vec::new();
         let file;
@@ -2799,6 +2887,15 @@ impl<R: BufRead> Interpreter<R> {
         // Index of this line in the innermost frame.
         let here = self.frames.last().map_or(0, |f| f.pc.saturating_sub(1));
         match c.keyword {
+            Sub if self.mdi && !in_frame => {
+                return Err(self.error(
+                    c.col,
+                    ErrorKind::Unsupported {
+                        what: "subroutine definitions in MDI".to_owned(),
+                        reason: "define the subroutine in a file on the subroutine_path, or run it as a program",
+                    },
+                ));
+            }
             Sub => {
                 let mut body = Vec::new();
                 let mut file = self.main_file.clone();

@@ -85,9 +85,9 @@ pub use element::{
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interpreter::{
-    DEFAULT_SPLINE_TOL_MM, Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES,
-    MAX_LINE_BYTES, MAX_POSITION_MM, MAX_SPLINE_SEGMENTS, MAX_STORED_BYTES, MIN_ARC_RADIUS_MM,
-    MIN_SPLINE_TOL_MM, Setup,
+    Carry, DEFAULT_SPLINE_TOL_MM, Interpreter, MAX_CALL_DEPTH, MAX_CYCLE_ITEMS, MAX_IDLE_LINES,
+    MAX_LINE_BYTES, MAX_POSITION_MM, MAX_SPLINE_SEGMENTS, MAX_STORED_BYTES, MDI_FILE,
+    MIN_ARC_RADIUS_MM, MIN_SPLINE_TOL_MM, Setup,
 };
 pub use lex::MAX_ABS_VALUE;
 pub use tool_table::{MAX_TOOL_NUMBER, MAX_TOOL_SIZE_MM, Tool, ToolTable};
@@ -209,26 +209,30 @@ pub struct Program {
     pub notes: Vec<Note>,
     /// How the program ended.
     pub end: ProgramEnd,
+    /// The state after the last item (after M2/M30's resets if it ended so), for the next
+    /// interpretation on the machine ([`Setup::carry`]).
+    pub carry: Carry,
 }
 
 impl Program {
     /// Runs an interpreter to the end and collects its output; the first error stops it.
-    pub fn collect<R: BufRead>(interpreter: Interpreter<R>) -> Result<Program, Error> {
-        let mut program = Program {
-            file: interpreter.file().to_owned(),
-            start_mm: interpreter.start_mm(),
-            items: Vec::new(),
-            notes: Vec::new(),
-            end: ProgramEnd::EndOfText,
-        };
-        for item in interpreter {
+    pub fn collect<R: BufRead>(mut interpreter: Interpreter<R>) -> Result<Program, Error> {
+        let (mut items, mut notes, mut end) = (Vec::new(), Vec::new(), ProgramEnd::EndOfText);
+        for item in interpreter.by_ref() {
             match item? {
-                Item::Note(note) => program.notes.push(note),
-                Item::End(end) => program.end = end,
-                other => program.items.push(other),
+                Item::Note(note) => notes.push(note),
+                Item::End(e) => end = e,
+                other => items.push(other),
             }
         }
-        Ok(program)
+        Ok(Program {
+            file: interpreter.file().to_owned(),
+            start_mm: interpreter.start_mm(),
+            items,
+            notes,
+            end,
+            carry: interpreter.carry(),
+        })
     }
 
     /// The motion elements in order.
@@ -256,6 +260,15 @@ pub fn parse_program(text: &str, file: &str, start_mm: Vector3<f64>) -> Result<P
 /// [`parse_program`] with a full [`Setup`] (work offsets, tool table, G28 position...).
 pub fn parse_program_with(text: &str, file: &str, setup: Setup) -> Result<Program, Error> {
     Program::collect(Interpreter::new(text.as_bytes(), file, setup))
+}
+
+/// Interprets MDI input (one line, or a few, each a block) as a program named [`MDI_FILE`]
+/// (errors read `MDI:1:col: ...`), from `setup` with [`Setup::carry`] set to what the last MDI
+/// line or program left; the result's [`Program::carry`] is for the next one. A line that is
+/// empty or only a comment gives no items and carries the state through. What MDI refuses:
+/// [`Interpreter::mdi`]. On an error nothing ran: keep the carry you had.
+pub fn parse_mdi(text: &str, setup: Setup) -> Result<Program, Error> {
+    Program::collect(Interpreter::mdi(text.as_bytes(), setup))
 }
 
 /// An error: where it is and what is wrong. Displays as `file:line:col: message`, or
