@@ -105,6 +105,9 @@ pub const VELOCITY_ACTUAL: u16 = 0x606C;
 /// Target position (INT32): the CSP setpoint, sent every SYNC (CiA 402-2, profile position
 /// mode; cyclic synchronous position mode).
 pub const TARGET_POSITION: u16 = 0x607A;
+/// Home offset (INT32), position units: the position actual value the drive reports at the
+/// home position once homing is attained (CiA 402-2, homing mode: home offset).
+pub const HOME_OFFSET: u16 = 0x607C;
 /// Software position limit (ARRAY INT32): sub 1 minimum, sub 2 maximum (CiA 402-2, profile
 /// position mode).
 pub const SOFTWARE_POSITION_LIMIT: u16 = 0x607D;
@@ -124,6 +127,15 @@ pub const POSITION_ENCODER_RESOLUTION: u16 = 0x608F;
 pub const GEAR_RATIO: u16 = 0x6091;
 /// Feed constant (ARRAY UNSIGNED32) (CiA 402-2, factor group).
 pub const FEED_CONSTANT: u16 = 0x6092;
+/// Homing method (INTEGER8): 17/18 limit switches, 19–22 home switch, 35/37 the current
+/// position (CiA 402-2, homing mode: homing method).
+pub const HOMING_METHOD: u16 = 0x6098;
+/// Homing speeds (ARRAY UNSIGNED32), velocity units: sub 1 the search for the switch, sub 2
+/// the search for zero (CiA 402-2, homing mode: homing speeds).
+pub const HOMING_SPEEDS: u16 = 0x6099;
+/// Homing acceleration (UNSIGNED32), acceleration units: the ramp of every homing motion
+/// (CiA 402-2, homing mode: homing acceleration).
+pub const HOMING_ACCELERATION: u16 = 0x609A;
 /// Interpolation sub mode select (INT16): 0 linear (CiA 402-2, interpolated position mode).
 pub const IP_SUBMODE: u16 = 0x60C0;
 /// Interpolation data record (ARRAY): sub 1 the INT32 position setpoint (CiA 402-2,
@@ -136,6 +148,9 @@ pub const IP_TIME_PERIOD: u16 = 0x60C2;
 pub const IP_DATA_CONFIG: u16 = 0x60C4;
 /// Max acceleration (UNSIGNED32), acceleration units (CiA 402-2, profile position mode).
 pub const MAX_ACCELERATION: u16 = 0x60C5;
+/// Supported homing methods (ARRAY INTEGER8): sub 0 the count, then one method per sub
+/// (CiA 402-2, homing mode: supported homing methods).
+pub const SUPPORTED_HOMING_METHODS: u16 = 0x60E3;
 /// Following error actual value (INT32), position units (CiA 402-2, position control
 /// function).
 pub const FOLLOWING_ERROR_ACTUAL: u16 = 0x60F4;

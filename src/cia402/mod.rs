@@ -90,6 +90,10 @@ pub mod statusword {
     pub const OP_MODE_SPECIFIC_12: u16 = 1 << 12;
     /// Bit 13: operation-mode specific (CSP/PP: following error).
     pub const OP_MODE_SPECIFIC_13: u16 = 1 << 13;
+    /// Bit 12 in homing mode (6): homing attained (CiA 402-2, homing mode: statusword).
+    pub const HOMING_ATTAINED: u16 = 1 << 12;
+    /// Bit 13 in homing mode (6): homing error (CiA 402-2, homing mode: statusword).
+    pub const HOMING_ERROR: u16 = 1 << 13;
     /// The bits that code the power state (0–3, 5, 6); see [`STATE_CODING`](super::STATE_CODING).
     pub const STATE_MASK: u16 = 0x006F;
 }
@@ -108,6 +112,9 @@ pub mod controlword {
     pub const IP_ENABLE: u16 = 1 << 4;
     /// Bit 4 under its profile-position name.
     pub const NEW_SETPOINT: u16 = 1 << 4;
+    /// Bit 4 in homing mode (6): homing operation start; its rising edge starts homing,
+    /// clearing it interrupts homing (CiA 402-2, homing mode: controlword).
+    pub const HOMING_START: u16 = 1 << 4;
     /// Bit 7: fault reset, acts on the 0 → 1 edge.
     pub const FAULT_RESET: u16 = 1 << 7;
     /// Bit 8: halt.

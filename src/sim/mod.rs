@@ -4,7 +4,8 @@
 //! CiA 301, enforces the PDO remap procedure, follows SYNC (synchronous RPDOs take effect at the
 //! next SYNC, synchronous TPDOs are sent on it), produces and consumes heartbeats, and runs the
 //! CiA 402 power state machine with interpolated position (mode 7, linear sub-mode 0) and cyclic
-//! synchronous position (mode 8) over a position loop with lag and velocity/acceleration limits.
+//! synchronous position (mode 8) over a position loop with lag and velocity/acceleration limits,
+//! and homing (mode 6, [`homing`]) on simulated home and limit switches ([`SimSetup`]).
 //!
 //! Time is an argument (`now`, a [`Duration`] since any fixed origin): the same drive runs in
 //! unit tests with a made-up clock, in-process next to the gateway, and on vcan0 as
@@ -12,6 +13,7 @@
 //!
 //! Units of the motion model are the drive's: counts, counts/s, counts/s².
 
+pub mod homing;
 pub mod inject;
 pub mod runner;
 
@@ -29,6 +31,7 @@ use crate::canopen::sdo_server::{SdoServer, SdoTarget};
 use crate::canopen::{AbortCode, NmtState, cob, nmt};
 use crate::cia402::{PowerStateMachine, State, controlword as cw_bits, statusword as sw};
 use crate::config::machine::MapEntry;
+pub use homing::{HomingStatus, SimSetup};
 pub use inject::{Inject, Targeted};
 
 /// Position loop gain (1/s): the actual position approaches the demand with a ~5 ms time constant.
@@ -128,6 +131,13 @@ pub struct SimDrive {
     warning: bool,
     /// When the controlword first asked for Operation enabled ([`Inject::SlowEnable`]).
     enable_asked_at: Option<Duration>,
+    /// The simulated axis: where its switches are.
+    setup: SimSetup,
+    /// Physical position (where the switches are) minus the reported position, counts: homing
+    /// moves the reported frame so that the home position reads 0x607C.
+    origin: f64,
+    /// Homing mode's state.
+    homing: homing::HomingRun,
 }
 
 fn rpdo_base(n: usize) -> u16 {
@@ -185,7 +195,33 @@ impl SimDrive {
             bus_errors: Vec::new(),
             warning: false,
             enable_asked_at: None,
+            setup: SimSetup::default(),
+            origin: 0.0,
+            homing: homing::HomingRun::default(),
         }
+    }
+
+    /// The simulated axis's switches and start position (see [`SimSetup`]).
+    pub fn with_sim_setup(mut self, setup: SimSetup) -> SimDrive {
+        self.setup = setup;
+        self.origin = 0.0;
+        self.with_position(setup.start_counts)
+    }
+
+    /// Where homing (mode 6) stands.
+    pub fn homing_status(&self) -> HomingStatus {
+        self.homing.status
+    }
+
+    /// A fresh drive (a reset of the node) on the same motor: the motor does not move, and the
+    /// switches stay where they are; homing is lost.
+    fn reset_keeping_motor(&mut self) {
+        let (pos, origin, setup) = (self.pos, self.origin, self.setup);
+        *self = SimDrive::new(self.od.dictionary().clone(), self.node);
+        self.pos = pos;
+        self.demand = pos;
+        self.origin = origin;
+        self.setup = setup;
     }
 
     /// Start with the motor at `counts` (where the machine was left).
@@ -228,10 +264,8 @@ impl SimDrive {
                 Inject::FollowingError { .. } => self.jammed = true,
                 Inject::Silent { .. } => self.silent = true,
                 Inject::Reboot { .. } => {
-                    let (pos, injects) = (self.pos, std::mem::take(&mut self.injects));
-                    *self = SimDrive::new(self.od.dictionary().clone(), self.node);
-                    self.pos = pos;
-                    self.demand = pos;
+                    let injects = std::mem::take(&mut self.injects);
+                    self.reset_keeping_motor();
                     self.injects = injects;
                     self.boot(now, out);
                     return;
@@ -637,10 +671,7 @@ impl SimDrive {
                 self.nmt = NmtState::PreOperational;
             }
             nmt::RESET_NODE => {
-                let pos = self.pos;
-                *self = SimDrive::new(self.od.dictionary().clone(), self.node);
-                self.pos = pos;
-                self.demand = pos;
+                self.reset_keeping_motor();
                 self.boot(now, out);
             }
             nmt::RESET_COMMUNICATION => {
@@ -796,6 +827,18 @@ impl SimDrive {
         d
     }
 
+    /// The homing methods 0x60E3 lists, or all this drive runs if its dictionary has no 0x60E3.
+    fn supported_homing_methods(&self) -> Vec<i8> {
+        if self.od.get(index::SUPPORTED_HOMING_METHODS, 0).is_none() {
+            return homing::SUPPORTED_METHODS.to_vec();
+        }
+        let n = self.od.int(index::SUPPORTED_HOMING_METHODS, 0) as u8;
+        (1..=n)
+            .map(|s| self.od.int(index::SUPPORTED_HOMING_METHODS, s) as i8)
+            .filter(|m| homing::SUPPORTED_METHODS.contains(m))
+            .collect()
+    }
+
     /// The mode in force (0x6061).
     fn mode(&self) -> i8 {
         self.od.int(index::MODES_DISPLAY, 0) as i8
@@ -835,9 +878,19 @@ impl SimDrive {
                 // cyclic RPDO (python-canopen's BaseNode402 does) rewrite the same mode every SYNC.
                 let m = self.od.int(index::MODES_OF_OPERATION, 0);
                 if m != self.od.int(index::MODES_DISPLAY, 0) {
+                    if self.mode() == 6 {
+                        // Bumpless out of homing: the IP buffer and the CSP target start where
+                        // the drive holds (the master sends position actual next).
+                        let hold = self.demand.round() as i64;
+                        self.od.set_int(index::IP_DATA_RECORD, 1, hold);
+                        self.od.set_int(index::TARGET_POSITION, 0, hold);
+                    }
                     self.od.set_int(index::MODES_DISPLAY, 0, m);
                     self.ip_active = false;
                     self.interp = None;
+                    self.homing.v = 0.0;
+                    self.homing.stopping = false;
+                    self.leave_homing_if_disabled();
                 }
             }
             (index::QUICK_STOP_OPTION, 0) => {
@@ -885,6 +938,8 @@ impl SimDrive {
             self.demand = self.pos;
             self.vel = 0.0;
             self.interp = None;
+            self.homing.v = 0.0;
+            self.homing.stopping = false;
         }
         if was_fault && self.power.state() != State::Fault {
             self.ferr_flag = false;
@@ -920,7 +975,134 @@ impl SimDrive {
         } else {
             self.ip_active = false;
         }
+        // Homing: bit 4's rising edge starts it; bit 4 cleared or halt (bit 8) interrupts it.
+        let halt = cw & cw_bits::HALT != 0;
+        if self.mode() == 6 && self.power.is_operation_enabled() {
+            if bit4 && !was4 && !halt {
+                self.start_homing();
+            } else if (!bit4 || halt) && self.homing.status == HomingStatus::InProgress {
+                self.homing.stop(HomingStatus::Interrupted);
+            }
+        }
+        self.leave_homing_if_disabled();
         self.refresh();
+    }
+
+    /// Leaving Operation enabled (or mode 6) ends a homing run: the power stage stops the motor.
+    fn leave_homing_if_disabled(&mut self) {
+        if (!self.power.is_operation_enabled() || self.mode() != 6)
+            && (self.homing.status == HomingStatus::InProgress || self.homing.stopping)
+        {
+            if self.homing.status == HomingStatus::InProgress {
+                self.homing.status = HomingStatus::Interrupted;
+            }
+            self.homing.v = 0.0;
+            self.homing.stopping = false;
+            self.homing.goto = None;
+        }
+    }
+
+    /// Start the method in 0x6098 from where the motor is.
+    fn start_homing(&mut self) {
+        let x = self.pos + self.origin;
+        let limits = match self.setup.limit_switches_counts {
+            Some([lo, hi]) => [f64::from(lo), f64::from(hi)],
+            None => {
+                let lo = self.od.int(index::SOFTWARE_POSITION_LIMIT, 1) as f64;
+                let hi = self.od.int(index::SOFTWARE_POSITION_LIMIT, 2) as f64;
+                [lo.min(hi) + self.origin, hi.max(lo) + self.origin]
+            }
+        };
+        let switches = homing::Switches {
+            home: self.setup.home_switch_counts.map(f64::from),
+            limits,
+        };
+        let method = self.od.int(index::HOMING_METHOD, 0) as i8;
+        self.homing = homing::HomingRun {
+            status: HomingStatus::InProgress,
+            switches,
+            v: self.homing.v,
+            ..Default::default()
+        };
+        match method {
+            35 | 37 => {
+                self.set_home(x);
+                self.homing.status = HomingStatus::Attained;
+            }
+            m => match homing::legs(m, &switches, x) {
+                Some(legs) => self.homing.legs = legs,
+                None => self.homing.stop(HomingStatus::Error),
+            },
+        }
+    }
+
+    /// The physical position `edge` is the home: from now on it reads 0x607C.
+    fn set_home(&mut self, edge: f64) {
+        let offset = self.od.int(index::HOME_OFFSET, 0) as f64;
+        let delta = offset - (edge - self.origin);
+        self.pos += delta;
+        self.demand += delta;
+        self.origin -= delta;
+        self.interp = None;
+    }
+
+    /// One physics step of homing: advance the demand the drive generates itself; its
+    /// velocity (the feed-forward).
+    fn homing_step(&mut self, dt: f64) -> f64 {
+        let vmax = self.od.int(index::MAX_PROFILE_VELOCITY, 0).max(1) as f64;
+        let acc = self.od.int(index::HOMING_ACCELERATION, 0).max(1) as f64;
+        let fast = (self.od.int(index::HOMING_SPEEDS, 1).max(1) as f64).min(vmax);
+        let slow = (self.od.int(index::HOMING_SPEEDS, 2).max(1) as f64).min(vmax);
+        let h = &mut self.homing;
+        if h.status == HomingStatus::InProgress && !h.stopping {
+            if let Some(target) = h.goto {
+                let (v, done) = homing::approach(self.demand, h.v, target, slow, acc, dt);
+                if done {
+                    self.demand = target;
+                    h.v = 0.0;
+                    h.goto = None;
+                    h.status = HomingStatus::Attained;
+                } else {
+                    h.v = v;
+                    self.demand += v * dt;
+                }
+                return h.v;
+            }
+            let x = self.pos + self.origin;
+            let leg = h.legs[h.leg];
+            let beyond = if leg.dir < 0.0 {
+                homing::Switch::NegativeLimit
+            } else {
+                homing::Switch::PositiveLimit
+            };
+            if h.switches.active(leg.switch, x) == leg.until {
+                if h.leg + 1 < h.legs.len() {
+                    h.leg += 1;
+                } else {
+                    let edge = h.switches.edge(leg.switch).unwrap_or(x);
+                    self.set_home(edge);
+                    let offset = self.od.int(index::HOME_OFFSET, 0) as f64;
+                    self.homing.goto = Some(offset);
+                    return self.homing_step(dt);
+                }
+            } else if beyond != leg.switch && h.switches.active(beyond, x) {
+                // The search reached the end of the travel: the switch is not there.
+                h.stop(HomingStatus::Error);
+            }
+        }
+        let h = &mut self.homing;
+        let target = if h.status == HomingStatus::InProgress && !h.stopping {
+            let leg = h.legs[h.leg];
+            leg.dir * if leg.fast { fast } else { slow }
+        } else {
+            0.0
+        };
+        h.v = homing::ramp(h.v, target, acc, dt);
+        if h.stopping && h.v == 0.0 {
+            h.stopping = false;
+        }
+        self.demand += h.v * dt;
+        h.v
     }
 
     /// Time in which the simulated world did not run (the thread that runs it was descheduled
@@ -959,6 +1141,7 @@ impl SimDrive {
     }
 
     fn step(&mut self, t: Duration, dt: f64, out: &mut Vec<Frame>) {
+        self.leave_homing_if_disabled();
         let vmax = self.od.int(index::MAX_PROFILE_VELOCITY, 0).max(1) as f64;
         // 0x60C5 limits the acceleration in every mode (0x6083 is the profile modes' ramp); a
         // dictionary without it gets the motor's own limit.
@@ -969,7 +1152,10 @@ impl SimDrive {
         match self.power.state() {
             State::OperationEnabled => {
                 let mut v_ff = 0.0;
-                if let Some(ip) = self.interp {
+                let homing_mode = self.mode() == 6;
+                if homing_mode {
+                    v_ff = self.homing_step(dt);
+                } else if let Some(ip) = self.interp {
                     let period = self
                         .ip_period()
                         .or(self.sync_period())
@@ -985,7 +1171,7 @@ impl SimDrive {
                 // when latched; a limit written since applies here).
                 let lo = self.od.int(index::SOFTWARE_POSITION_LIMIT, 1) as f64;
                 let hi = self.od.int(index::SOFTWARE_POSITION_LIMIT, 2) as f64;
-                if !(lo.min(hi)..=hi.max(lo)).contains(&self.demand) {
+                if !homing_mode && !(lo.min(hi)..=hi.max(lo)).contains(&self.demand) {
                     self.limit_flag = true;
                     self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
                     v_ff = 0.0;
@@ -1054,16 +1240,32 @@ impl SimDrive {
         if self.warning {
             s |= sw::WARNING;
         }
-        match self.mode() {
-            7 if enabled && self.ip_active => s |= sw::OP_MODE_SPECIFIC_12,
-            8 if enabled => s |= sw::OP_MODE_SPECIFIC_12,
-            _ => {}
-        }
-        if s & sw::OP_MODE_SPECIFIC_12 != 0 && self.motion_since.is_none() {
-            self.motion_since = self.last_physics;
+        let following = match self.mode() {
+            7 => enabled && self.ip_active,
+            8 => enabled,
+            _ => false,
+        };
+        if following {
+            s |= sw::OP_MODE_SPECIFIC_12;
+            if self.motion_since.is_none() {
+                self.motion_since = self.last_physics;
+            }
         }
         let window = self.od.int(index::POSITION_WINDOW, 0) as f64;
-        if (self.demand - self.pos).abs() <= window && self.vel.abs() < 1.0 {
+        let reached = (self.demand - self.pos).abs() <= window && self.vel.abs() < 1.0;
+        if self.mode() == 6 && enabled {
+            // CiA 402-2 homing statusword: bits 13/12/10.
+            let standstill = reached && self.homing.v == 0.0;
+            s |= match self.homing.status {
+                HomingStatus::InProgress => 0,
+                HomingStatus::NotStarted | HomingStatus::Interrupted => 0,
+                HomingStatus::Attained => sw::HOMING_ATTAINED,
+                HomingStatus::Error => sw::HOMING_ERROR,
+            };
+            if standstill && self.homing.status != HomingStatus::InProgress {
+                s |= sw::TARGET_REACHED;
+            }
+        } else if reached {
             s |= sw::TARGET_REACHED;
         }
         self.od.set_int(index::STATUSWORD, 0, i64::from(s));
@@ -1198,13 +1400,32 @@ impl SimDrive {
                 if x != 0 && (!(1..=32).contains(&x) || supported & (1 << (x - 1)) == 0) {
                     return Err(AbortCode::INVALID_VALUE);
                 }
+                // Streaming setpoints (IP active, CSP) changes mode only to homing (CiA 402
+                // allows a change at any time; a change between the cyclic modes mid-stream
+                // would jump); a homing run in motion is not left.
                 if self.power.is_operation_enabled()
                     && (self.ip_active || self.mode() == 8)
+                    && x as i8 != self.mode()
+                    && x != 6
+                {
+                    return Err(AbortCode::DEVICE_STATE);
+                }
+                if (self.homing.status == HomingStatus::InProgress || self.homing.stopping)
                     && x as i8 != self.mode()
                 {
                     return Err(AbortCode::DEVICE_STATE);
                 }
                 Ok(())
+            }
+            (index::HOMING_METHOD, 0) => {
+                if self.homing.status == HomingStatus::InProgress {
+                    return Err(AbortCode::DEVICE_STATE);
+                }
+                if self.supported_homing_methods().contains(&(x as i8)) {
+                    Ok(())
+                } else {
+                    Err(AbortCode::INVALID_VALUE)
+                }
             }
             (index::IP_TIME_PERIOD, _) if self.ip_active => Err(AbortCode::DEVICE_STATE),
             _ => Ok(()),

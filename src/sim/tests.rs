@@ -1548,3 +1548,360 @@ fn a_frozen_drive_skips_the_time_in_its_motor_but_not_in_its_heartbeat() {
     let gaps = hb.windows(2).map(|w| w[1].0 - w[0].0).max().unwrap();
     assert!(gaps <= ms(130), "{gaps:?}");
 }
+
+// ============================================================================================
+// Homing mode (6)
+
+use super::homing::{self, Switch, Switches};
+use super::{HomingStatus, SimSetup};
+
+/// Homing speeds and acceleration of the homing tests: 20 mm/s search, 2 mm/s zero search,
+/// 200 mm/s² at 1000 counts/mm.
+const SEARCH: i64 = 20_000;
+const ZERO: i64 = 2_000;
+const HOMING_ACC: i64 = 200_000;
+
+/// A drive on an axis with `setup`, in mode 6, Operation enabled, with `method` and `offset`.
+fn homing_bench(setup: SimSetup, method: i64, offset: i64) -> Bench {
+    let mut b = Bench::with(SimDrive::new(dict(), NODE).with_sim_setup(setup));
+    b.set(0x6098, 0, method);
+    b.set(0x607C, 0, offset);
+    b.set(0x6099, 1, SEARCH);
+    b.set(0x6099, 2, ZERO);
+    b.set(0x609A, 0, HOMING_ACC);
+    b.set(0x6060, 0, 6);
+    assert_eq!(b.get(0x6061, 0), 6);
+    b.enable();
+    b
+}
+
+/// The homing bits of a statusword: (13, 12, 10).
+fn homing_bits(s: u16) -> (bool, bool, bool) {
+    (
+        s & sw::HOMING_ERROR != 0,
+        s & sw::HOMING_ATTAINED != 0,
+        s & sw::TARGET_REACHED != 0,
+    )
+}
+
+impl Bench {
+    /// Advance 1 ms at a time until the drive no longer homes and stands still (bit 10), or
+    /// `deadline` (virtual time) passes; every statusword seen on the way.
+    fn run_homing(&mut self, deadline: Duration) -> Vec<u16> {
+        let end = self.now + deadline;
+        let mut seen = vec![self.sw()];
+        while self.now < end {
+            self.advance(ms(1));
+            let s = self.sw();
+            seen.push(s);
+            if self.drive.homing_status() != HomingStatus::InProgress && s & sw::TARGET_REACHED != 0
+            {
+                return seen;
+            }
+        }
+        panic!(
+            "homing did not end within {deadline:?}: {:?}, statusword {:04X}",
+            self.drive.homing_status(),
+            self.sw()
+        );
+    }
+
+    /// Where the motor physically is (the switches' frame), counts.
+    fn physical(&self) -> f64 {
+        self.drive.pos + self.drive.origin
+    }
+}
+
+/// An axis from -5000 to 300000 counts (limit switches there), its home switch at 1000.
+fn axis(start: i32, home_switch: Option<i32>) -> SimSetup {
+    SimSetup {
+        start_counts: start,
+        home_switch_counts: home_switch,
+        limit_switches_counts: Some([-5_000, 300_000]),
+    }
+}
+
+#[test]
+fn homing_objects_are_in_the_dictionary_and_mode_6_is_supported() {
+    let mut b = Bench::new();
+    assert_ne!(b.get(0x6502, 0) & (1 << 5), 0, "0x6502 bit 5: homing mode");
+    for (index, sub, v) in [
+        (0x6098, 0, 19),
+        (0x6099, 1, 12_345),
+        (0x6099, 2, 678),
+        (0x609A, 0, 90_000),
+        (0x607C, 0, -4321),
+    ] {
+        b.set(index, sub, v);
+        assert_eq!(b.get(index, sub), v);
+    }
+    let n = b.get(0x60E3, 0);
+    let listed: Vec<i64> = (1..=n as u8).map(|s| b.get(0x60E3, s)).collect();
+    assert_eq!(listed, [17, 18, 19, 20, 21, 22, 35, 37]);
+    // A method the drive does not run is refused (CiA 301: value range of parameter exceeded).
+    assert_eq!(
+        b.refused(0x6098, 0, Value::Integer8(1)),
+        AbortCode::INVALID_VALUE.0
+    );
+    assert_eq!(b.get(0x6098, 0), 19);
+}
+
+#[test]
+fn homing_methods_37_and_35_declare_the_current_position_home_without_motion() {
+    for method in [37, 35] {
+        let mut b = homing_bench(axis(12_345, None), method, 5_000);
+        // Not started: bit 10 only.
+        assert_eq!(homing_bits(b.sw()), (false, false, true), "method {method}");
+        let before = b.physical();
+        b.cw(0x1F);
+        let seen = b.run_homing(ms(100));
+        assert_eq!(b.drive.homing_status(), HomingStatus::Attained);
+        assert_eq!(homing_bits(*seen.last().unwrap()), (false, true, true));
+        assert_eq!(
+            b.get(0x6064, 0),
+            5_000,
+            "method {method}: position actual = 0x607C"
+        );
+        assert!((b.physical() - before).abs() < 1.0, "no motion");
+        assert_eq!(b.state(), State::OperationEnabled);
+    }
+}
+
+#[test]
+fn homing_legs_follow_the_cia_402_edge_and_direction_rules() {
+    let sw = Switches {
+        home: Some(1000.0),
+        limits: [-5000.0, 300_000.0],
+    };
+    // (method, start, final direction, final switch, its state at the home, legs)
+    for (method, x, dir, switch, until, n) in [
+        (17, 50_000.0, 1.0, Switch::NegativeLimit, false, 2),
+        (17, -6_000.0, 1.0, Switch::NegativeLimit, false, 1),
+        (18, 50_000.0, -1.0, Switch::PositiveLimit, false, 2),
+        // 19/20: the switch is active above 1000.
+        (19, 0.0, -1.0, Switch::HomePositive, false, 2),
+        (19, 50_000.0, -1.0, Switch::HomePositive, false, 1),
+        (20, 0.0, 1.0, Switch::HomePositive, true, 3),
+        (20, 50_000.0, 1.0, Switch::HomePositive, true, 2),
+        // 21/22: the switch is active below 1000.
+        (21, 50_000.0, 1.0, Switch::HomeNegative, false, 2),
+        (21, 0.0, 1.0, Switch::HomeNegative, false, 1),
+        (22, 50_000.0, -1.0, Switch::HomeNegative, true, 3),
+        (22, 0.0, -1.0, Switch::HomeNegative, true, 2),
+    ] {
+        let legs = homing::legs(method, &sw, x).expect("a switch method");
+        let last = legs.last().unwrap();
+        assert_eq!(
+            (legs.len(), last.dir, last.switch, last.until, last.fast),
+            (n, dir, switch, until, false),
+            "method {method} from {x}: {legs:?}"
+        );
+        // Each leg moves toward its switch's change of state.
+        let mut at = x;
+        for l in &legs {
+            assert_ne!(
+                sw.active(l.switch, at),
+                l.until,
+                "method {method}: {legs:?}"
+            );
+            at = sw.edge(l.switch).unwrap() + l.dir;
+        }
+    }
+    assert!(homing::legs(1, &sw, 0.0).is_none());
+}
+
+#[test]
+fn homing_on_the_home_switch_ends_at_its_edge_with_position_actual_the_home_offset() {
+    // Every switch method, from either side of the switch, ends at the switch's edge (or
+    // the limit switch's), standing, with 0x6064 = 0x607C; bit 13 is never seen and the
+    // drive's following-error supervision never fires.
+    for (method, start, edge) in [
+        (19, -2_000, 1_000.0),
+        (19, 40_000, 1_000.0),
+        (20, -2_000, 1_000.0),
+        (20, 40_000, 1_000.0),
+        (21, -2_000, 1_000.0),
+        (21, 40_000, 1_000.0),
+        (22, -2_000, 1_000.0),
+        (22, 40_000, 1_000.0),
+        (17, 40_000, -5_000.0),
+        (18, 250_000, 300_000.0),
+    ] {
+        let mut b = homing_bench(axis(start, Some(1000)), method, 7_000);
+        b.cw(0x1F);
+        let seen = b.run_homing(ms(30_000));
+        let what = format!("method {method} from {start}");
+        assert_eq!(b.drive.homing_status(), HomingStatus::Attained, "{what}");
+        assert_eq!(b.get(0x6064, 0), 7_000, "{what}");
+        assert!(
+            (b.physical() - edge).abs() <= 1.0,
+            "{what}: stopped at {}, the edge is at {edge}",
+            b.physical()
+        );
+        assert_eq!(
+            b.state(),
+            State::OperationEnabled,
+            "{what}: {:?}",
+            b.emcys()
+        );
+        // The CiA 402 table, in order: in progress (0/0/0), then attained (0/1/x), ending 0/1/1.
+        assert_eq!(homing_bits(seen[1]), (false, false, false), "{what}");
+        assert!(seen.iter().all(|s| s & sw::HOMING_ERROR == 0), "{what}");
+        let first_attained = seen.iter().position(|s| s & sw::HOMING_ATTAINED != 0);
+        let first_attained = first_attained.expect("bit 12 seen");
+        assert!(
+            seen[..first_attained]
+                .iter()
+                .skip(1)
+                .all(|s| homing_bits(*s) == (false, false, false)),
+            "{what}"
+        );
+        assert_eq!(homing_bits(*seen.last().unwrap()), (false, true, true));
+        // It took a search: the motor moved.
+        assert!(seen.len() > 100, "{what}: {} ms", seen.len());
+    }
+}
+
+#[test]
+fn a_home_switch_never_found_is_a_homing_error_at_the_end_of_the_travel() {
+    for method in [19, 20, 21, 22] {
+        let mut b = homing_bench(axis(10_000, None), method, 0);
+        b.cw(0x1F);
+        let seen = b.run_homing(ms(60_000));
+        let what = format!("method {method}");
+        assert_eq!(b.drive.homing_status(), HomingStatus::Error, "{what}");
+        // 1/0/0 while stopping, then 1/0/1 at standstill.
+        assert!(seen.iter().any(|s| homing_bits(*s) == (true, false, false)));
+        assert_eq!(
+            homing_bits(*seen.last().unwrap()),
+            (true, false, true),
+            "{what}"
+        );
+        // Stopped past the limit switch it ran into by at most the braking distance.
+        let braking = (SEARCH * SEARCH) as f64 / (2.0 * HOMING_ACC as f64);
+        let x = b.physical();
+        let past = if (19..=20).contains(&method) {
+            x - 300_000.0
+        } else {
+            -5_000.0 - x
+        };
+        assert!(
+            (0.0..=braking + SEARCH as f64 * 0.002).contains(&past),
+            "{what}: at {x}"
+        );
+        // A homing error is no fault: the drive stays enabled and holds.
+        assert_eq!(b.state(), State::OperationEnabled, "{what}");
+        let held = b.get(0x6064, 0);
+        b.advance(ms(50));
+        assert_eq!(b.get(0x6064, 0), held);
+    }
+}
+
+#[test]
+fn clearing_bit_4_or_halt_interrupts_homing_with_the_homing_acceleration() {
+    for cw in [0x0F, 0x11F] {
+        let mut b = homing_bench(axis(100_000, Some(1000)), 21, 0);
+        b.cw(0x1F);
+        b.advance(ms(500));
+        assert_eq!(b.drive.homing_status(), HomingStatus::InProgress);
+        let v = b.drive.homing.v;
+        assert!(
+            (v + SEARCH as f64).abs() < 1.0,
+            "searching at full speed: {v}"
+        );
+        let at = b.physical();
+        b.cw(cw);
+        assert_eq!(b.drive.homing_status(), HomingStatus::Interrupted);
+        let seen = b.run_homing(ms(1_000));
+        // Bit 10 waits for the stop; 12 and 13 stay clear.
+        assert_eq!(homing_bits(seen[0]), (false, false, false), "cw {cw:#X}");
+        assert_eq!(homing_bits(*seen.last().unwrap()), (false, false, true));
+        let braking = (SEARCH * SEARCH) as f64 / (2.0 * HOMING_ACC as f64);
+        let moved = at - b.physical();
+        assert!(
+            (braking * 0.9..=braking * 1.1 + 50.0).contains(&moved),
+            "cw {cw:#X}: {moved} counts to stop, braking distance {braking}"
+        );
+        assert_eq!(b.state(), State::OperationEnabled);
+        // A new rising edge of bit 4 starts over, and homes.
+        b.cw(0x0F);
+        b.cw(0x1F);
+        b.run_homing(ms(30_000));
+        assert_eq!(b.drive.homing_status(), HomingStatus::Attained);
+        assert_eq!(b.get(0x6064, 0), 0);
+    }
+}
+
+#[test]
+fn a_mode_change_is_refused_while_homing_moves_and_disabling_interrupts_it() {
+    let mut b = homing_bench(axis(100_000, Some(1000)), 21, 0);
+    b.cw(0x1F);
+    b.advance(ms(100));
+    assert_eq!(
+        b.refused(0x6060, 0, Value::Integer8(7)),
+        AbortCode::DEVICE_STATE.0
+    );
+    assert_eq!(
+        b.refused(0x6098, 0, Value::Integer8(37)),
+        AbortCode::DEVICE_STATE.0
+    );
+    b.cw(0x07);
+    assert_eq!(b.drive.homing_status(), HomingStatus::Interrupted);
+    b.advance(ms(500));
+    b.set(0x6060, 0, 7);
+}
+
+#[test]
+fn leaving_homing_for_ip_or_csp_is_bumpless() {
+    // IP: after homing, the set-point buffer holds position actual; streaming it holds still.
+    let mut b = homing_bench(axis(30_000, Some(1000)), 19, 2_000);
+    b.set(0x1006, 0, PERIOD_US);
+    b.nmt(nmt::START, NODE);
+    b.cw(0x1F);
+    b.run_homing(ms(30_000));
+    assert_eq!(b.get(0x6064, 0), 2_000);
+    b.cw(0x0F);
+    b.set(0x6060, 0, 7);
+    assert_eq!(b.get(0x60C1, 1), 2_000, "IP buffer at position actual");
+    b.cw(0x1F);
+    assert_ne!(b.sw() & sw::OP_MODE_SPECIFIC_12, 0, "IP active");
+    for _ in 0..50 {
+        b.sync();
+        b.advance(ms(1));
+        assert!(
+            (b.drive.pos - 2_000.0).abs() < 1.0,
+            "moved to {}",
+            b.drive.pos
+        );
+    }
+    // Then a move from there, as the master streams it.
+    for k in 1..=100 {
+        b.ip_cycle(0x1F, 2_000 + 10 * k);
+    }
+    b.advance(ms(50));
+    assert!((b.drive.pos - 3_000.0).abs() < 1.0, "at {}", b.drive.pos);
+
+    // CSP: homing is entered from CSP while enabled, and left to CSP with 0x607A at the hold.
+    let mut b = Bench::with(SimDrive::new(dict(), NODE).with_sim_setup(axis(30_000, Some(1000))));
+    b.set(0x1006, 0, PERIOD_US);
+    b.set(0x6060, 0, 8);
+    b.nmt(nmt::START, NODE);
+    b.enable();
+    b.csp_cycle(0x0F, 30_000);
+    b.set(0x6098, 0, 21);
+    b.set(0x6060, 0, 6);
+    b.cw(0x1F);
+    b.run_homing(ms(30_000));
+    assert_eq!(b.drive.homing_status(), HomingStatus::Attained);
+    assert_eq!(b.get(0x6064, 0), 0);
+    b.cw(0x0F);
+    b.set(0x6060, 0, 8);
+    assert_eq!(b.get(0x607A, 0), 0, "CSP target at the hold");
+    for _ in 0..50 {
+        b.sync();
+        b.advance(ms(1));
+        assert!(b.drive.pos.abs() < 1.0, "moved to {}", b.drive.pos);
+    }
+    b.csp_cycle(0x0F, 0);
+    assert!(b.drive.pos.abs() < 1.0);
+}
