@@ -86,6 +86,25 @@ enum Command {
         #[arg(long)]
         no_keys: bool,
     },
+    /// A long-running gateway: start the drives once, then take enable, home, jog, MDI and
+    /// programs on a control socket (one command per line; see the README's "Machine
+    /// operation"). SIGTERM or `quit` ends it in order.
+    Serve {
+        /// Machine file (the embedded demo machine when omitted).
+        #[arg(long)]
+        machine: Option<PathBuf>,
+        /// Bus: `sim` (in-process bus with simulated drives) or a SocketCAN interface.
+        /// Default: the machine file's `bus.interface`.
+        #[arg(long)]
+        bus: Option<String>,
+        /// The control socket (default: the machine file's `[operation] control_socket`,
+        /// /run/canmotion.sock).
+        #[arg(long, value_name = "PATH")]
+        control: Option<PathBuf>,
+        /// Write one CSV row per cycle to this file.
+        #[arg(long)]
+        log: Option<PathBuf>,
+    },
     /// CiA 402 fault reset (controlword bit 7), verified: the statusword must leave Fault and
     /// stay out; reports 0x603F before and after. Exit status 1 if a fault did not clear.
     Reset {
@@ -500,6 +519,39 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             files::write_output(&output, &done.text)?;
             out!("{}", done.report.summary());
             outln!("wrote             {}", output.display());
+            Ok(())
+        }
+        Command::Serve {
+            machine,
+            bus,
+            control,
+            log,
+        } => {
+            let machine = match machine {
+                Some(p) => Machine::load(&p)?,
+                None => Machine::demo(),
+            };
+            canmotion::rt::signal::route_stop_signals()
+                .map_err(|e| format!("cannot route SIGINT and SIGTERM: {e}"))?;
+            let bus = Bus::from_arg(&bus.unwrap_or_else(|| machine.interface.clone()));
+            let simulate = matches!(bus, Bus::InProc(_));
+            let opts = canmotion::gateway::serve::ServeOptions {
+                control_path: control.unwrap_or_else(|| machine.operation.control_socket.clone()),
+                simulate,
+                injects: Vec::new(),
+                log,
+            };
+            outln!(
+                "canmotion serve: machine '{}' ({} axes, {} µs cycle) over {}{}; control socket {}",
+                files::Escaped(&machine.name),
+                machine.axes.len(),
+                machine.cycle_us,
+                bus.name(),
+                if simulate { " with simulated drives" } else { "" },
+                opts.control_path.display()
+            );
+            canmotion::gateway::serve::serve(&machine, &bus, &opts)?;
+            outln!("canmotion serve: ended in order");
             Ok(())
         }
         Command::Run {

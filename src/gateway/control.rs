@@ -343,6 +343,15 @@ impl ControlSocket {
     /// process (a connection is refused) is replaced; a live one, or anything else at the path,
     /// is refused.
     pub fn bind(path: &Path, control: Arc<Control>) -> Result<ControlSocket, ControlSocketError> {
+        ControlSocket::bind_with(path, control)
+    }
+
+    /// Listens at `path`, each line of a client answered by `handler` (as [`Self::bind`]).
+    pub fn bind_with(
+        path: &Path,
+        handler: Arc<dyn Handler>,
+    ) -> Result<ControlSocket, ControlSocketError> {
+        let control = handler;
         let listener = listen(path)?;
         let stop = Arc::new(AtomicBool::new(false));
         let stopped = stop.clone();
@@ -400,7 +409,7 @@ fn listen(path: &Path) -> Result<UnixListener, ControlSocketError> {
     }
 }
 
-fn accept_loop(listener: &UnixListener, control: Arc<Control>, stop: &Arc<AtomicBool>) {
+fn accept_loop(listener: &UnixListener, control: Arc<dyn Handler>, stop: &Arc<AtomicBool>) {
     let mut clients: Vec<std::thread::JoinHandle<()>> = Vec::new();
     for conn in listener.incoming() {
         if stop.load(Ordering::Acquire) {
@@ -420,7 +429,7 @@ fn accept_loop(listener: &UnixListener, control: Arc<Control>, stop: &Arc<Atomic
         let control = control.clone();
         if let Ok(t) = std::thread::Builder::new()
             .name("canmotion-control-client".into())
-            .spawn(move || serve(conn, &control, &stop))
+            .spawn(move || serve(conn, control.as_ref(), &stop))
         {
             clients.push(t);
         }
@@ -466,7 +475,7 @@ impl Read for ClientStream<'_> {
     }
 }
 
-fn serve(conn: UnixStream, control: &Control, stop: &AtomicBool) {
+fn serve(conn: UnixStream, control: &dyn Handler, stop: &AtomicBool) {
     let _ = conn.set_read_timeout(Some(POLL));
     let _ = conn.set_write_timeout(Some(LINE_TIMEOUT));
     let Ok(mut out) = conn.try_clone() else {
@@ -482,8 +491,15 @@ fn serve(conn: UnixStream, control: &Control, stop: &AtomicBool) {
     );
     let mut line = Vec::with_capacity(128);
     loop {
-        let answer = match read_line_bounded(&mut input, &mut line, MAX_LINE_BYTES) {
-            Ok(LineRead::Line) => control.answer(&line),
+        match read_line_bounded(&mut input, &mut line, MAX_LINE_BYTES) {
+            Ok(LineRead::Line) => {
+                let r = control.handle(&line, &mut out, stop);
+                line.clear();
+                if r.is_err() {
+                    return;
+                }
+                continue;
+            }
             Ok(LineRead::TooLong) => {
                 let _ = writeln!(
                     out,
@@ -510,11 +526,21 @@ fn serve(conn: UnixStream, control: &Control, stop: &AtomicBool) {
                 continue;
             }
             Err(_) => return,
-        };
-        line.clear();
-        if writeln!(out, "{answer}").is_err() {
-            return;
         }
+    }
+}
+
+/// What answers the lines of a control socket's clients.
+pub trait Handler: Send + Sync + 'static {
+    /// Answers one line (bytes, without its newline) on `out`: one answer line, or, for a
+    /// command that streams (`watch`), lines until the client goes or `stop` is set. An error
+    /// closes the connection.
+    fn handle(&self, line: &[u8], out: &mut UnixStream, stop: &AtomicBool) -> std::io::Result<()>;
+}
+
+impl Handler for Control {
+    fn handle(&self, line: &[u8], out: &mut UnixStream, _stop: &AtomicBool) -> std::io::Result<()> {
+        writeln!(out, "{}", self.answer(line))
     }
 }
 

@@ -6,6 +6,7 @@ pub mod cyclic_bus;
 pub mod io;
 pub mod progress;
 pub mod resume;
+pub mod serve;
 pub mod startup;
 
 use std::io::Write;
@@ -217,6 +218,13 @@ pub enum GatewayError {
     /// The motion stopped because of a fault.
     #[error("motion stopped: {0}")]
     Motion(Box<MotionFailure>),
+    /// The control socket could not be opened.
+    #[error("control socket: {source}")]
+    ControlSocket {
+        /// Why.
+        #[from]
+        source: control::ControlSocketError,
+    },
     /// Writing the log failed.
     #[error("{file}: {source}")]
     Log {
@@ -806,12 +814,7 @@ pub fn run_with(
     rt::signal::STOP.begin_run();
 
     let _sims = if opts.simulate {
-        let drives = machine
-            .axes
-            .iter()
-            .map(|a| crate::sim::SimDrive::new(a.dictionary.clone(), a.node))
-            .collect();
-        Some(crate::sim::runner::spawn(bus, drives)?)
+        Some(spawn_sims(machine, bus, &[])?)
     } else {
         None
     };
@@ -822,6 +825,27 @@ pub fn run_with(
         .build()
         .expect("tokio runtime");
     runtime.block_on(run_async(machine, bus, opts, source))
+}
+
+/// The machine's simulated drives on `bus`, each with the injected misbehaviours aimed at it.
+pub(crate) fn spawn_sims(
+    machine: &Machine,
+    bus: &Bus,
+    injects: &[crate::sim::Targeted],
+) -> Result<crate::sim::runner::SimHandle, GatewayError> {
+    let drives = machine
+        .axes
+        .iter()
+        .map(|a| {
+            injects
+                .iter()
+                .filter(|t| t.node.is_none_or(|n| n == a.node))
+                .fold(crate::sim::SimDrive::new(a.dictionary.clone(), a.node), |d, t| {
+                    d.with_inject(t.inject)
+                })
+        })
+        .collect();
+    Ok(crate::sim::runner::spawn(bus, drives)?)
 }
 
 async fn run_async(
@@ -1238,7 +1262,7 @@ fn cyclic_thread(
 /// The run's supervision, from what start-up saw of the nodes: their last heartbeats (on the
 /// cyclic thread's clock, CLOCK_MONOTONIC) and their EMCYs, which the first cycles decide by the
 /// statusword like any other.
-fn supervision_from(machine: &Machine, health: &io::Health) -> Supervision {
+pub(crate) fn supervision_from(machine: &Machine, health: &io::Health) -> Supervision {
     let mut sup = Supervision::new(machine);
     let now_ns = rt::now_ns();
     let g = health.lock().unwrap_or_else(|e| e.into_inner());
@@ -1257,7 +1281,7 @@ fn supervision_from(machine: &Machine, health: &io::Health) -> Supervision {
 
 type LogThread = std::thread::JoinHandle<std::io::Result<()>>;
 
-fn spawn_logger(
+pub(crate) fn spawn_logger(
     path: &Path,
     machine: &Machine,
 ) -> Result<(mpsc::SyncSender<CycleRecord>, LogThread), GatewayError> {

@@ -1,0 +1,400 @@
+//! `canmotion serve` on the in-process bus, every scenario through its control socket: enable,
+//! home (order, statusword bits 10 and 12, the home offset), jogs (the dead-man, the increment),
+//! MDI then a program with no second start-up, abort on the path, a drive that resets and a
+//! drive fault (alarm, reset, home, run again), a homing error, a program on an axis that is not
+//! homed, and `status`/`watch` as JSON. The setpoints of every scenario keep the axis limits
+//! (finite differences), across every change of mode. The same session runs on vcan0 in
+//! tests/vcan/serve.rs.
+
+mod common;
+#[path = "common/serve.rs"]
+mod serve_rig;
+
+use std::time::{Duration, Instant};
+
+use canmotion::config::Machine;
+use canmotion::interpolator::OverrideRamp;
+use canmotion::sim::{Inject, Targeted};
+use serve_rig::{Client, Service, axis};
+use common::*;
+
+/// The demo machine with the homing and simulator tables of these tests: Z homes first on the
+/// current position (offset -1 mm), X and Y together on home switches found from non-zero start
+/// positions, with offsets.
+fn machine() -> Machine {
+    common::machine(serve_tables)
+}
+
+/// The machine file text with the tables of [`machine`].
+fn serve_tables(text: String) -> String {
+    let homing = |order: u32, method: &str, offset: f64, switch: Option<f64>, start: f64| {
+        format!(
+            "\n[axis.homing]\nmethod = {method}\nspeed_search_mm_s = 40.0\nspeed_zero_mm_s = 4.0\nacc_mm_s2 = 800.0\noffset_mm = {offset}\norder = {order}\ntimeout_ms = 10000\n\n[axis.sim]\nstart_mm = {start}\n{}\n",
+            switch.map_or(String::new(), |s| format!("home_switch_mm = {s}"))
+        )
+    };
+    let mut out = String::new();
+    let mut axis = 0;
+    for block in strip_tables(&text).split("\n[[axis]]\n") {
+        if !out.is_empty() {
+            out.push_str("\n[[axis]]\n");
+            out.push_str(block.trim_end());
+            out.push_str(&match axis {
+                0 => homing(1, "21", 0.0, Some(-2.0), 6.0),
+                1 => homing(1, "19", 5.0, Some(20.0), 12.0),
+                _ => homing(0, "\"current\"", -1.0, None, -3.0),
+            });
+            axis += 1;
+        } else {
+            out.push_str(block);
+        }
+    }
+    out
+}
+
+/// The machine file without any `[axis.homing]` or `[axis.sim]` table it has already.
+fn strip_tables(text: &str) -> String {
+    let mut out = String::new();
+    let mut skipping = false;
+    for line in text.lines() {
+        let t = line.trim();
+        if t.starts_with('[') {
+            skipping = t == "[axis.homing]" || t == "[axis.sim]";
+        }
+        if !skipping {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The setpoints of the log from `from_cycle` on keep every axis's limits.
+fn limits_from(m: &Machine, log: &std::path::Path, from_cycle: f64) {
+    let rows: Vec<Vec<f64>> = read_csv(log)
+        .into_iter()
+        .filter(|r| r[0] >= from_cycle)
+        .collect();
+    let t = m.cycle_s();
+    for w in rows.windows(3) {
+        for (i, a) in m.axes.iter().enumerate() {
+            let cmd = |r: &Vec<f64>| r[2 + i];
+            let v = (cmd(&w[2]) - cmd(&w[1])) / t;
+            let acc = (cmd(&w[2]) - 2.0 * cmd(&w[1]) + cmd(&w[0])) / (t * t);
+            assert!(
+                v.abs() <= a.max_vel_mm_s * 1.01,
+                "axis {} at cycle {}: {v} mm/s",
+                a.name,
+                w[2][0]
+            );
+            assert!(
+                acc.abs() <= a.max_acc_mm_s2 * 1.01,
+                "axis {} at cycle {}: {acc} mm/s²",
+                a.name,
+                w[2][0]
+            );
+        }
+    }
+}
+
+fn cycle(s: &serde_json::Value) -> f64 {
+    s["cycle"].as_f64().unwrap()
+}
+
+fn actual(s: &serde_json::Value, i: usize) -> f64 {
+    axis(s, i)["actual_mm"].as_f64().unwrap()
+}
+
+fn commanded(s: &serde_json::Value, i: usize) -> f64 {
+    axis(s, i)["commanded_mm"].as_f64().unwrap()
+}
+
+/// Waits until every axis stands within one count of its setpoint.
+fn settled(c: &mut Client, m: &Machine) -> serde_json::Value {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let s = c.status();
+        if s["state"] == "idle"
+            && m.axes
+                .iter()
+                .enumerate()
+                .all(|(i, a)| (actual(&s, i) - commanded(&s, i)).abs() <= 1.0 / a.counts_per_mm)
+        {
+            return s;
+        }
+        assert!(Instant::now() < deadline, "not settled: {s}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+const SDO_RX: u16 = 0x600;
+
+/// The SDO writes of 0x6060 (mode of operation) in the recorded frames: (time, node, mode).
+fn mode_writes(frames: &[(u64, canmotion::bus::Frame)]) -> Vec<(u64, u8, i8)> {
+    frames
+        .iter()
+        .filter_map(|(t, f)| {
+            let d = f.data();
+            let node = f.id().checked_sub(SDO_RX).filter(|n| (1..=127).contains(n))?;
+            (d.len() == 8 && d[0] & 0xE0 == 0x20 && d[1] == 0x60 && d[2] == 0x60)
+                .then(|| (*t, node as u8, d[4] as i8))
+        })
+        .collect()
+}
+
+#[test]
+fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_second_start_up() {
+    let _one = one_at_a_time();
+    let m = machine();
+    let mut svc = Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    let recorder = Recorder::start(&svc.bus);
+    let s = c.status();
+    assert_eq!(s["state"], "disabled", "{s}");
+    // Nothing moves while disabled, and nothing on an axis that is not homed.
+    let a = c.cmd("mdi G0 X1");
+    assert!(a.starts_with("error: ") && a.contains("disabled"), "{a}");
+    c.ok("enable");
+    let a = c.cmd("mdi G0 X1");
+    assert!(
+        a.starts_with("error: MDI:1: axis X is not homed"),
+        "{a}"
+    );
+    let part = svc.file("part.ngc", "G21 G90\nG1 X30 Y20 F3000\nG1 Z-2 F600\nM2\n");
+    let a = c.cmd(&format!("run {}", part.display()));
+    assert!(a.contains("axis X is not homed"), "{a}");
+
+    // Home all: Z (order 0) first, then X and Y together.
+    let before_home = c.status();
+    assert!((actual(&before_home, 0) - 6.0).abs() < 1e-3, "{before_home}");
+    let a = c.ok("home all");
+    assert_eq!(a, "ok homed X Y Z");
+    let homed = c.status();
+    let after_home_cycle = cycle(&homed);
+    for (i, offset) in [(0, 0.0), (1, 5.0), (2, -1.0)] {
+        assert_eq!(axis(&homed, i)["homed"], true, "{homed}");
+        assert!(
+            (actual(&homed, i) - offset).abs() <= 1.0 / m.axes[i].counts_per_mm,
+            "axis {i} at {} after homing, offset {offset}",
+            actual(&homed, i)
+        );
+        assert_eq!(axis(&homed, i)["control"], "cyclic");
+    }
+    assert_eq!(homed["state"], "idle");
+
+    // A continuous jog that nobody repeats stops by the dead-man.
+    let x0 = commanded(&c.status(), 0);
+    let t0 = Instant::now();
+    let a = c.ok("jog X 20");
+    assert!(a.contains("jogging X"), "{a}");
+    let s = c.wait_state("idle", Duration::from_secs(5));
+    let took = t0.elapsed().as_secs_f64();
+    let ramp = OverrideRamp::for_machine(&canmotion::gateway::limits(&m), &m.planner).unwrap();
+    let stop_s = ramp.ramp_time_s(1.0, 0.0);
+    let timeout_s = f64::from(m.operation.jog_timeout_ms) / 1000.0;
+    let travelled = commanded(&s, 0) - x0;
+    assert!(travelled > 0.0, "{travelled}");
+    assert!(
+        travelled <= 20.0 * (timeout_s + 0.05) + 20.0 * stop_s,
+        "jog went {travelled} mm: over the dead-man time plus the stopping distance"
+    );
+    assert!(
+        took >= timeout_s && took <= timeout_s + stop_s + 0.5,
+        "the jog stopped {took} s after it started (time-out {timeout_s} s)"
+    );
+
+    // An incremental jog, to within one count.
+    let y0 = commanded(&c.status(), 1);
+    c.ok("jog Y 10 2.5");
+    let s = settled(&mut c, &m);
+    let counts = |mm: f64| (mm * 1000.0).round() as i64;
+    assert!((counts(actual(&s, 1)) - counts(y0 + 2.5)).abs() <= 1, "{s}");
+
+    // MDI, then a program: the drives stay enabled between the two.
+    let a = c.ok("mdi G0 X10 Y10");
+    assert!(a.starts_with("ok queued MDI"), "{a}");
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 10.0).abs() <= 1e-3 && (actual(&s, 1) - 10.0).abs() <= 1e-3);
+    let a = c.ok(&format!("run {}", part.display()));
+    assert!(a.starts_with("ok queued"), "{a}");
+    let running = c.wait_state("running", Duration::from_secs(2));
+    assert_eq!(running["program"], part.display().to_string());
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 30.0).abs() <= 1e-3, "{s}");
+    assert!((actual(&s, 2) + 2.0).abs() <= 1e-3, "{s}");
+    // The modal state carried from the program (its M2 reset to G90, G54 and G17).
+    assert!(s["modal"].as_str().unwrap().contains("G90"), "{s}");
+
+    // Valid JSON on watch too.
+    let mut w = svc.client();
+    writeln_watch(&mut w);
+    for _ in 0..3 {
+        let l = w.line();
+        let json: serde_json::Value = serde_json::from_str(l.strip_prefix("ok ").unwrap()).unwrap();
+        assert_eq!(json["state"], "idle");
+        assert_eq!(json["axes"].as_array().unwrap().len(), 3);
+    }
+    drop(w);
+    svc.quit().unwrap();
+    let frames = recorder.stop();
+
+    // One start-up: one NMT reset per node (or one broadcast), and one boot-up each.
+    let resets = frames
+        .iter()
+        .filter(|(_, f)| f.id() == 0 && f.data().first() == Some(&0x81))
+        .count();
+    assert!(resets <= 3, "{resets} NMT resets during the session");
+    let boots = frames
+        .iter()
+        .filter(|(_, f)| (0x701..=0x77F).contains(&f.id()) && f.data() == [0])
+        .count();
+    assert_eq!(boots, 0, "a drive booted again during the session");
+    // Homing in order: Z in mode 6 (and back) before X and Y; X and Y together.
+    let modes = mode_writes(&frames);
+    let at = |node: u8, mode: i8| {
+        modes
+            .iter()
+            .find(|(_, n, md)| *n == node && *md == mode)
+            .unwrap_or_else(|| panic!("no 0x6060 = {mode} to node {node}: {modes:?}"))
+            .0
+    };
+    assert!(at(3, 7) < at(1, 6) && at(3, 7) < at(2, 6), "{modes:?}");
+    assert!(at(1, 6) < at(2, 7) && at(2, 6) < at(1, 7), "{modes:?}");
+    // Statusword bits 10 and 12 seen from every homed drive while in mode 6.
+    for node in 1..=3u8 {
+        let (from, to) = (at(node, 6), at(node, 7));
+        let seen = frames.iter().any(|(t, f)| {
+            *t > from
+                && *t < to
+                && f.id() == 0x180 + u16::from(node)
+                && f.data().len() >= 2
+                && u16::from_le_bytes([f.data()[0], f.data()[1]]) & 0x1400 == 0x1400
+        });
+        assert!(seen, "node {node}: no statusword with bits 10 and 12 while homing");
+    }
+    // Every setpoint within the limits: before homing, and from its end through jogs, MDI and
+    // the program (homing re-references position actual, which the setpoint follows).
+    let rows = read_csv(&svc.log);
+    assert!(rows.len() > 100);
+    limits_from(&m, &svc.log, after_home_cycle);
+    limits_from_to(&m, &rows, cycle(&before_home));
+}
+
+fn writeln_watch(c: &mut Client) {
+    let first = c.cmd("watch 20");
+    let json: serde_json::Value = serde_json::from_str(first.strip_prefix("ok ").unwrap()).unwrap();
+    assert!(json["cycle"].as_u64().is_some());
+}
+
+fn limits_from_to(m: &Machine, rows: &[Vec<f64>], to_cycle: f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("part.csv");
+    let mut text = String::from("header\n");
+    for r in rows.iter().filter(|r| r[0] <= to_cycle) {
+        text.push_str(
+            &r.iter()
+                .map(|x| x.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
+        text.push('\n');
+    }
+    std::fs::write(&p, text).unwrap();
+    limits_from(m, &p, 0.0);
+}
+
+#[test]
+fn abort_stops_a_program_on_its_path_and_keeps_the_drives_enabled() {
+    let _one = one_at_a_time();
+    let m = machine();
+    let mut svc = Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    c.ok("enable");
+    c.ok("home all");
+    let start = c.status();
+    let (x0, y0) = (commanded(&start, 0), commanded(&start, 1));
+    let long = svc.file("long.ngc", "G21 G90\nG1 X150 Y150 F8485\nM2\n");
+    c.ok(&format!("run {}", long.display()));
+    c.wait_state("running", Duration::from_secs(2));
+    std::thread::sleep(Duration::from_millis(400));
+    c.ok("abort");
+    let s = settled(&mut c, &m);
+    assert!(s["alarm"].is_null(), "{s}");
+    let x = actual(&s, 0);
+    assert!(x > x0 + 1.0 && x < 149.0, "stopped at X {x}");
+    // On the path: every setpoint on the line from the start to (150, 150).
+    let dir = nalgebra::Vector2::new(150.0 - x0, 150.0 - y0).normalize();
+    for r in read_csv(&svc.log).iter().filter(|r| r[0] >= cycle(&start)) {
+        let p = nalgebra::Vector2::new(r[2] - x0, r[3] - y0);
+        let off = (p - dir * p.dot(&dir)).norm();
+        assert!(off < 1e-6, "cycle {}: {off} mm off the path", r[0]);
+    }
+    limits_from(&m, &svc.log, cycle(&start));
+    // Still enabled: the next job runs.
+    c.ok("mdi G0 X20 Y20");
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 20.0).abs() <= 1e-3, "{s}");
+    svc.quit().unwrap();
+}
+
+#[test]
+fn a_homing_error_names_the_node_and_the_cause_and_leaves_the_machine_holding() {
+    let _one = one_at_a_time();
+    // X's drive has no home switch.
+    let m = common::machine(|t| {
+        serve_tables(t).replacen("home_switch_mm = -2\n", "\n", 1)
+    });
+    let mut svc = Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    c.ok("enable");
+    let a = c.cmd("home X");
+    assert!(a.starts_with("error: axis X (node 1): homing error"), "{a}");
+    assert!(a.contains("home switch was not found"), "{a}");
+    let s = c.status();
+    assert_eq!(s["state"], "idle", "{s}");
+    assert_eq!(axis(&s, 0)["homed"], false);
+    assert_eq!(axis(&s, 0)["control"], "cyclic");
+    assert!(s["homing_error"].as_str().unwrap().contains("node 1"), "{s}");
+    // The other axes still home.
+    c.ok("home Y");
+    svc.quit().unwrap();
+}
+
+#[test]
+fn a_drive_that_resets_leaves_an_alarm_until_reset_then_home_and_run_work_again() {
+    let _one = one_at_a_time();
+    let m = machine();
+    let mut svc = Service::start(
+        &m,
+        vec![Targeted {
+            node: Some(2),
+            inject: Inject::Reboot {
+                after: Duration::from_millis(2500),
+            },
+        }],
+    );
+    let mut c = svc.client();
+    c.ok("enable");
+    c.ok("home all");
+    let long = svc.file("long.ngc", "G21 G90\nG1 X150 Y150 F3000\nM2\n");
+    c.ok(&format!("run {}", long.display()));
+    let s = c.wait_state("alarm", Duration::from_secs(10));
+    assert_eq!(s["alarm"]["kind"], "BootUp", "{s}");
+    assert_eq!(s["alarm"]["node"], 2, "{s}");
+    assert_eq!(s["queued"], 0);
+    let a = c.cmd("mdi G0 X1");
+    assert!(a.starts_with("error: alarm"), "{a}");
+    let a = c.ok("reset");
+    assert!(a.contains("enabled"), "{a}");
+    let s = c.status();
+    assert_eq!(s["state"], "idle", "{s}");
+    assert_eq!(axis(&s, 1)["homed"], false, "{s}");
+    let a = c.cmd(&format!("run {}", long.display()));
+    assert!(a.contains("is not homed"), "{a}");
+    c.ok("home all");
+    let short = svc.file("short.ngc", "G21 G90\nG1 X20 Y25 F3000\nM2\n");
+    c.ok(&format!("run {}", short.display()));
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 1) - 25.0).abs() <= 1e-3, "{s}");
+    svc.quit().unwrap();
+}
