@@ -809,7 +809,7 @@ pub fn run_with(
         let drives = machine
             .axes
             .iter()
-            .map(|a| crate::sim::SimDrive::new(a.dictionary.clone(), a.node))
+            .map(crate::sim::SimDrive::for_axis)
             .collect();
         Some(crate::sim::runner::spawn(bus, drives)?)
     } else {
