@@ -309,10 +309,22 @@ pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
         "written every cycle",
     ),
     (
+        index::HOME_OFFSET,
+        index::HOME_OFFSET,
+        "home offset",
+        "written from [axis.homing] offset_mm",
+    ),
+    (
         index::SOFTWARE_POSITION_LIMIT,
         index::SOFTWARE_POSITION_LIMIT,
         "software position limits",
         "written from min_mm and max_mm",
+    ),
+    (
+        index::HOMING_METHOD,
+        index::HOMING_ACCELERATION,
+        "homing method, speeds and acceleration",
+        "written from [axis.homing]",
     ),
     (
         index::MAX_PROFILE_VELOCITY,
