@@ -179,6 +179,12 @@ enum Command {
         /// controller would report. Repeatable.
         #[arg(long = "inject", value_name = "SPEC")]
         injects: Vec<canmotion::sim::Targeted>,
+        /// The home switch of NODE's axis for homing mode 6, at COUNTS of position actual as it
+        /// reads at power-on (methods 19/20 see it active above, 21/22 below). Without one the
+        /// switch methods end in a homing error at the software position limits 0x607D.
+        /// Repeatable, one per node.
+        #[arg(long = "home-switch", value_name = "NODE:COUNTS", value_parser = parse_home_switch)]
+        home_switches: Vec<(u8, i32)>,
     },
     /// Decode the bus's traffic per CiA 301/402, one line per frame (candump, decoded).
     Monitor {
@@ -287,6 +293,24 @@ enum SdoOp {
 }
 
 /// `plan --override`: a percentage from 1 to 200.
+/// `--home-switch NODE:COUNTS`.
+fn parse_home_switch(s: &str) -> Result<(u8, i32), String> {
+    let (node, counts) = s
+        .split_once(':')
+        .ok_or_else(|| format!("{s:?}: expected NODE:COUNTS, e.g. 1:-2000"))?;
+    let node: u8 = node
+        .trim()
+        .parse()
+        .ok()
+        .filter(|n| (1..=127).contains(n))
+        .ok_or_else(|| format!("{node:?}: a node id is 1..=127"))?;
+    let counts: i32 = counts
+        .trim()
+        .parse()
+        .map_err(|_| format!("{counts:?}: a position in counts (INT32)"))?;
+    Ok((node, counts))
+}
+
 fn parse_plan_override(s: &str) -> Result<f64, String> {
     let percent: f64 = s
         .trim_end_matches('%')
@@ -547,7 +571,11 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 machine.axes.len(),
                 machine.cycle_us,
                 bus.name(),
-                if simulate { " with simulated drives" } else { "" },
+                if simulate {
+                    " with simulated drives"
+                } else {
+                    ""
+                },
                 opts.control_path.display()
             );
             canmotion::gateway::serve::serve(&machine, &bus, &opts)?;
@@ -758,6 +786,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             nodes,
             dictionary,
             injects,
+            home_switches,
         } => {
             let dict = std::sync::Arc::new(match dictionary {
                 Some(p) => DriveDictionary::load(&p)?,
@@ -775,6 +804,14 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                         .filter(|t| t.node.is_none_or(|m| m == n))
                         .fold(SimDrive::new(dict.clone(), n), |d, t| {
                             d.with_inject(t.inject)
+                        })
+                        .with_sim_setup(canmotion::sim::SimSetup {
+                            home_switch_counts: home_switches
+                                .iter()
+                                .rev()
+                                .find(|(node, _)| *node == n)
+                                .map(|(_, c)| *c),
+                            ..Default::default()
                         })
                 })
                 .collect();

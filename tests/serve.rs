@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use canmotion::config::Machine;
 use canmotion::interpolator::OverrideRamp;
 use canmotion::sim::{Inject, Targeted};
-use serve_rig::{Client, Service, axis};
 use common::*;
+use serve_rig::{Client, Service, axis};
 
 /// The demo machine with the homing and simulator tables of these tests: Z homes first on the
 /// current position (offset -1 mm), X and Y together on home switches found from non-zero start
@@ -135,7 +135,10 @@ fn mode_writes(frames: &[(u64, canmotion::bus::Frame)]) -> Vec<(u64, u8, i8)> {
         .iter()
         .filter_map(|(t, f)| {
             let d = f.data();
-            let node = f.id().checked_sub(SDO_RX).filter(|n| (1..=127).contains(n))?;
+            let node = f
+                .id()
+                .checked_sub(SDO_RX)
+                .filter(|n| (1..=127).contains(n))?;
             (d.len() == 8 && d[0] & 0xE0 == 0x20 && d[1] == 0x60 && d[2] == 0x60)
                 .then(|| (*t, node as u8, d[4] as i8))
         })
@@ -156,17 +159,17 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
     assert!(a.starts_with("error: ") && a.contains("disabled"), "{a}");
     c.ok("enable");
     let a = c.cmd("mdi G0 X1");
-    assert!(
-        a.starts_with("error: MDI:1: axis X is not homed"),
-        "{a}"
-    );
+    assert!(a.starts_with("error: MDI:1: axis X is not homed"), "{a}");
     let part = svc.file("part.ngc", "G21 G90\nG1 X30 Y20 F3000\nG1 Z-2 F600\nM2\n");
     let a = c.cmd(&format!("run {}", part.display()));
     assert!(a.contains("axis X is not homed"), "{a}");
 
     // Home all: Z (order 0) first, then X and Y together.
     let before_home = c.status();
-    assert!((actual(&before_home, 0) - 6.0).abs() < 1e-3, "{before_home}");
+    assert!(
+        (actual(&before_home, 0) - 6.0).abs() < 1e-3,
+        "{before_home}"
+    );
     let a = c.ok("home all");
     assert_eq!(a, "ok homed X Y Z");
     let homed = c.status();
@@ -270,7 +273,10 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
                 && f.data().len() >= 2
                 && u16::from_le_bytes([f.data()[0], f.data()[1]]) & 0x1400 == 0x1400
         });
-        assert!(seen, "node {node}: no statusword with bits 10 and 12 while homing");
+        assert!(
+            seen,
+            "node {node}: no statusword with bits 10 and 12 while homing"
+        );
     }
     // Every setpoint within the limits: before homing, and from its end through jogs, MDI and
     // the program (homing re-references position actual, which the setpoint follows).
@@ -341,9 +347,7 @@ fn abort_stops_a_program_on_its_path_and_keeps_the_drives_enabled() {
 fn a_homing_error_names_the_node_and_the_cause_and_leaves_the_machine_holding() {
     let _one = one_at_a_time();
     // X's drive has no home switch.
-    let m = common::machine(|t| {
-        serve_tables(t).replacen("home_switch_mm = -2\n", "\n", 1)
-    });
+    let m = common::machine(|t| serve_tables(t).replacen("home_switch_mm = -2\n", "\n", 1));
     let mut svc = Service::start(&m, Vec::new());
     let mut c = svc.client();
     c.ok("enable");
@@ -354,7 +358,10 @@ fn a_homing_error_names_the_node_and_the_cause_and_leaves_the_machine_holding() 
     assert_eq!(s["state"], "idle", "{s}");
     assert_eq!(axis(&s, 0)["homed"], false);
     assert_eq!(axis(&s, 0)["control"], "cyclic");
-    assert!(s["homing_error"].as_str().unwrap().contains("node 1"), "{s}");
+    assert!(
+        s["homing_error"].as_str().unwrap().contains("node 1"),
+        "{s}"
+    );
     // The other axes still home.
     c.ok("home Y");
     svc.quit().unwrap();

@@ -16,6 +16,13 @@ use crate::canopen::index;
 use crate::interpolator::filter::{AxisFilter, FilterKind, FilterSpec};
 use crate::planner::MAX_LIMIT;
 
+use super::operation::{AxisLimits, RawHoming, RawOperation, RawSim};
+pub use super::operation::{
+    DEFAULT_CONTROL_SOCKET, DEFAULT_HOMING_TIMEOUT_MS, DEFAULT_JOG_TIMEOUT_MS,
+    DEFAULT_UNHOMED_JOG_FRACTION, HOMING_TIMEOUT_MS, HomingConfig, HomingMethod, JOG_TIMEOUT_MS,
+    OperationConfig, SimOptions,
+};
+
 /// The most axes a machine may have.
 pub const MAX_AXES: usize = 8;
 
@@ -45,6 +52,8 @@ struct RawMachine {
     program: RawProgram,
     #[serde(default)]
     planner: RawPlanner,
+    #[serde(default)]
+    operation: RawOperation,
 }
 
 /// `[planner]`: how the look-ahead joins elements and shapes speed (all keys optional).
@@ -170,6 +179,10 @@ struct RawAxis {
     sdo: Vec<RawSdo>,
     #[serde(default)]
     filter: Option<RawFilter>,
+    #[serde(default)]
+    homing: Option<RawHoming>,
+    #[serde(default)]
+    sim: RawSim,
 }
 
 /// `filter = { kind = "linear", time_ms = 8 }`: the axis's post-interpolation filter.
@@ -296,10 +309,22 @@ pub const GATEWAY_OWNED: &[(u16, u16, &str, &str)] = &[
         "written every cycle",
     ),
     (
+        index::HOME_OFFSET,
+        index::HOME_OFFSET,
+        "home offset",
+        "written from [axis.homing] offset_mm",
+    ),
+    (
         index::SOFTWARE_POSITION_LIMIT,
         index::SOFTWARE_POSITION_LIMIT,
         "software position limits",
         "written from min_mm and max_mm",
+    ),
+    (
+        index::HOMING_METHOD,
+        index::HOMING_ACCELERATION,
+        "homing method, speeds and acceleration",
+        "written from [axis.homing]",
     ),
     (
         index::MAX_PROFILE_VELOCITY,
@@ -478,6 +503,11 @@ pub struct AxisConfig {
     pub sdo: Vec<SdoWrite>,
     /// The post-interpolation filter on the axis's setpoints (`filter`), if any.
     pub filter: Option<FilterSpec>,
+    /// How the axis homes (`[axis.homing]`); `None`: it has no homing, and counts as homed
+    /// only where homing is not required (`[operation] require_homing = false`).
+    pub homing: Option<HomingConfig>,
+    /// Options of the simulated drive (`[axis.sim]`): its start position and switches.
+    pub sim: SimOptions,
 }
 
 impl AxisConfig {
@@ -547,6 +577,8 @@ pub struct Machine {
     /// How the look-ahead plans (`[planner]`; the period and the jerk limits come from the
     /// bus and the axes).
     pub planner: crate::planner::PlannerConfig,
+    /// What `canmotion serve` requires and allows (`[operation]`).
+    pub operation: OperationConfig,
 }
 
 /// Work offset names in the order of [`crate::gcode::Setup::work_offsets_mm`].
@@ -1196,6 +1228,22 @@ impl Machine {
                     value,
                 });
             }
+            let limits = AxisLimits {
+                table: &table,
+                counts_per_mm: a.counts_per_mm,
+                min_mm: a.min_mm,
+                max_mm: a.max_mm,
+                max_vel_mm_s: a.max_vel_mm_s,
+                max_acc_mm_s2: a.max_acc_mm_s2,
+            };
+            let table_err = |(t, k, m): (String, String, String)| ctx.err(t, &k, m);
+            let homing = a
+                .homing
+                .as_ref()
+                .map(|h| super::operation::homing(&limits, h, &dict))
+                .transpose()
+                .map_err(table_err)?;
+            let sim = super::operation::sim(&limits, &a.sim).map_err(table_err)?;
             axes.push(AxisConfig {
                 name: a.name.clone(),
                 node: a.node,
@@ -1214,6 +1262,8 @@ impl Machine {
                 feedback_pdo,
                 sdo,
                 filter,
+                homing,
+                sim,
             });
         }
         if !axes.iter().any(|a| a.xyz().is_some()) {
@@ -1243,6 +1293,8 @@ impl Machine {
             max_load_percent: raw.bus.max_load_percent,
             program: program_setup(&ctx, &raw.program)?,
             planner: crate::planner::PlannerConfig::exact_stop(),
+            operation: super::operation::operation(&raw.operation)
+                .map_err(|(t, k, m)| ctx.err(t, &k, m))?,
         };
         machine.planner = planner_config(&ctx, &raw.planner, &machine)?;
         machine.admit(&ctx)?;
@@ -1935,5 +1987,219 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(msg.contains("column 2: unknown field `spindle`"), "{msg}");
+    }
+
+    /// The demo with `from` replaced by `to` (in the whole file, `n` times): the table and key of
+    /// the `ConfigError::Invalid` it gives.
+    fn invalid_with(from: &str, to: &str, n: usize) -> (String, String, String) {
+        assert!(DEMO_MACHINE.contains(from), "demo file lacks {from:?}");
+        let text = DEMO_MACHINE.replacen(from, to, n);
+        match parse(&text) {
+            Ok(_) => panic!("accepted {to:?}"),
+            Err(ConfigError::Invalid {
+                table,
+                key,
+                message,
+                ..
+            }) => (table, key, message),
+            Err(e) => panic!("not an Invalid error: {e}"),
+        }
+    }
+
+    fn parsed_with(from: &str, to: &str) -> Machine {
+        assert!(DEMO_MACHINE.contains(from), "demo file lacks {from:?}");
+        parse(&DEMO_MACHINE.replacen(from, to, 1)).expect("valid")
+    }
+
+    #[test]
+    fn the_demo_homes_z_first_then_x_and_y_on_simulated_switches() {
+        let m = Machine::demo();
+        let h = |n: &str| m.axis(n).unwrap().homing.clone().expect("homing");
+        let (x, y, z) = (h("X"), h("Y"), h("Z"));
+        assert_eq!((z.order, x.order, y.order), (0, 1, 1));
+        assert_eq!(x.method, HomingMethod::Drive(21));
+        assert_eq!(x.drive_method(), Some(21));
+        assert_eq!(z.method, HomingMethod::Drive(19));
+        assert_eq!(x.timeout_ms, 30_000);
+        assert_eq!((x.speed_search_mm_s, x.speed_zero_mm_s), (20.0, 2.0));
+        assert_eq!((x.acc_mm_s2, x.offset_mm), (200.0, -2.0));
+        assert_eq!(m.axis("Z").unwrap().sim.home_switch_mm, Some(2.0));
+        let x_sim = m.axis("X").unwrap().sim;
+        assert_eq!(x_sim.start_mm, 0.0, "runs on the demo start at 0");
+        assert_eq!(x_sim.limit_switches_mm, None);
+        assert_eq!(m.operation, OperationConfig::default());
+        assert!(m.operation.require_homing);
+        assert_eq!(m.operation.jog_timeout_ms, 500);
+        assert_eq!(m.operation.unhomed_jog_fraction, 0.1);
+        assert_eq!(
+            m.operation.control_socket,
+            PathBuf::from("/run/canmotion.sock")
+        );
+    }
+
+    #[test]
+    fn homing_methods_current_and_absolute_need_no_speeds() {
+        let z = "method = 19              # Z homes first (order 0), up to a switch near the top, then off it downward\nspeed_search_mm_s = 10.0\nspeed_zero_mm_s = 1.0\nacc_mm_s2 = 200.0\n";
+        for (method, want, drive) in [
+            ("\"current\"", HomingMethod::Current, Some(37)),
+            ("\"absolute\"", HomingMethod::Absolute, None),
+            ("37", HomingMethod::Drive(37), Some(37)),
+        ] {
+            let m = parsed_with(&z, &format!("method = {method}\n"));
+            let h = m.axis("Z").unwrap().homing.clone().unwrap();
+            assert_eq!(h.method, want);
+            assert_eq!(h.drive_method(), drive);
+            assert!(!h.moves());
+            assert_eq!(h.speed_search_mm_s, 0.0);
+        }
+        // Without the table the axis has no homing.
+        let start = DEMO_MACHINE.rfind("[axis.homing]").unwrap();
+        let end = DEMO_MACHINE.rfind("[axis.sim]").unwrap();
+        let text = format!("{}{}", &DEMO_MACHINE[..start], &DEMO_MACHINE[end..]);
+        let m = parse(&text).expect("valid");
+        assert!(m.axis("Z").unwrap().homing.is_none());
+    }
+
+    #[test]
+    fn homing_tables_are_checked_against_the_axis_and_the_drive() {
+        let x = "axis X.homing";
+        for (from, to, key, says) in [
+            (
+                "speed_search_mm_s = 20.0",
+                "speed_search_mm_s = 250.0",
+                "speed_search_mm_s",
+                "200",
+            ),
+            (
+                "speed_search_mm_s = 20.0",
+                "speed_search_mm_s = 0.0",
+                "speed_search_mm_s",
+                "(0, 200]",
+            ),
+            (
+                "speed_zero_mm_s = 2.0",
+                "speed_zero_mm_s = -1.0",
+                "speed_zero_mm_s",
+                "(0, 200]",
+            ),
+            (
+                "acc_mm_s2 = 200.0",
+                "acc_mm_s2 = 3000.0",
+                "acc_mm_s2",
+                "max_acc_mm_s2",
+            ),
+            (
+                "offset_mm = -2.0",
+                "offset_mm = -6.0",
+                "offset_mm",
+                "[-5, 300]",
+            ),
+            (
+                "timeout_ms = 30000",
+                "timeout_ms = 0",
+                "timeout_ms",
+                "100..=600000",
+            ),
+            ("method = 21 ", "method = 40 ", "method", "1..=37"),
+            ("method = 21 ", "method = 1  ", "method", "0x60E3"),
+            ("method = 21 ", "method = \"home\"", "method", "\"current\""),
+            (
+                "speed_search_mm_s = 20.0 #",
+                "# speed_search_mm_s = 20.0 #",
+                "speed_search_mm_s",
+                "missing",
+            ),
+        ] {
+            let (table, k, message) = invalid_with(from, to, 1);
+            assert_eq!((table.as_str(), k.as_str()), (x, key), "{to}: {message}");
+            assert!(message.contains(says), "{to}: {message}");
+        }
+        // A drive without homing mode: the dictionary's 0x6502 decides.
+        let text = DEMO_MACHINE.to_string();
+        let no_hm = DEMO_DRIVE.replace("default = 0x000000E1", "default = 0x000000C1");
+        let e = Machine::parse(Path::new("m.toml"), &text, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), &no_hm)
+        })
+        .unwrap_err();
+        assert!(
+            matches!(&e, ConfigError::Invalid { table, key, message, .. }
+                if table == "axis X.homing" && key == "method" && message.contains("0x6502")),
+            "{e}"
+        );
+        // ... unless the axis homes without the drive.
+        let text = DEMO_MACHINE
+            .replace("method = 21 ", "method = \"absolute\"")
+            .replace("method = 21\n", "method = \"absolute\"\n")
+            .replace("method = 19 ", "method = \"absolute\"");
+        Machine::parse(Path::new("m.toml"), &text, |rel| {
+            DriveDictionary::parse(&Path::new("dictionaries/machines").join(rel), &no_hm)
+        })
+        .expect("absolute encoders need no homing mode");
+    }
+
+    #[test]
+    fn sim_and_operation_tables_are_checked() {
+        let (t, k, m) = invalid_with(
+            "home_switch_mm = -2.0    #",
+            "limit_switches_mm = [3.0, 1.0]\nhome_switch_mm = -2.0    #",
+            1,
+        );
+        assert_eq!(
+            (t.as_str(), k.as_str()),
+            ("axis X.sim", "limit_switches_mm"),
+            "{m}"
+        );
+        let (t, k, _) = invalid_with("home_switch_mm = -2.0    #", "start_mm = nan\n#", 1);
+        assert_eq!((t.as_str(), k.as_str()), ("axis X.sim", "start_mm"));
+        for (from, to, key) in [
+            (
+                "jog_timeout_ms = 500 ",
+                "jog_timeout_ms = 10  ",
+                "jog_timeout_ms",
+            ),
+            (
+                "unhomed_jog_fraction = 0.1",
+                "unhomed_jog_fraction = 1.5",
+                "unhomed_jog_fraction",
+            ),
+            (
+                "unhomed_jog_fraction = 0.1",
+                "unhomed_jog_fraction = 0.0",
+                "unhomed_jog_fraction",
+            ),
+            (
+                "control_socket = \"/run/canmotion.sock\"",
+                "control_socket = \"\"",
+                "control_socket",
+            ),
+        ] {
+            let (t, k, m) = invalid_with(from, to, 1);
+            assert_eq!((t.as_str(), k.as_str()), ("operation", key), "{m}");
+        }
+        let m = parsed_with(
+            "home_switch_mm = -2.0    #",
+            "start_mm = 50.0\nlimit_switches_mm = [-4.0, 290.0]\nhome_switch_mm = -2.0    #",
+        );
+        let sim = m.axis("X").unwrap().sim;
+        assert_eq!(sim.start_mm, 50.0);
+        assert_eq!(sim.limit_switches_mm, Some([-4.0, 290.0]));
+        let m = parsed_with("require_homing = true", "require_homing = false");
+        assert!(!m.operation.require_homing);
+        // The table is optional.
+        let text = DEMO_MACHINE
+            .lines()
+            .filter(|l| {
+                !l.starts_with("[operation]")
+                    && !l.starts_with("require_homing")
+                    && !l.starts_with("jog_timeout_ms")
+                    && !l.starts_with("unhomed_jog_fraction")
+                    && !l.starts_with("control_socket")
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert_eq!(
+            parse(&text).expect("valid").operation,
+            OperationConfig::default()
+        );
     }
 }

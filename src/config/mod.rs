@@ -6,6 +6,7 @@
 
 pub mod dictionary;
 pub mod machine;
+pub mod operation;
 pub mod tool_table;
 
 use std::ops::Range;

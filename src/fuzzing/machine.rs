@@ -9,8 +9,9 @@ use std::path::Path;
 
 use crate::canopen::index;
 use crate::config::machine::{
-    DEMO_DRIVE, DRIVE_VELOCITY_HEADROOM, GATEWAY_OWNED, MAX_AXES, MIN_AXIS_LIMIT,
-    MIN_FOLLOWING_ERROR_COUNTS, MIN_PATH_ACC_SHARE, MIN_TRAVEL_COUNTS, RESTRICTED_CAN_IDS,
+    DEMO_DRIVE, DRIVE_VELOCITY_HEADROOM, GATEWAY_OWNED, HOMING_TIMEOUT_MS, JOG_TIMEOUT_MS,
+    MAX_AXES, MIN_AXIS_LIMIT, MIN_FOLLOWING_ERROR_COUNTS, MIN_PATH_ACC_SHARE, MIN_TRAVEL_COUNTS,
+    RESTRICTED_CAN_IDS,
 };
 use crate::config::{DriveDictionary, Machine, PdoConfig};
 use crate::planner::MAX_LIMIT;
@@ -37,6 +38,9 @@ fn invariants(m: &Machine) {
     );
     let hb = m.heartbeat;
     assert!((1..=127).contains(&hb.gateway_node));
+    assert!(JOG_TIMEOUT_MS.contains(&m.operation.jog_timeout_ms));
+    let f = m.operation.unhomed_jog_fraction;
+    assert!(f > 0.0 && f <= 1.0, "unhomed_jog_fraction {f}");
     let names: BTreeSet<_> = m.axes.iter().map(|a| a.name.as_str()).collect();
     let nodes: BTreeSet<_> = m.axes.iter().map(|a| a.node).collect();
     assert_eq!((names.len(), nodes.len()), (m.axes.len(), m.axes.len()));
@@ -71,6 +75,32 @@ fn invariants(m: &Machine) {
                 "axis {}: sdo 0x{:04X}",
                 a.name,
                 w.index
+            );
+        }
+        if let Some(h) = &a.homing {
+            assert!(
+                (a.min_mm..=a.max_mm).contains(&h.offset_mm),
+                "axis {}",
+                a.name
+            );
+            assert!(HOMING_TIMEOUT_MS.contains(&h.timeout_ms));
+            if h.moves() {
+                for v in [h.speed_search_mm_s, h.speed_zero_mm_s] {
+                    assert!(v > 0.0 && v <= a.max_vel_mm_s, "axis {}: {v}", a.name);
+                    assert!(v * a.counts_per_mm <= f64::from(u32::MAX));
+                }
+                assert!(h.acc_mm_s2 > 0.0 && h.acc_mm_s2 <= a.max_acc_mm_s2);
+            }
+        }
+        for v in [Some(a.sim.start_mm), a.sim.home_switch_mm]
+            .into_iter()
+            .flatten()
+            .chain(a.sim.limit_switches_mm.into_iter().flatten())
+        {
+            assert!(
+                (v * a.counts_per_mm).abs() < f64::from(i32::MAX),
+                "axis {}",
+                a.name
             );
         }
         let pdo = |p: &PdoConfig| {

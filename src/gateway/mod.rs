@@ -840,7 +840,7 @@ pub(crate) fn spawn_sims(
             injects
                 .iter()
                 .filter(|t| t.node.is_none_or(|n| n == a.node))
-                .fold(crate::sim::SimDrive::new(a.dictionary.clone(), a.node), |d, t| {
+                .fold(crate::sim::SimDrive::for_axis(a), |d, t| {
                     d.with_inject(t.inject)
                 })
         })

@@ -370,7 +370,9 @@ impl CyclicMaster {
             e.set_bits(0);
             e.set_target(Target::OperationEnabled);
         }
-        self.control.iter_mut().for_each(|c| *c = AxisControl::Cyclic);
+        self.control
+            .iter_mut()
+            .for_each(|c| *c = AxisControl::Cyclic);
         self.motion = None;
         self.set_phase(Phase::Enabling);
         Ok(())
@@ -394,8 +396,7 @@ impl CyclicMaster {
     }
 
     fn check_no_alarm(&self) -> Result<(), Refusal> {
-        if self.reset.iter().any(|r| *r) || (self.failure.is_some() && self.phase == Phase::Done)
-        {
+        if self.reset.iter().any(|r| *r) || (self.failure.is_some() && self.phase == Phase::Done) {
             return Err(Refusal::NeedsStartUp);
         }
         if self.failure.is_some() {
@@ -781,7 +782,9 @@ impl CyclicMaster {
                     self.fail(alarm);
                 }
             }
-            Phase::Enabling | Phase::Arming | Phase::Armed | Phase::DriveControl => self.fail(alarm),
+            Phase::Enabling | Phase::Arming | Phase::Armed | Phase::DriveControl => {
+                self.fail(alarm)
+            }
             Phase::Settling
             | Phase::Stopping
             | Phase::Disabling
@@ -1112,8 +1115,7 @@ impl CyclicMaster {
                         AxisControl::Rearming => {
                             let since = self.control_since[i];
                             let following = self.fb[i].is_some_and(|f| {
-                                f.cycle > since + 1
-                                    && f.statusword & swb::OP_MODE_SPECIFIC_12 != 0
+                                f.cycle > since + 1 && f.statusword & swb::OP_MODE_SPECIFIC_12 != 0
                             });
                             if following {
                                 self.control[i] = AxisControl::Cyclic;
@@ -1310,7 +1312,9 @@ impl CyclicMaster {
                 if self.service {
                     self.motion = None;
                     self.aborting = false;
-                    self.control.iter_mut().for_each(|c| *c = AxisControl::Cyclic);
+                    self.control
+                        .iter_mut()
+                        .for_each(|c| *c = AxisControl::Cyclic);
                     self.set_phase(Phase::Disabled);
                 } else {
                     self.set_phase(Phase::Done);
@@ -1852,11 +1856,9 @@ mod tests {
 
     fn with_ramp(i: Interpolator) -> Interpolator {
         let m = Machine::demo();
-        let ramp = crate::interpolator::OverrideRamp::for_machine(
-            &crate::gateway::limits(&m),
-            &m.planner,
-        )
-        .unwrap();
+        let ramp =
+            crate::interpolator::OverrideRamp::for_machine(&crate::gateway::limits(&m), &m.planner)
+                .unwrap();
         i.with_override_ramp(ramp)
     }
 
@@ -1881,7 +1883,8 @@ mod tests {
         assert!(r.master.is_idle());
         // A motion from elsewhere is refused.
         assert!(matches!(
-            r.master.start_motion(motion(Vector3::zeros(), "G1 X10 F3000\n")),
+            r.master
+                .start_motion(motion(Vector3::zeros(), "G1 X10 F3000\n")),
             Err(Refusal::StartMismatch { .. })
         ));
         r.master
@@ -1992,7 +1995,11 @@ mod tests {
             assert!(n < 100);
             // The setpoint follows the drive's own motion.
             let sp = r.master.setpoint_counts()[2];
-            assert!((sp - r.drives[2].pos).abs() <= 1, "{sp} {}", r.drives[2].pos);
+            assert!(
+                (sp - r.drives[2].pos).abs() <= 1,
+                "{sp} {}",
+                r.drives[2].pos
+            );
         }
         assert_eq!(r.drives[2].pos, 25);
         r.master.end_drive_op(0b100);

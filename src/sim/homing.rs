@@ -222,3 +222,17 @@ impl HomingRun {
         self.goto = None;
     }
 }
+
+impl SimSetup {
+    /// The machine file's `[axis.sim]` of `axis` in counts; the limit switches default to the
+    /// axis's travel (`min_mm`, `max_mm`).
+    pub fn for_axis(axis: &crate::config::AxisConfig) -> SimSetup {
+        let o = &axis.sim;
+        let [lo, hi] = o.limit_switches_mm.unwrap_or([axis.min_mm, axis.max_mm]);
+        SimSetup {
+            start_counts: axis.mm_to_counts(o.start_mm),
+            home_switch_counts: o.home_switch_mm.map(|h| axis.mm_to_counts(h)),
+            limit_switches_counts: Some([axis.mm_to_counts(lo), axis.mm_to_counts(hi)]),
+        }
+    }
+}

@@ -201,6 +201,11 @@ impl SimDrive {
         }
     }
 
+    /// The simulated drive of a machine file's axis: its dictionary, node and `[axis.sim]`.
+    pub fn for_axis(axis: &crate::config::AxisConfig) -> SimDrive {
+        SimDrive::new(axis.dictionary.clone(), axis.node).with_sim_setup(SimSetup::for_axis(axis))
+    }
+
     /// The simulated axis's switches and start position (see [`SimSetup`]).
     pub fn with_sim_setup(mut self, setup: SimSetup) -> SimDrive {
         self.setup = setup;

@@ -125,7 +125,9 @@ impl Client {
     /// `status`, parsed.
     pub fn status(&mut self) -> serde_json::Value {
         let s = self.cmd("status");
-        let json = s.strip_prefix("ok ").unwrap_or_else(|| panic!("status: {s}"));
+        let json = s
+            .strip_prefix("ok ")
+            .unwrap_or_else(|| panic!("status: {s}"));
         serde_json::from_str(json).unwrap_or_else(|e| panic!("status is not JSON ({e}): {json}"))
     }
 

@@ -63,7 +63,9 @@ pub enum HomingError {
         timeout_ms: u32,
     },
     /// The drive did not take a mode of operation.
-    #[error("axis {axis} (node {node}): 0x6061 shows mode {found}, not {mode}, after 0x6060 = {mode}")]
+    #[error(
+        "axis {axis} (node {node}): 0x6061 shows mode {found}, not {mode}, after 0x6060 = {mode}"
+    )]
     Mode {
         /// Axis.
         axis: String,

@@ -385,12 +385,15 @@ impl Controller<'_> {
             self.current = None;
             self.jog = None;
             for (h, a) in self.homed.iter_mut().zip(&self.m.axes) {
-                *h = a.homing.as_ref().is_some_and(|h| {
-                    h.method == crate::config::operation::HomingMethod::Absolute
-                });
+                *h = a
+                    .homing
+                    .as_ref()
+                    .is_some_and(|h| h.method == crate::config::operation::HomingMethod::Absolute);
             }
             for i in 0..self.m.axes.len() {
-                let _ = self.ask(Request::TravelChecked(i, self.travel_checked(i))).await;
+                let _ = self
+                    .ask(Request::TravelChecked(i, self.travel_checked(i)))
+                    .await;
             }
         }
         if let Some(j) = &self.jog
@@ -569,9 +572,7 @@ impl Controller<'_> {
             Command::Reset => self.reset().await,
             Command::Quit => Ok("bye".into()),
             // Answered by the client's thread.
-            Command::Status | Command::Watch(_) | Command::Operator(_) => {
-                Err(ServeError::NotHere)
-            }
+            Command::Status | Command::Watch(_) | Command::Operator(_) => Err(ServeError::NotHere),
         }
     }
 
@@ -639,14 +640,11 @@ impl Controller<'_> {
             crate::gcode::parse_program_with(text, name, setup)
         }
         .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
-        let mut program = crate::compensation::compensate_program(
-            &program,
-            self.m.program.compensation,
-        )
-        .map_err(|e| ServeError::Program(Box::new(GatewayError::from(e))))?;
+        let mut program =
+            crate::compensation::compensate_program(&program, self.m.program.compensation)
+                .map_err(|e| ServeError::Program(Box::new(GatewayError::from(e))))?;
         if let Some(line) = from_line {
-            from_line_on(&mut program, line, start)
-                .ok_or(ServeError::NoMotionFrom { line })?;
+            from_line_on(&mut program, line, start).ok_or(ServeError::NoMotionFrom { line })?;
         }
         for item in &program.items {
             match item {
@@ -703,7 +701,10 @@ impl Controller<'_> {
         Ok(format!(
             "queued {name}: {elements} moves, {duration:.3} s{}",
             if self.queue.len() > 1 || self.current.is_some() {
-                format!(" ({} ahead)", self.queue.len() - 1 + usize::from(self.current.is_some()))
+                format!(
+                    " ({} ahead)",
+                    self.queue.len() - 1 + usize::from(self.current.is_some())
+                )
             } else {
                 String::new()
             }
@@ -712,9 +713,10 @@ impl Controller<'_> {
 
     fn interpolator(&self, plan: crate::planner::Plan) -> Result<Interpolator, ServeError> {
         let i = Interpolator::new(plan, self.m.cycle_s()).map_err(|e| {
-            ServeError::Program(Box::new(GatewayError::Motion(
-                super::MotionFailure::plain(e.into(), self.m.cycle_s()),
-            )))
+            ServeError::Program(Box::new(GatewayError::Motion(super::MotionFailure::plain(
+                e.into(),
+                self.m.cycle_s(),
+            ))))
         })?;
         Ok(match self.ramp {
             Some(r) => i.with_override_ramp(r),
@@ -825,7 +827,9 @@ impl Controller<'_> {
             axis,
             speed_mm_s,
             dist_mm,
-            deadline: dist_mm.is_none().then(|| Instant::now() + self.jog_timeout()),
+            deadline: dist_mm
+                .is_none()
+                .then(|| Instant::now() + self.jog_timeout()),
         });
         self.publish();
         Ok(match dist_mm {
@@ -834,7 +838,11 @@ impl Controller<'_> {
                 "jogging {} at {:+.3} mm/s{}",
                 a.name,
                 v * dir,
-                if homed { "" } else { " (not homed: reduced speed)" }
+                if homed {
+                    ""
+                } else {
+                    " (not homed: reduced speed)"
+                }
             ),
         })
     }

@@ -190,15 +190,14 @@ pub fn parse(machine: &Machine, line: &[u8]) -> Result<Command, ParseError> {
                     path: PathBuf::from(p),
                     from_line: None,
                 }),
-                [p, f, l] if f.eq_ignore_ascii_case("from") => Ok(Command::Run {
-                    path: PathBuf::from(p),
-                    from_line: Some(
-                        l.parse::<usize>()
-                            .ok()
-                            .filter(|l| *l > 0)
-                            .ok_or_else(|| usage("run", U, &format!("'{l}' is not a line number")))?,
-                    ),
-                }),
+                [p, f, l] if f.eq_ignore_ascii_case("from") => {
+                    Ok(Command::Run {
+                        path: PathBuf::from(p),
+                        from_line: Some(l.parse::<usize>().ok().filter(|l| *l > 0).ok_or_else(
+                            || usage("run", U, &format!("'{l}' is not a line number")),
+                        )?),
+                    })
+                }
                 _ => Err(usage("run", U, "wrong arguments")),
             }
         }
@@ -356,9 +355,15 @@ mod tests {
             })
         );
         assert_eq!(p("watch 2"), Ok(Command::Watch(2.0)));
-        assert_eq!(p("override 50"), Ok(Command::Operator("override 50".into())));
+        assert_eq!(
+            p("override 50"),
+            Ok(Command::Operator("override 50".into()))
+        );
         assert!(matches!(p("home Q"), Err(ParseError::NoSuchAxis { .. })));
-        assert!(matches!(p("jog X fast"), Err(ParseError::Usage { command: "jog", .. })));
+        assert!(matches!(
+            p("jog X fast"),
+            Err(ParseError::Usage { command: "jog", .. })
+        ));
         assert!(matches!(p("watch 1000"), Err(ParseError::Usage { .. })));
         assert!(matches!(p("run a from 0"), Err(ParseError::Usage { .. })));
         assert!(matches!(p("enable now"), Err(ParseError::Usage { .. })));

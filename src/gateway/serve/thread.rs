@@ -9,11 +9,11 @@ use std::time::Duration;
 use crate::bus::{Bus, Filter, Frame, Port};
 use crate::config::Machine;
 use crate::config::machine::MAX_AXES;
+use crate::gateway::GatewayError;
 use crate::gateway::control::Control;
 use crate::gateway::cyclic_bus::CyclicBus;
-use crate::gateway::GatewayError;
-use crate::master::alarm::SharedBusError;
 use crate::interpolator::Interpolator;
+use crate::master::alarm::SharedBusError;
 use crate::master::alarm::{Alarm, Failure};
 use crate::master::cyclic::{
     AxisControl, CycleRecord, CyclicMaster, DriveOpStatus, Phase, Refusal,
