@@ -398,3 +398,96 @@ fn an_enable_timeout_outside_its_bounds_is_refused_on_its_key() {
     assert_eq!(m.axes[0].enable_timeout_ms, 60_000);
     assert_eq!(m.axes[1].enable_timeout_ms, 2000);
 }
+
+/// The homing test machine (tests/machines/homing-xyz.toml): each axis's simulated drive, built
+/// from the file with `SimDrive::for_axis`, starts at `[axis.sim] start_mm`, and homing it with
+/// the objects `[axis.homing]` gives (in counts, as the master writes them) moves it to its
+/// simulated home switch and ends with position actual = `offset_mm`, in the file's order.
+#[test]
+fn a_machine_files_homing_and_sim_tables_home_its_simulated_drives() {
+    use std::time::Duration;
+
+    use canmotion::canopen::index;
+    use canmotion::canopen::sdo_server::SdoTarget;
+    use canmotion::cia402::{controlword as cw, statusword as sw};
+    use canmotion::sim::{HomingStatus, SimDrive};
+    use canopen_rs::Value;
+
+    let m = Machine::load(Path::new("tests/machines/homing-xyz.toml")).expect("loads");
+    let mut axes: Vec<_> = m.axes.iter().collect();
+    axes.sort_by_key(|a| a.homing.as_ref().expect("every axis homes").order);
+    assert_eq!(
+        axes.iter().map(|a| a.name.as_str()).collect::<Vec<_>>(),
+        ["Z", "X", "Y"],
+        "Z homes first"
+    );
+    for a in axes {
+        let h = a.homing.as_ref().unwrap();
+        let mut d = SimDrive::for_axis(a);
+        let mut now = Duration::ZERO;
+        let mut out = Vec::new();
+        d.boot(now, &mut out);
+        let start = d.position_counts();
+        assert_eq!(start, a.mm_to_counts(a.sim.start_mm), "axis {}", a.name);
+        assert_ne!(
+            a.sim.start_mm, h.offset_mm,
+            "axis {}: homing must move",
+            a.name
+        );
+        let write = |d: &mut SimDrive, index: u16, sub: u8, v: Value| {
+            let mut buf = [0u8; 8];
+            let n = v.encode_le(&mut buf).unwrap();
+            d.sdo_write(index, sub, &buf[..n])
+                .unwrap_or_else(|e| panic!("axis {}: {index:04X}:{sub}: {e}", a.name));
+        };
+        let counts_u32 = |x: f64| Value::Unsigned32((x * a.counts_per_mm).round() as u32);
+        let method = h.drive_method().expect("a drive method");
+        write(&mut d, index::HOMING_METHOD, 0, Value::Integer8(method));
+        write(
+            &mut d,
+            index::HOMING_SPEEDS,
+            1,
+            counts_u32(h.speed_search_mm_s),
+        );
+        write(
+            &mut d,
+            index::HOMING_SPEEDS,
+            2,
+            counts_u32(h.speed_zero_mm_s),
+        );
+        write(
+            &mut d,
+            index::HOMING_ACCELERATION,
+            0,
+            counts_u32(h.acc_mm_s2),
+        );
+        let offset = a.mm_to_counts(h.offset_mm);
+        write(&mut d, index::HOME_OFFSET, 0, Value::Integer32(offset));
+        write(&mut d, index::MODES_OF_OPERATION, 0, Value::Integer8(6));
+        for c in [
+            cw::SHUTDOWN,
+            cw::SWITCH_ON_CMD,
+            cw::ENABLE_OPERATION_CMD,
+            cw::ENABLE_OPERATION_CMD | cw::HOMING_START,
+        ] {
+            write(&mut d, index::CONTROLWORD, 0, Value::Unsigned16(c));
+        }
+        // Virtual time, to a deadline of the axis's homing time-out.
+        let deadline = Duration::from_millis(u64::from(h.timeout_ms));
+        let mut moved = 0i32;
+        while d.homing_status() == HomingStatus::InProgress
+            || d.statusword() & sw::TARGET_REACHED == 0
+        {
+            assert!(now < deadline, "axis {}: homing did not end", a.name);
+            now += Duration::from_millis(1);
+            d.poll(now, &mut out);
+            moved = moved.max((d.position_counts() - start).abs());
+        }
+        assert_eq!(d.homing_status(), HomingStatus::Attained, "axis {}", a.name);
+        let s = d.statusword();
+        assert_ne!(s & sw::HOMING_ATTAINED, 0);
+        assert_eq!(s & sw::HOMING_ERROR, 0);
+        assert_eq!(d.position_counts(), offset, "axis {}", a.name);
+        assert!(moved > 1000, "axis {}: moved {moved} counts", a.name);
+    }
+}

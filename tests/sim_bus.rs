@@ -398,9 +398,11 @@ fn a_hold_from_the_control_socket_stops_the_drives_on_the_path_and_a_resume_fini
     );
 }
 
-/// X and Y with `min_mm = 10`: drives at 0 stand outside the travel.
+/// X and Y with `min_mm = 10`: drives at 0 stand outside the travel (and their home offsets,
+/// which must lie in the travel, move to its new end).
 fn travel_from_10(t: String) -> String {
     t.replace("min_mm = -5.0", "min_mm = 10.0")
+        .replace("offset_mm = -2.0", "offset_mm = 10.0")
 }
 
 /// The demo machine's drives at `counts` (machine order) on a fresh bus, recorded.

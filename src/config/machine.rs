@@ -2045,7 +2045,7 @@ mod tests {
             ("\"absolute\"", HomingMethod::Absolute, None),
             ("37", HomingMethod::Drive(37), Some(37)),
         ] {
-            let m = parsed_with(&z, &format!("method = {method}\n"));
+            let m = parsed_with(z, &format!("method = {method}\n"));
             let h = m.axis("Z").unwrap().homing.clone().unwrap();
             assert_eq!(h.method, want);
             assert_eq!(h.drive_method(), drive);

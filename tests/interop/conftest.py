@@ -35,6 +35,12 @@ def vcan_status(ifname: str = VCAN) -> tuple[bool, str]:
     )
 
 
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "simdrive_args(*args): extra command-line options of `canmotion simdrive`"
+    )
+
+
 def pytest_report_header(config):
     import can
     import canopen

@@ -322,6 +322,10 @@ def drive(request, network, dictionary, tmp_path):
     network.subscribe(hb_id, on_heartbeat)  # armed BEFORE the process starts: no race
 
     cmd = [str(exe), "simdrive", "--bus", VCAN, "--node", str(NODE_ID)]
+    # @pytest.mark.simdrive_args(...): more options of the simulated drive (e.g. its home switch).
+    extra = request.node.get_closest_marker("simdrive_args")
+    if extra is not None:
+        cmd += [str(a) for a in extra.args]
     if os.environ.get("CANMOTION_DICTIONARY"):
         cmd += ["--dictionary", str(dictionary.path)]
     log_path = tmp_path / "simdrive.log"
@@ -960,3 +964,76 @@ def test_sdo_upload_of_every_entry_matches_the_dictionary(drive, dictionary):
     print(f"[interop] read {n} entries by SDO, {len(problems)} problems")
     assert not problems, "\n".join(problems)
     drive.assert_alive()
+
+
+# ---------------------------------------------------------------------------------------------
+# Homing mode (6), run by python-canopen's BaseNode402.homing()
+# ---------------------------------------------------------------------------------------------
+
+SW_TARGET_REACHED = 1 << 10
+SW_HOMING_ATTAINED = 1 << 12
+SW_HOMING_ERROR = 1 << 13
+HOME_SWITCH_COUNTS = -3000  # the simulated home switch's edge (position actual at power-on)
+HOME_OFFSET_COUNTS = 1234
+
+
+def configure_homing(node, method: int) -> None:
+    """Method, speeds, acceleration and home offset by python-canopen's SDO client, read back."""
+    node.sdo[0x6098].raw = method
+    node.sdo[0x6099][1].raw = 20000  # counts/s: search for the switch
+    node.sdo[0x6099][2].raw = 2000  # counts/s: search for zero
+    node.sdo[0x609A].raw = 200000  # counts/s^2
+    node.sdo[0x607C].raw = HOME_OFFSET_COUNTS
+    got = (node.sdo[0x6098].raw, node.sdo[0x6099][1].raw, node.sdo[0x6099][2].raw,
+           node.sdo[0x609A].raw, node.sdo[0x607C].raw)
+    assert got == (method, 20000, 2000, 200000, HOME_OFFSET_COUNTS), got
+    node.TIMEOUT_HOMING_DEFAULT = 20
+
+
+@pytest.mark.simdrive_args("--home-switch", f"{NODE_ID}:{HOME_SWITCH_COUNTS}")
+@pytest.mark.parametrize("method", [21, 19, 37])
+def test_python_canopen_homes_our_simdrive(drive, dictionary, method):
+    """BaseNode402.homing() (mode 6, its state walk, CW bit 4, the CiA 402 homing statusword
+    table) against our simulated drive: it reports success, statusword bits 12 (attained) and
+    10 (target reached) are set, position actual is the home offset 0x607C, and the motor stands
+    still there. 21 searches the switch below 0 and comes back off it; 19 starts on the switch
+    (active above -3000) and moves off it downward; 37 declares the current position home."""
+    node = drive.node
+    assert node.sdo[0x6502].raw & 0x20, "0x6502: homing mode supported"
+    configure_homing(node, method)
+    before = node.sdo[0x6064].raw
+    assert node.homing(), f"homing failed: SW 0x{node.sdo[0x6041].raw:04X}"
+    assert node.op_mode == "HOMING"
+    sw = wait_until(lambda: (lambda w: w if w & SW_TARGET_REACHED else 0)(node.sdo[0x6041].raw),
+                    10.0, "statusword bit 10 after homing")
+    assert sw & SW_HOMING_ATTAINED, f"SW 0x{sw:04X}: bit 12 (homing attained)"
+    assert not sw & SW_HOMING_ERROR, f"SW 0x{sw:04X}: bit 13 (homing error)"
+    assert sw & 0x6F == 0x27, f"SW 0x{sw:04X}: Operation enabled"
+    assert node.sdo[0x6064].raw == HOME_OFFSET_COUNTS
+    time.sleep(0.05)  # not a wait for a condition: the position must STAY at the offset
+    assert node.sdo[0x6064].raw == HOME_OFFSET_COUNTS
+    print(f"[interop] method {method}: position actual {before} -> {HOME_OFFSET_COUNTS}, "
+          f"SW 0x{sw:04X}")
+    node.state = "SWITCHED ON"
+    drive.assert_alive()
+
+
+def test_python_canopen_sees_a_homing_error_when_the_switch_is_never_found(drive, dictionary):
+    """No home switch (simdrive without --home-switch): method 21's search runs to the end of the
+    travel, here the software position limit 0x607D:1, and the drive reports a homing error
+    (bit 13) instead of attained; homing() returns False, and the drive stays enabled."""
+    node = drive.node
+    configure_homing(node, 21)
+    node.sdo[0x607D][1].raw = -20000
+    node.sdo[0x607D][2].raw = 20000
+    assert not node.homing(), "homing() succeeded without a home switch"
+    sw = wait_until(lambda: (lambda w: w if w & SW_TARGET_REACHED else 0)(node.sdo[0x6041].raw),
+                    10.0, "statusword bit 10 (standstill) after the homing error")
+    assert sw & SW_HOMING_ERROR, f"SW 0x{sw:04X}: bit 13 (homing error)"
+    assert not sw & SW_HOMING_ATTAINED, f"SW 0x{sw:04X}: bit 12"
+    assert sw & 0x6F == 0x27, f"SW 0x{sw:04X}: a homing error is no fault"
+    pos = node.sdo[0x6064].raw
+    assert -22000 <= pos <= -20000, f"stopped at {pos}, past the -20000 limit by the braking distance"
+    node.state = "SWITCHED ON"
+    drive.assert_alive()
+
