@@ -1176,9 +1176,14 @@ impl SimDrive {
                 // when latched; a limit written since applies here).
                 let lo = self.od.int(index::SOFTWARE_POSITION_LIMIT, 1) as f64;
                 let hi = self.od.int(index::SOFTWARE_POSITION_LIMIT, 2) as f64;
-                if !homing_mode && !(lo.min(hi)..=hi.max(lo)).contains(&self.demand) {
+                // A motor already beyond a limit (a homing search stops past the limit switch)
+                // is not pulled back by the drive: the demand may stay where the motor is, and
+                // only a setpoint brings it back in.
+                let (lo, hi) = (lo.min(hi), hi.max(lo));
+                let (lo, hi) = (lo.min(self.pos.round()), hi.max(self.pos.round()));
+                if !homing_mode && !(lo..=hi).contains(&self.demand) {
                     self.limit_flag = true;
-                    self.demand = self.demand.clamp(lo.min(hi), hi.max(lo));
+                    self.demand = self.demand.clamp(lo, hi);
                     v_ff = 0.0;
                 }
                 // A jammed motor (injected) does not move whatever it is told.

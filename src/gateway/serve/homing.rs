@@ -93,6 +93,14 @@ pub enum HomingError {
         /// The alarm.
         alarm: String,
     },
+    /// Homing failed, and so did the return to the cyclic mode after it.
+    #[error("{error}; then the return to the cyclic mode failed: {restore}")]
+    NotRestored {
+        /// The homing's error.
+        error: Box<HomingError>,
+        /// The return's.
+        restore: Box<HomingError>,
+    },
     /// The cyclic master refused a step, or did not reach it in time.
     #[error("homing: {0}")]
     Master(Box<ServeError>),
@@ -149,8 +157,17 @@ pub(super) async fn home(ctl: &mut Controller<'_>, axes: &[usize]) -> Result<(),
         let result = home_group(ctl, &drive, mask).await;
         // Whatever happened: back to the cyclic mode, holding, enabled.
         let back = back_to_cyclic(ctl, &drive, mask).await;
-        result?;
-        back?;
+        match (result, back) {
+            (Ok(()), Ok(())) => {}
+            (Err(e), Ok(())) | (Ok(()), Err(e)) => return Err(e.into()),
+            (Err(e), Err(back)) => {
+                return Err(HomingError::NotRestored {
+                    error: Box::new(e),
+                    restore: Box::new(back),
+                }
+                .into());
+            }
+        }
         for &(i, _) in &drive {
             ctl.homed[i] = true;
         }
@@ -262,6 +279,19 @@ async fn back_to_cyclic(
         return Ok(());
     }
     ctl.ask(Request::EndDriveOp(mask)).await?;
+    // Bit 4 cleared stops the drive's homing motion; its mode changes once it stands still
+    // (statusword bit 10, target reached, in homing mode: CiA 402-2's "interrupted" or
+    // "error, velocity 0" rows).
+    let since = ctl.snapshot().cycle;
+    ctl.wait_for("standstill after homing", Duration::from_secs(3), false, |s| {
+        s.cycle > since + 1
+            && drive.iter().all(|(i, _)| {
+                s.axes[*i]
+                    .statusword
+                    .is_some_and(|w| w & crate::cia402::statusword::TARGET_REACHED != 0)
+            })
+    })
+    .await?;
     for &(i, _) in drive {
         let mode = ctl.m.axes[i].mode.number();
         set_mode(ctl, i, mode).await?;

@@ -103,6 +103,8 @@ pub struct Info {
     pub current: Option<Current>,
     /// Jobs waiting.
     pub queued: usize,
+    /// The kind of the next job waiting.
+    pub next: Option<JobKind>,
     /// Per axis, homed.
     pub homed: Vec<bool>,
     /// The interpreter's modal state, as G-codes.
@@ -187,6 +189,14 @@ async fn serve_async(
         snapshot.clone(),
         log_tx.clone(),
     )?;
+    // The socket opens once the cyclic thread runs (its first snapshot is out).
+    let first = tokio::time::Instant::now();
+    while snapshot.lock().unwrap_or_else(|e| e.into_inner()).phase.is_none() {
+        if first.elapsed() > Duration::from_secs(2) {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
     let (req_tx, req_rx) = tokio::sync::mpsc::unbounded_channel();
     let shared = Arc::new(Shared {
         machine: machine.clone(),
@@ -358,6 +368,7 @@ impl Controller<'_> {
         let mut info = self.shared.info.lock().unwrap_or_else(|e| e.into_inner());
         info.current = self.current.clone();
         info.queued = self.queue.len();
+        info.next = self.queue.front().map(|j| j.kind);
         info.homed.clone_from(&self.homed);
         info.modal = self
             .carry
@@ -470,7 +481,8 @@ impl Controller<'_> {
         }
         match s.phase {
             Some(Phase::Armed | Phase::Streaming | Phase::Settling | Phase::Stopping) => Ok(()),
-            _ => Err(ServeError::Disabled),
+            None | Some(Phase::Disabled | Phase::Done) => Err(ServeError::Disabled),
+            Some(phase) => Err(ServeError::NotReady { phase }),
         }
     }
 
@@ -587,10 +599,13 @@ impl Controller<'_> {
                 alarm: f.to_string(),
             });
         }
-        if s.phase != Some(Phase::Disabled) {
-            return Ok("enabled".into());
+        if s.phase == Some(Phase::Disabled) {
+            self.ask(Request::Enable).await?;
+        } else if s.phase == Some(Phase::Disabling) {
+            return Err(ServeError::NotReady {
+                phase: Phase::Disabling,
+            });
         }
-        self.ask(Request::Enable).await?;
         let timeout = self
             .m
             .axes
@@ -855,6 +870,11 @@ impl Controller<'_> {
             return Ok("no alarm".into());
         }
         if s.needs_startup || s.ended {
+            // The fault stop first: every drive disabled (or the bus gone).
+            self.wait_for("stop", Duration::from_secs(5), true, |s| {
+                s.ended || matches!(s.phase, Some(Phase::Disabled | Phase::Done))
+            })
+            .await?;
             self.restart().await?;
         } else {
             self.wait_for("stop", Duration::from_secs(5), true, |s| {

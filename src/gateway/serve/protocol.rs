@@ -238,6 +238,12 @@ pub enum ServeError {
     /// The drives are disabled.
     #[error("the drives are disabled: `enable` first")]
     Disabled,
+    /// The drives are on their way (enabling, disabling, homing hand-over).
+    #[error("not ready: the cyclic master is in phase {phase:?}")]
+    NotReady {
+        /// The phase.
+        phase: crate::master::cyclic::Phase,
+    },
     /// Something else is under way.
     #[error("busy with {what}: wait, or `abort`")]
     Busy {

@@ -100,7 +100,13 @@ pub fn state(s: &Snapshot, info: &Info) -> &'static str {
         Some(Phase::DriveControl) => "homing",
         Some(Phase::Stopping) => "stopping",
         Some(Phase::Armed | Phase::Streaming | Phase::Settling) => match &info.current {
-            None => "idle",
+            // A job queued and not started yet is already what the machine does.
+            None => match info.next {
+                None => "idle",
+                Some(JobKind::Jog) => "jogging",
+                Some(JobKind::Mdi) => "mdi",
+                Some(JobKind::Program) => "running",
+            },
             Some(_) if s.held && s.standing_still => "held",
             Some(c) => match c.kind {
                 JobKind::Jog => "jogging",
