@@ -875,10 +875,17 @@ impl CyclicMaster {
 
     /// The statusword bits that are alarms for axis `i`: fault, and bit 13 (following error in
     /// IP/CSP) unless its drive runs its own operation (homing error there, not an alarm).
+    /// A re-arming axis's bit 13 counts only in a statusword sent after the re-arm began (an
+    /// older one is the homing mode's, where bit 13 is a homing error).
     fn alarm_bits(&self, i: usize) -> u16 {
         match self.control[i] {
-            AxisControl::Cyclic | AxisControl::Rearming => swb::FAULT | swb::OP_MODE_SPECIFIC_13,
-            AxisControl::Released | AxisControl::DriveOp => swb::FAULT,
+            AxisControl::Cyclic => swb::FAULT | swb::OP_MODE_SPECIFIC_13,
+            AxisControl::Rearming
+                if self.fb[i].is_some_and(|f| f.cycle > self.control_since[i] + 1) =>
+            {
+                swb::FAULT | swb::OP_MODE_SPECIFIC_13
+            }
+            AxisControl::Rearming | AxisControl::Released | AxisControl::DriveOp => swb::FAULT,
         }
     }
 

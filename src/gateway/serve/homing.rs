@@ -283,14 +283,19 @@ async fn back_to_cyclic(
     // (statusword bit 10, target reached, in homing mode: CiA 402-2's "interrupted" or
     // "error, velocity 0" rows).
     let since = ctl.snapshot().cycle;
-    ctl.wait_for("standstill after homing", Duration::from_secs(3), false, |s| {
-        s.cycle > since + 1
-            && drive.iter().all(|(i, _)| {
-                s.axes[*i]
-                    .statusword
-                    .is_some_and(|w| w & crate::cia402::statusword::TARGET_REACHED != 0)
-            })
-    })
+    ctl.wait_for(
+        "standstill after homing",
+        Duration::from_secs(3),
+        false,
+        |s| {
+            s.cycle > since + 1
+                && drive.iter().all(|(i, _)| {
+                    s.axes[*i]
+                        .statusword
+                        .is_some_and(|w| w & crate::cia402::statusword::TARGET_REACHED != 0)
+                })
+        },
+    )
     .await?;
     for &(i, _) in drive {
         let mode = ctl.m.axes[i].mode.number();

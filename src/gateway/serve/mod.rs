@@ -191,7 +191,12 @@ async fn serve_async(
     )?;
     // The socket opens once the cyclic thread runs (its first snapshot is out).
     let first = tokio::time::Instant::now();
-    while snapshot.lock().unwrap_or_else(|e| e.into_inner()).phase.is_none() {
+    while snapshot
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .phase
+        .is_none()
+    {
         if first.elapsed() > Duration::from_secs(2) {
             break;
         }
