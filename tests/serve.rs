@@ -423,3 +423,54 @@ fn a_drive_that_resets_leaves_an_alarm_until_reset_then_home_and_run_work_again(
     assert!((actual(&s, 1) - 25.0).abs() <= 1e-3, "{s}");
     svc.quit().unwrap();
 }
+
+#[test]
+fn a_drive_fault_leaves_an_alarm_until_reset_then_home_and_run_work_again() {
+    let _one = one_at_a_time();
+    let m = machine();
+    let mut svc = Service::start(
+        &m,
+        vec![Targeted {
+            node: Some(1),
+            inject: Inject::Fault {
+                after: Duration::from_millis(2000),
+            },
+        }],
+    );
+    let mut c = svc.client();
+    c.ok("enable");
+    c.ok("home all");
+    let start = c.status();
+    let long = svc.file("long.ngc", "G21 G90\nG1 X150 Y22 F3000\nM2\n");
+    c.ok(&format!("run {}", long.display()));
+    c.ok(&format!("run {}", long.display()));
+    let s = c.wait_state("alarm", Duration::from_secs(10));
+    // The fault's EMCY or its statusword, whichever arrives first.
+    assert!(
+        s["alarm"]["kind"] == "Emcy" || s["alarm"]["kind"] == "DriveFault",
+        "{s}"
+    );
+    assert_eq!(s["alarm"]["node"], 1, "{s}");
+    assert_eq!(s["queued"], 0, "the queue is cleared: {s}");
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while c.status()["phase"] != "Disabled" {
+        assert!(Instant::now() < deadline, "{}", c.status());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // The group stopped within its limits (the faulted axis frozen).
+    limits_from(&m, &svc.log, cycle(&start));
+    let a = c.cmd("home all");
+    assert!(a.starts_with("error: alarm: axis X (node 1)"), "{a}");
+    let a = c.ok("reset");
+    assert!(a.contains("enabled"), "{a}");
+    let s = c.status();
+    assert_eq!(s["state"], "idle", "{s}");
+    assert!(s["alarm"].is_null(), "{s}");
+    assert_eq!(axis(&s, 0)["homed"], false, "{s}");
+    c.ok("home all");
+    let short = svc.file("short.ngc", "G21 G90\nG1 X20 Y25 F3000\nM2\n");
+    c.ok(&format!("run {}", short.display()));
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 20.0).abs() <= 1e-3, "{s}");
+    svc.quit().unwrap();
+}

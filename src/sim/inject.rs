@@ -1,7 +1,7 @@
 //! Misbehaviours a simulated drive can be told to show, for fault-reaction tests:
 //! `--inject following-error@2.0s`, `--inject silent@1.5s`, `--inject reboot@1.0s`,
 //! `--inject drop-rpdo=5%`, `--inject no-heartbeat@1s`, `--inject persistent-fault@1s`,
-//! `--inject recurring-fault@1s`, `--inject warning=0x4210@300ms`, `--inject slow-enable=2600ms`,
+//! `--inject recurring-fault@1s`, `--inject fault@1s`, `--inject warning=0x4210@300ms`, `--inject slow-enable=2600ms`,
 //! optionally for one node: `--inject 2:silent@1.5s`.
 //!
 //! `--inject bus-off@T` and `--inject error-passive@T` stand in for the *gateway's* CAN
@@ -55,6 +55,12 @@ pub enum Inject {
         /// When, after motion start.
         after: Duration,
     },
+    /// The drive faults once with EMCY 0x2310 (over-current, a transient): a fault reset
+    /// clears it for good.
+    Fault {
+        /// When, after motion start.
+        after: Duration,
+    },
     /// This fraction of received RPDOs is lost (deterministic pseudo-random choice).
     DropRpdo {
         /// 0–100.
@@ -99,6 +105,7 @@ impl Inject {
             | Inject::NoHeartbeat { after }
             | Inject::PersistentFault { after }
             | Inject::RecurringFault { after }
+            | Inject::Fault { after }
             | Inject::BusOff { after }
             | Inject::ErrorPassive { after }
             | Inject::Warning { after, .. } => Some(after),
@@ -170,11 +177,12 @@ impl FromStr for Targeted {
                 "no-heartbeat" => Inject::NoHeartbeat { after },
                 "persistent-fault" => Inject::PersistentFault { after },
                 "recurring-fault" => Inject::RecurringFault { after },
+                "fault" => Inject::Fault { after },
                 "bus-off" => Inject::BusOff { after },
                 "error-passive" => Inject::ErrorPassive { after },
                 _ => {
                     return Err(format!(
-                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, no-heartbeat, persistent-fault, recurring-fault, bus-off, error-passive, drop-rpdo)"
+                        "{spec:?}: unknown fault {what:?} (following-error, silent, reboot, no-heartbeat, persistent-fault, recurring-fault, fault, bus-off, error-passive, drop-rpdo)"
                     ));
                 }
             }
@@ -195,7 +203,7 @@ impl FromStr for Targeted {
             Inject::DropRpdo { percent }
         } else {
             return Err(format!(
-                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T, bus-off@T, error-passive@T, warning=CODE@T, slow-enable=T or drop-rpdo=P% (optionally NODE: first)"
+                "{spec:?}: expected following-error@T, silent@T, reboot@T, no-heartbeat@T, persistent-fault@T, recurring-fault@T, fault@T, bus-off@T, error-passive@T, warning=CODE@T, slow-enable=T or drop-rpdo=P% (optionally NODE: first)"
             ));
         };
         Ok(Targeted { node, inject })

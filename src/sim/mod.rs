@@ -288,6 +288,11 @@ impl SimDrive {
                     self.raise_fault(FaultCause::Injected { code }, now, out, true);
                     self.refresh();
                 }
+                Inject::Fault { .. } => {
+                    let code = emcy_code::OVER_CURRENT;
+                    self.raise_fault(FaultCause::Injected { code }, now, out, true);
+                    self.refresh();
+                }
                 Inject::BusOff { .. } => self.bus_errors.push(crate::bus::ErrorFrame::bus_off()),
                 Inject::ErrorPassive { .. } => self
                     .bus_errors
