@@ -1000,7 +1000,7 @@ fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Opti
     let Item::Motion(e) = &program.items[first] else {
         unreachable!()
     };
-    let mut lead_in = e.clone();
+    let mut lead_in = *e;
     lead_in.kind = crate::gcode::ElementKind::Line;
     lead_in.rapid = true;
     lead_in.feed_mm_s = None;
