@@ -7,6 +7,10 @@ mod bus;
 mod common;
 #[path = "vcan/recovery.rs"]
 mod recovery;
+#[path = "vcan/serve.rs"]
+mod serve;
+#[path = "common/serve.rs"]
+mod serve_rig;
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};

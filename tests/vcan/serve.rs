@@ -1,0 +1,116 @@
+//! `canmotion serve` on vcan0: the service and the simulated drives as separate processes, the
+//! session through the control socket (enable, home all in order, a dead-man jog, an
+//! incremental jog, MDI then a program, SIGTERM's orderly end), the setpoints within the limits.
+
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use super::serve_rig::Client;
+use super::{BIN, IFACE, ROOT, lock, simdrive_with};
+use canmotion::config::Machine;
+
+/// The demo machine's switches for `simdrive` (counts): X and Y at -2 mm, Z at 2 mm.
+const SWITCHES: [&str; 6] = [
+    "--home-switch",
+    "1:-2000",
+    "--home-switch",
+    "2:-2000",
+    "--home-switch",
+    "3:4000",
+];
+
+#[test]
+fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm() {
+    let _g = lock();
+    let _drives = simdrive_with(&[1, 2, 3], None, &SWITCHES);
+    let dir = tempfile::tempdir().unwrap();
+    let sock = dir.path().join("cm.sock");
+    let csv = dir.path().join("serve.csv");
+    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
+    let m = Machine::load(std::path::Path::new(&machine_file)).unwrap();
+    let mut service = Command::new(BIN)
+        .current_dir(ROOT)
+        .args(["serve", "--bus", IFACE, "--machine", &machine_file, "--control"])
+        .arg(&sock)
+        .arg("--log")
+        .arg(&csv)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start canmotion serve");
+    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    let status = |c: &mut Client| c.status();
+    assert_eq!(status(&mut c)["state"], "disabled");
+    c.ok("enable");
+    let a = c.ok("home all");
+    assert_eq!(a, "ok homed X Y Z");
+    let s = status(&mut c);
+    for (i, offset) in [(0, -2.0), (1, -2.0), (2, 2.0)] {
+        let act = s["axes"][i]["actual_mm"].as_f64().unwrap();
+        assert!(
+            (act - offset).abs() <= 1.0 / m.axes[i].counts_per_mm,
+            "axis {i} at {act} after homing: {s}"
+        );
+    }
+    let homed_cycle = s["cycle"].as_f64().unwrap();
+    // A jog nobody repeats stops by the dead-man within its time-out and the stop.
+    let t0 = Instant::now();
+    c.ok("jog X 10");
+    c.wait_state("idle", Duration::from_secs(5));
+    let took = t0.elapsed().as_secs_f64();
+    assert!((0.5..2.5).contains(&took), "the jog took {took} s");
+    // An incremental jog, to within one count.
+    let y0 = status(&mut c)["axes"][1]["commanded_mm"].as_f64().unwrap();
+    c.ok("jog Y 5 1.5");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = status(&mut c);
+        let act = s["axes"][1]["actual_mm"].as_f64().unwrap();
+        if s["state"] == "idle" && ((act - (y0 + 1.5)) * 1000.0).abs() <= 1.0 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    c.ok("mdi G0 X10 Y10");
+    c.ok(&format!("run {ROOT}/tests/programs/square.ngc"));
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let s = status(&mut c);
+        if s["state"] == "idle" {
+            let x = s["axes"][0]["actual_mm"].as_f64().unwrap();
+            assert!((x - 15.0).abs() <= 0.002, "{s}");
+            break;
+        }
+        assert!(s["alarm"].is_null(), "{s}");
+        assert!(Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SIGTERM: the orderly end.
+    let pid = service.id() as i32;
+    unsafe {
+        libc::kill(pid, libc::SIGTERM);
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let code = loop {
+        if let Some(st) = service.try_wait().unwrap() {
+            break st;
+        }
+        assert!(Instant::now() < deadline, "serve did not end on SIGTERM");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(code.success(), "serve ended with {code}");
+    // Every setpoint from the end of homing on within the limits.
+    let rows = super::common::read_csv(&csv);
+    let t = m.cycle_s();
+    let rows: Vec<&Vec<f64>> = rows.iter().filter(|r| r[0] >= homed_cycle).collect();
+    assert!(rows.len() > 100);
+    for w in rows.windows(3) {
+        for (i, a) in m.axes.iter().enumerate() {
+            let v = (w[2][2 + i] - w[1][2 + i]) / t;
+            let acc = (w[2][2 + i] - 2.0 * w[1][2 + i] + w[0][2 + i]) / (t * t);
+            assert!(v.abs() <= a.max_vel_mm_s * 1.01, "{} {v}", a.name);
+            assert!(acc.abs() <= a.max_acc_mm_s2 * 1.01, "{} {acc}", a.name);
+        }
+    }
+}
