@@ -579,7 +579,14 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 opts.control_path.display()
             );
             canmotion::gateway::serve::serve(&machine, &bus, &opts)?;
-            outln!("canmotion serve: ended in order");
+            // SIGTERM and SIGINT are how a service is asked to end: after the orderly end the
+            // exit status is 0 (not the 143 of a `run` cut short).
+            if let Some(signal) = canmotion::rt::signal::STOP.first() {
+                outln!("canmotion serve: {signal:?}: ended in order");
+                canmotion::rt::signal::STOP.handled();
+            } else {
+                outln!("canmotion serve: ended in order");
+            }
             Ok(())
         }
         Command::Run {

@@ -69,6 +69,12 @@ impl StopSignals {
         }
     }
 
+    /// The signals so far were handled as a request to end (`canmotion serve`'s orderly end):
+    /// they no longer set the exit status.
+    pub fn handled(&self) {
+        self.clear();
+    }
+
     fn clear(&self) {
         self.count.store(0, Ordering::Release);
         self.first.store(0, Ordering::Release);

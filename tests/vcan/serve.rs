@@ -30,7 +30,14 @@ fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm()
     let m = Machine::load(std::path::Path::new(&machine_file)).unwrap();
     let mut service = Command::new(BIN)
         .current_dir(ROOT)
-        .args(["serve", "--bus", IFACE, "--machine", &machine_file, "--control"])
+        .args([
+            "serve",
+            "--bus",
+            IFACE,
+            "--machine",
+            &machine_file,
+            "--control",
+        ])
         .arg(&sock)
         .arg("--log")
         .arg(&csv)
