@@ -187,13 +187,17 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
     assert_eq!(homed["state"], "idle");
 
     // A continuous jog that nobody repeats stops by the dead-man.
-    let x0 = commanded(&c.status(), 0);
+    let jog_start = c.status();
+    let x0 = commanded(&jog_start, 0);
     let t0 = Instant::now();
     let a = c.ok("jog X 20");
     assert!(a.contains("jogging X"), "{a}");
     let s = c.wait_state("idle", Duration::from_secs(5));
     let took = t0.elapsed().as_secs_f64();
-    let ramp = OverrideRamp::for_machine(&canmotion::gateway::limits(&m), &m.planner).unwrap();
+    // Jogs run the jerk-limited profile whatever the machine's planner mode.
+    let mut jog_config = m.planner.clone();
+    jog_config.profile = canmotion::planner::ProfileKind::SCurve;
+    let ramp = OverrideRamp::for_machine(&canmotion::gateway::limits(&m), &jog_config).unwrap();
     let stop_s = ramp.ramp_time_s(1.0, 0.0);
     let timeout_s = f64::from(m.operation.jog_timeout_ms) / 1000.0;
     let travelled = commanded(&s, 0) - x0;
@@ -206,6 +210,9 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
         took >= timeout_s && took <= timeout_s + stop_s + 0.5,
         "the jog stopped {took} s after it started (time-out {timeout_s} s)"
     );
+
+    // Jerk-limited, by finite differences of the setpoints it streamed.
+    jerk_within(&m, &svc.log, cycle(&jog_start), cycle(&s));
 
     // An incremental jog, to within one count.
     let y0 = commanded(&c.status(), 1);
@@ -292,6 +299,32 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
     let rows = read_csv(&svc.log);
     assert!(rows.len() > 100);
     limits_from(&m, &svc.log, after_home_cycle);
+    // Homing to cyclic without a jump: from the drive's re-referencing of position actual (the
+    // one step of the homing, a change of coordinates) on, each homed axis's setpoints keep its
+    // limits through the end of homing and the return to the cyclic mode.
+    let homing_rows: Vec<Vec<f64>> = rows
+        .iter()
+        .filter(|r| r[0] >= cycle(&before_home) && r[0] <= after_home_cycle)
+        .cloned()
+        .collect();
+    let t = m.cycle_s();
+    for (i, a) in m.axes.iter().enumerate() {
+        let step = |k: usize| (homing_rows[k + 1][2 + i] - homing_rows[k][2 + i]).abs();
+        let reref = (0..homing_rows.len() - 1)
+            .filter(|k| step(*k) > a.max_vel_mm_s * t)
+            .max()
+            .unwrap_or(0);
+        for w in homing_rows[reref + 1..].windows(3) {
+            let v = (w[2][2 + i] - w[1][2 + i]) / t;
+            let acc = (w[2][2 + i] - 2.0 * w[1][2 + i] + w[0][2 + i]) / (t * t);
+            assert!(v.abs() <= a.max_vel_mm_s * 1.01, "{} homing: {v}", a.name);
+            assert!(
+                acc.abs() <= a.max_acc_mm_s2 * 1.01,
+                "{} homing: {acc}",
+                a.name
+            );
+        }
+    }
     limits_from_to(
         &m,
         &rows
@@ -301,6 +334,27 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
             .collect::<Vec<_>>(),
         cycle(&before_home),
     );
+}
+
+/// Every axis's jerk within its limit (1 %) over the log's cycles `from..=to`.
+fn jerk_within(m: &Machine, log: &std::path::Path, from: f64, to: f64) {
+    let rows: Vec<Vec<f64>> = read_csv(log)
+        .into_iter()
+        .filter(|r| r[0] >= from && r[0] <= to)
+        .collect();
+    let t = m.cycle_s();
+    for w in rows.windows(4) {
+        for (i, a) in m.axes.iter().enumerate() {
+            let p = |k: usize| w[k][2 + i];
+            let jerk = (p(3) - 3.0 * p(2) + 3.0 * p(1) - p(0)) / (t * t * t);
+            assert!(
+                jerk.abs() <= a.max_jerk_mm_s3 * 1.01,
+                "axis {} at cycle {}: jerk {jerk} mm/s³",
+                a.name,
+                w[3][0]
+            );
+        }
+    }
 }
 
 fn writeln_watch(c: &mut Client) {
@@ -472,5 +526,110 @@ fn a_drive_fault_leaves_an_alarm_until_reset_then_home_and_run_work_again() {
     c.ok(&format!("run {}", short.display()));
     let s = settled(&mut c, &m);
     assert!((actual(&s, 0) - 20.0).abs() <= 1e-3, "{s}");
+    svc.quit().unwrap();
+}
+
+#[test]
+fn work_offsets_persist_across_jobs_and_a_program_runs_from_a_line() {
+    let _one = one_at_a_time();
+    // No homing needed here.
+    let m = common::machine(|t| {
+        serve_tables(t).replace("require_homing = true", "require_homing = false")
+    });
+    assert!(!m.operation.require_homing);
+    let mut svc = Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    c.ok("enable");
+    // G10 L2 in MDI sets G54's origin; a program's G0 X0 Y0 goes there.
+    c.ok("mdi G10 L2 P1 X5 Y7");
+    let a = c.ok("mdi G0 X0 Y0");
+    assert!(a.starts_with("ok queued MDI"), "{a}");
+    let s = settled(&mut c, &m);
+    assert!(
+        (actual(&s, 0) - 5.0).abs() <= 1e-3 && (actual(&s, 1) - 7.0).abs() <= 1e-3,
+        "{s}"
+    );
+    let prog = svc.file(
+        "offsets.ngc",
+        "G21 G90\nG0 X1 Y1\nG1 X10 F3000\nG1 Y10\nG1 X2\nM2\n",
+    );
+    c.ok(&format!("run {}", prog.display()));
+    let s = settled(&mut c, &m);
+    assert!(
+        (actual(&s, 0) - 7.0).abs() <= 1e-3 && (actual(&s, 1) - 17.0).abs() <= 1e-3,
+        "{s}"
+    );
+    // G91 in MDI stays for the next MDI line.
+    c.ok("mdi G91");
+    c.ok("mdi G0 X1");
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 8.0).abs() <= 1e-3, "{s}");
+    c.ok("mdi G90");
+    // From line 4 (`G1 Y10`): a rapid to where it starts (X10 Y1 in G54), then lines 4 and 5.
+    c.ok(&format!("run {} from 4", prog.display()));
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while c.status()["program"].is_null() {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let s = settled(&mut c, &m);
+    assert!(
+        (actual(&s, 0) - 7.0).abs() <= 1e-3 && (actual(&s, 1) - 17.0).abs() <= 1e-3,
+        "{s}"
+    );
+    let rows = read_csv(&svc.log);
+    // The lead-in ends at rest where line 4 starts (X 15, Y 8), and line 3 (Y = 8 from X 6) is
+    // not run again: the last job never runs along Y = 8 before that point.
+    let from = rows
+        .iter()
+        .rposition(|r| (r[2] - 8.0).abs() < 1e-6 && (r[3] - 17.0).abs() < 1e-6)
+        .expect("the start of the run from line 4");
+    let tail = &rows[from..];
+    // (The stop falls between two samples: the closest sample is within a count.)
+    let dist = |r: &Vec<f64>| ((r[2] - 15.0).powi(2) + (r[3] - 8.0).powi(2)).sqrt();
+    let at = (0..tail.len())
+        .min_by(|a, b| dist(&tail[*a]).total_cmp(&dist(&tail[*b])))
+        .unwrap();
+    assert!(
+        dist(&tail[at]) < 1e-3,
+        "line 4's start not reached: {:?}",
+        tail[at]
+    );
+    assert!(
+        tail[..at].iter().all(|r| r[3] > 8.0 + 1e-6),
+        "line 3 ran again"
+    );
+    let a = c.cmd(&format!("run {} from 40", prog.display()));
+    assert_eq!(a, "error: no motion from line 40 on");
+    svc.quit().unwrap();
+}
+
+#[test]
+fn a_hold_is_reported_and_resume_finishes_the_program() {
+    let _one = one_at_a_time();
+    let m = common::machine(|t| {
+        serve_tables(t).replace("require_homing = true", "require_homing = false")
+    });
+    let mut svc = Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    c.ok("enable");
+    let long = svc.file("long.ngc", "G21 G90\nG1 X80 F6000\nM2\n");
+    c.ok(&format!("run {}", long.display()));
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while c.status()["program"].is_null() {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    let a = c.ok("hold");
+    assert!(a.contains("hold"), "{a}");
+    let s = c.wait_state("held", Duration::from_secs(3));
+    let x = actual(&s, 0);
+    assert!(x > 6.0 && x < 80.0, "{s}");
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(c.status()["state"], "held");
+    c.ok("resume");
+    let s = settled(&mut c, &m);
+    assert!((actual(&s, 0) - 80.0).abs() <= 1e-3, "{s}");
     svc.quit().unwrap();
 }

@@ -828,14 +828,29 @@ impl Controller<'_> {
         );
         let program = crate::gcode::parse_program(&text, "jog", here)
             .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
-        let plan = crate::planner::plan_with(&program, &super::limits(self.m), &self.m.planner)
-            .map_err(|source| {
-                ServeError::Program(Box::new(GatewayError::Plan {
-                    file: "jog".into(),
-                    source,
-                }))
-            })?;
-        let interp = self.interpolator(plan)?;
+        // Jogs are jerk-limited whatever the machine's planner mode: the jerk-limited profile
+        // with the axes' max_jerk_mm_s3 (a single straight move: time-optimal for the limits).
+        let mut config = self.m.planner.clone();
+        if config.profile == crate::planner::ProfileKind::Trapezoid {
+            config.profile = crate::planner::ProfileKind::SCurve;
+        }
+        let limits = super::limits(self.m);
+        let plan = crate::planner::plan_with(&program, &limits, &config).map_err(|source| {
+            ServeError::Program(Box::new(GatewayError::Plan {
+                file: "jog".into(),
+                source,
+            }))
+        })?;
+        let interp = Interpolator::new(plan, self.m.cycle_s()).map_err(|e| {
+            ServeError::Program(Box::new(GatewayError::Motion(super::MotionFailure::plain(
+                e.into(),
+                self.m.cycle_s(),
+            ))))
+        })?;
+        let interp = match OverrideRamp::for_machine(&limits, &config) {
+            Ok(r) => interp.with_override_ramp(r),
+            Err(_) => interp,
+        };
         let seq = s.motions_started + 1;
         self.ask(Request::Start(Box::new(interp))).await?;
         self.current = Some(Current {
@@ -991,7 +1006,8 @@ impl Controller<'_> {
 
 /// `run PATH from LINE`: the program's motion from the first element of line `LINE` on (its
 /// modal state and position established by the lines before), preceded by a straight rapid
-/// move from `start` to where that element starts. `None` without motion from there.
+/// move from `start` to where that element starts, which ends at rest (exact stop). `None`
+/// without motion from there.
 fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Option<()> {
     let first = program
         .items
@@ -1004,6 +1020,8 @@ fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Opti
     lead_in.kind = crate::gcode::ElementKind::Line;
     lead_in.rapid = true;
     lead_in.feed_mm_s = None;
+    // It arrives where the line starts, at rest, before the line runs.
+    lead_in.blend = crate::gcode::BlendMode::ExactStop;
     lead_in.start_mm = start;
     lead_in.end_mm = e.start_mm;
     program.items.drain(..first);
