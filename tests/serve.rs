@@ -195,7 +195,7 @@ fn a_session_enables_homes_in_order_jogs_runs_mdi_then_a_program_without_a_secon
     let s = c.wait_state("idle", Duration::from_secs(5));
     let took = t0.elapsed().as_secs_f64();
     // Jogs run the jerk-limited profile whatever the machine's planner mode.
-    let mut jog_config = m.planner.clone();
+    let mut jog_config = m.planner;
     jog_config.profile = canmotion::planner::ProfileKind::SCurve;
     let ramp = OverrideRamp::for_machine(&canmotion::gateway::limits(&m), &jog_config).unwrap();
     let stop_s = ramp.ramp_time_s(1.0, 0.0);

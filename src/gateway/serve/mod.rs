@@ -830,7 +830,7 @@ impl Controller<'_> {
             .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
         // Jogs are jerk-limited whatever the machine's planner mode: the jerk-limited profile
         // with the axes' max_jerk_mm_s3 (a single straight move: time-optimal for the limits).
-        let mut config = self.m.planner.clone();
+        let mut config = self.m.planner;
         if config.profile == crate::planner::ProfileKind::Trapezoid {
             config.profile = crate::planner::ProfileKind::SCurve;
         }
