@@ -565,7 +565,19 @@ fn work_offsets_persist_across_jobs_and_a_program_runs_from_a_line() {
     let s = settled(&mut c, &m);
     assert!((actual(&s, 0) - 8.0).abs() <= 1e-3, "{s}");
     c.ok("mdi G90");
+    // A job queued while another runs starts where that one ends.
+    c.ok("mdi G0 X30 Y30");
+    std::thread::sleep(Duration::from_millis(30));
+    assert_eq!(c.status()["state"], "mdi");
+    c.ok("mdi G0 X31");
+    let s = settled(&mut c, &m);
+    assert!(
+        (actual(&s, 0) - 36.0).abs() <= 1e-3 && (actual(&s, 1) - 37.0).abs() <= 1e-3,
+        "{s}"
+    );
     // From line 4 (`G1 Y10`): a rapid to where it starts (X10 Y1 in G54), then lines 4 and 5.
+    c.ok("mdi G0 X3 Y10");
+    settled(&mut c, &m);
     c.ok(&format!("run {} from 4", prog.display()));
     let deadline = Instant::now() + Duration::from_secs(2);
     while c.status()["program"].is_null() {

@@ -49,6 +49,8 @@ fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm()
     let status = |c: &mut Client| c.status();
     assert_eq!(status(&mut c)["state"], "disabled");
     c.ok("enable");
+    let a = c.cmd(&format!("run {ROOT}/tests/programs/square.ngc"));
+    assert!(a.contains("axis X is not homed"), "{a}");
     let a = c.ok("home all");
     assert_eq!(a, "ok homed X Y Z");
     let s = status(&mut c);
@@ -120,4 +122,80 @@ fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm()
             assert!(acc.abs() <= a.max_acc_mm_s2 * 1.01, "{} {acc}", a.name);
         }
     }
+}
+
+#[test]
+fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_path() {
+    let _g = lock();
+    // X's drive has no home switch; Y's and Z's have.
+    let _drives = simdrive_with(&[1, 2, 3], None, &SWITCHES[2..]);
+    let dir = tempfile::tempdir().unwrap();
+    let sock = dir.path().join("cm.sock");
+    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
+    let mut service = Command::new(BIN)
+        .current_dir(ROOT)
+        .args([
+            "serve",
+            "--bus",
+            IFACE,
+            "--machine",
+            &machine_file,
+            "--control",
+        ])
+        .arg(&sock)
+        .stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start canmotion serve");
+    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    c.ok("enable");
+    let a = c.cmd("home X");
+    assert!(
+        a.starts_with("error: axis X (node 1): homing error")
+            && a.contains("home switch was not found"),
+        "{a}"
+    );
+    let s = c.status();
+    assert_eq!(s["state"], "idle", "{s}");
+    assert_eq!(s["axes"][0]["control"], "cyclic", "{s}");
+    c.ok("home Y Z");
+    // The failed search left X past its negative limit, outside its travel: a program's lines
+    // would end there. A jog of the unhomed axis (reduced speed, no travel check) brings it in.
+    let x = c.status()["axes"][0]["actual_mm"].as_f64().unwrap();
+    assert!(x < -5.0, "X at {x}");
+    c.ok("jog X 5 3");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = c.status();
+        let x1 = s["axes"][0]["actual_mm"].as_f64().unwrap();
+        if s["state"] == "idle" && ((x1 - (x + 3.0)) * 1000.0).abs() <= 1.5 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let prog = dir.path().join("long.ngc");
+    std::fs::write(&prog, "G21 G90\nG1 Y150 F3000\nM2\n").unwrap();
+    c.ok(&format!("run {}", prog.display()));
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while c.status()["program"].is_null() {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    c.ok("abort");
+    let s = c.wait_state("idle", Duration::from_secs(5));
+    let y = s["axes"][1]["commanded_mm"].as_f64().unwrap();
+    assert!(y > 0.0 && y < 149.0, "{s}");
+    assert!(s["alarm"].is_null(), "{s}");
+    assert_eq!(c.cmd("quit"), "ok bye");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let code = loop {
+        if let Some(st) = service.try_wait().unwrap() {
+            break st;
+        }
+        assert!(Instant::now() < deadline, "serve did not end on quit");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(code.success(), "serve ended with {code}");
 }

@@ -82,6 +82,8 @@ pub struct Current {
     pub name: String,
     /// Its number among the motions started ([`Snapshot::motions_started`]).
     seq: u64,
+    /// Where it ends (the next job's start).
+    end_mm: Vector3<f64>,
 }
 
 /// A jog under way.
@@ -425,6 +427,7 @@ impl Controller<'_> {
             && let Some(job) = self.queue.pop_front()
         {
             let seq = s.motions_started + 1;
+            let end_mm = job.interp.queued_end_mm();
             match self.ask(Request::Start(Box::new(job.interp))).await {
                 Ok(()) => {
                     if job.kind != JobKind::Jog {
@@ -434,6 +437,7 @@ impl Controller<'_> {
                         kind: job.kind,
                         name: job.name,
                         seq,
+                        end_mm,
                     });
                 }
                 Err(e) => {
@@ -457,10 +461,14 @@ impl Controller<'_> {
         self.homed[i] || !self.m.operation.require_homing
     }
 
-    /// Where the next job starts: the end of the last one queued, or where the axes hold.
+    /// Where the next job starts: the end of the last one queued, or of the one running, or
+    /// where the axes hold.
     fn tail_mm(&self, s: &Snapshot) -> Vector3<f64> {
         if let Some(j) = self.queue.back() {
             return j.interp.queued_end_mm();
+        }
+        if let Some(c) = &self.current {
+            return c.end_mm;
         }
         let mut p = Vector3::zeros();
         for (i, a) in self.m.axes.iter().enumerate() {
@@ -852,11 +860,13 @@ impl Controller<'_> {
             Err(_) => interp,
         };
         let seq = s.motions_started + 1;
+        let end_mm = interp.queued_end_mm();
         self.ask(Request::Start(Box::new(interp))).await?;
         self.current = Some(Current {
             kind: JobKind::Jog,
             name: a.name.clone(),
             seq,
+            end_mm,
         });
         self.jog = Some(Jog {
             axis,
