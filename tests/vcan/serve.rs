@@ -159,10 +159,11 @@ fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_
     assert_eq!(s["state"], "idle", "{s}");
     assert_eq!(s["axes"][0]["control"], "cyclic", "{s}");
     c.ok("home Y Z");
-    // The failed search left X past its negative limit, outside its travel: a program's lines
-    // would end there. A jog of the unhomed axis (reduced speed, no travel check) brings it in.
-    let x = c.status()["axes"][0]["actual_mm"].as_f64().unwrap();
-    assert!(x < -5.0, "X at {x}");
+    // The failed search left X at or past its negative limit, where a program's lines would end
+    // outside the travel. A jog of the unhomed axis (reduced speed, no travel check) brings it
+    // in.
+    let x = c.status()["axes"][0]["commanded_mm"].as_f64().unwrap();
+    assert!(x <= -4.9, "X at {x}");
     c.ok("jog X 5 3");
     let deadline = Instant::now() + Duration::from_secs(5);
     loop {
