@@ -192,11 +192,22 @@ fn letter_index(letter: char) -> Option<usize> {
     Some(k)
 }
 
+/// The bit of `letter` in [`Block::present`] (bit k for `LETTERS[k]`), 0 for other letters.
+pub(super) fn letter_bit(letter: char) -> u32 {
+    letter_index(letter).map_or(0, |k| 1 << k)
+}
+
+/// The bits ([`letter_bit`]) of X, Y, Z, `@` and `^`: the words that make a move.
+const AXIS_BITS: u32 = 0b11 << 16 | 0b111;
+
 /// The words of one line, checked and sorted into modal groups.
 #[derive(Debug, Default, Clone)]
 pub(super) struct Block {
     groups: [Option<Code>; GROUPS],
     words: [Option<Word>; LETTERS.len()],
+    /// The letters present, one bit each ([`letter_bit`]): most lines use few of them, and
+    /// the interpreter's check for unused words is one mask test.
+    present: u32,
     /// The second coolant code of `M7 M8` (both on one line is allowed).
     pub coolant2: Option<Code>,
 }
@@ -228,9 +239,20 @@ pub(super) fn as_index(value: f64) -> Option<u32> {
 }
 
 impl Block {
-    /// Checks every word of a line; the first problem in line order is reported.
+    /// A block of `words` (see [`Block::read_into`]).
+    #[cfg(test)]
     pub fn read(words: &[Word]) -> Result<Block, BlockError> {
         let mut block = Block::default();
+        block.read_into(words)?;
+        Ok(block)
+    }
+
+    /// Checks every word of a line into `self`, whatever it held; the first problem in line
+    /// order is reported. The interpreter keeps one block for every line, so that a line
+    /// costs no copy of it (it is some 800 bytes).
+    pub fn read_into(&mut self, words: &[Word]) -> Result<(), BlockError> {
+        *self = Block::default();
+        let block = self;
         for (i, word) in words.iter().enumerate() {
             match word.letter {
                 'G' => {
@@ -316,11 +338,17 @@ impl Block {
                         return Err((word.col, ErrorKind::RepeatedWord { letter }));
                     }
                     *slot = Some(*word);
+                    block.present |= letter_bit(letter);
                     check_domain(word)?;
                 }
             }
         }
-        Ok(block)
+        Ok(())
+    }
+
+    /// The letters present ([`letter_bit`]).
+    pub fn present(&self) -> u32 {
+        self.present
     }
 
     fn set_code(&mut self, group: Group, code: Code) -> Result<(), BlockError> {
@@ -371,6 +399,10 @@ impl Block {
 
     /// The first axis word of the line (by column).
     pub fn first_axis(&self) -> Option<Word> {
+        // Every line asks; most have no axis word or one.
+        if self.present & AXIS_BITS == 0 {
+            return None;
+        }
         let ([x, y, z], [distance, angle]) = (self.axes(), self.polar());
         [x, y, z, distance, angle]
             .into_iter()
@@ -511,6 +543,15 @@ mod tests {
             assert_eq!(letter_index(*l), Some(k));
         }
         assert_eq!(letter_index('G'), None);
+    }
+
+    #[test]
+    fn the_axis_bits_are_the_axis_letters() {
+        let bits = "XYZ@^".chars().fold(0, |m, c| m | letter_bit(c));
+        assert_eq!(bits, AXIS_BITS);
+        let b = read("G0 X1 Y2").unwrap();
+        assert_eq!(b.present(), letter_bit('X') | letter_bit('Y'));
+        assert!(read("G4 P1").unwrap().first_axis().is_none());
     }
 
     #[test]

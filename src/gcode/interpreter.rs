@@ -32,7 +32,7 @@ use std::rc::Rc;
 
 use nalgebra::Vector3;
 
-use super::block::{Block, BlockError, Code, as_index};
+use super::block::{Block, BlockError, Code, as_index, letter_bit};
 use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
 use super::expr::Params;
 use super::lex::{
@@ -290,8 +290,8 @@ struct State {
     spindle: Spindle,
     /// Sticky values of the canned cycles.
     cycles: CycleState,
-    /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
-    used: u16,
+    /// Letters of the current line that something used ([`letter_bit`]).
+    used: u32,
     /// The modal state saved by M70/M73 at each call level (0: the main program).
     saved: Vec<Option<Saved>>,
     /// G7 (X words are diameters) rather than G8.
@@ -307,7 +307,12 @@ struct State {
     line_number: f64,
 }
 
+/// The letters a line may not hold unused, in the order they are reported.
 const CHECKED: &str = "XYZIJKRPQDHL@^";
+
+/// The bits ([`letter_bit`]) of [`CHECKED`]: X Y Z I J K R P Q (0 to 8), D H L (12 to 14),
+/// `@` `^` (16, 17).
+const CHECKED_BITS: u32 = 0b11 << 16 | 0b111 << 12 | 0b1_1111_1111;
 
 fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
     if deg == 0.0 {
@@ -639,9 +644,7 @@ impl State {
     /// Marks a letter of the line as used and returns its word.
     fn take(&mut self, b: &Block, letter: char) -> Option<Word> {
         let w = b.word(letter)?;
-        if let Some(k) = CHECKED.find(letter) {
-            self.used |= 1 << k;
-        }
+        self.used |= letter_bit(letter);
         Some(w)
     }
 
@@ -1793,8 +1796,12 @@ impl State {
 
     /// Every word that needs a user must have found one.
     fn check_unused(&self, b: &Block) -> Result<(), BlockError> {
-        for (k, letter) in CHECKED.chars().enumerate() {
-            if self.used & (1 << k) != 0 {
+        // Every line runs this; nearly all pass.
+        if b.present() & CHECKED_BITS & !self.used == 0 {
+            return Ok(());
+        }
+        for letter in CHECKED.chars() {
+            if self.used & letter_bit(letter) != 0 {
                 continue;
             }
             if let Some(w) = b.word(letter) {
@@ -1951,6 +1958,8 @@ pub struct Interpreter<R> {
     state: State,
     params: Params,
     scanner: Scanner,
+    /// The block of the line being run, kept from line to line (see [`Block::read_into`]).
+    block: Block,
     buf: Vec<u8>,
     /// The text of the main program's line being run, kept from line to line so that a line
     /// costs no allocation.
@@ -2028,6 +2037,7 @@ impl<R: BufRead> Interpreter<R> {
             state,
             params,
             scanner: Scanner::default(),
+            block: Block::default(),
             buf: Vec::new(),
             line_text: String::new(),
             cr_pending: false,
@@ -2389,15 +2399,16 @@ impl<R: BufRead> Interpreter<R> {
                 self.code_seen = true;
                 let mut flow = Flow::Next;
                 if !self.scanner.words.is_empty() {
-                    let block =
-                        Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
+                    self.block
+                        .read_into(&self.scanner.words)
+                        .map_err(|(col, k)| self.error(col, k))?;
                     if self.mdi && !in_frame {
-                        self.check_mdi(&block)?;
+                        self.check_mdi(&self.block)?;
                     }
                     let first_item = self.queue.len();
                     flow = self
                         .state
-                        .execute(&block, line, &mut self.queue)
+                        .execute(&self.block, line, &mut self.queue)
                         .map_err(|(col, k)| self.error(col, k))?;
                     if let Some(call) = self.file_call() {
                         let (line, col) = (call.line, call.col);
@@ -3145,3 +3156,15 @@ impl<R: BufRead> Iterator for Interpreter<R> {
 }
 
 impl<R: BufRead> std::iter::FusedIterator for Interpreter<R> {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_checked_bits_are_the_checked_letters() {
+        let bits = CHECKED.chars().fold(0, |m, c| m | letter_bit(c));
+        assert_eq!(bits, CHECKED_BITS);
+        assert!(CHECKED.chars().all(|c| letter_bit(c) != 0));
+    }
+}
