@@ -623,6 +623,7 @@ impl State {
         }
     }
 
+    #[inline]
     fn to_machine(&self, prog: Vector3<f64>) -> Vector3<f64> {
         rotate_xy(prog + self.g92(), self.rotation_deg())
             + self.work_offsets_mm[self.coord]
@@ -642,6 +643,7 @@ impl State {
     }
 
     /// Marks a letter of the line as used and returns its word.
+    #[inline]
     fn take(&mut self, b: &Block, letter: char) -> Option<Word> {
         let w = b.word(letter)?;
         self.used |= letter_bit(letter);
@@ -649,12 +651,14 @@ impl State {
     }
 
     /// Value of a length word in mm.
+    #[inline]
     fn take_mm(&mut self, b: &Block, letter: char) -> Option<f64> {
         let scale = self.scale();
         self.take(b, letter).map(|w| w.value * scale)
     }
 
     /// The program-coordinate target of the line's axis words (G90/G91 applied).
+    #[inline]
     fn prog_target(&mut self, b: &Block) -> Vector3<f64> {
         let mut p = self.prog_mm;
         for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
@@ -669,6 +673,7 @@ impl State {
     /// degrees) included, as LinuxCNC: under G90 about the work system's origin (the word
     /// left out keeps the current point's distance or angle); under G91 both add to the
     /// current point's distance and angle about the origin (so not from the origin itself).
+    #[inline]
     fn prog_target_polar(&mut self, b: &Block) -> Result<Vector3<f64>, BlockError> {
         let [d, a] = b.polar();
         let Some(first) = d.or(a) else {
@@ -702,6 +707,7 @@ impl State {
 
     /// The machine point of a program target; axes whose program coordinate does not change
     /// keep their machine coordinate exactly.
+    #[inline]
     fn machine_of(&self, prog: Vector3<f64>) -> Vector3<f64> {
         let mut m = self.to_machine(prog);
         let same = |i: usize| prog[i] == self.prog_mm[i];
@@ -723,6 +729,7 @@ impl State {
         m
     }
 
+    #[inline]
     fn check_position(&self, col: usize, m: &Vector3<f64>) -> Result<(), BlockError> {
         if m.iter()
             .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
@@ -1536,7 +1543,11 @@ impl State {
         };
         let col = on_line.map_or_else(|| first_axis.map_or(0, |w| w.col), |c| c.col);
         let rapid = mode == Motion::Rapid;
-        let feed = |state: &State, length_mm: f64| -> Result<Option<f64>, BlockError> {
+        // The length is asked for under G93 only (a square root, or an arc's geometry, per
+        // move otherwise spent for nothing).
+        let feed = |state: &State,
+                    length_mm: &dyn Fn() -> f64|
+         -> Result<Option<f64>, BlockError> {
             if rapid {
                 return Ok(None);
             }
@@ -1548,7 +1559,7 @@ impl State {
             if state.inverse_time {
                 let f = inverse_f
                     .ok_or_else(|| err_at(col, ErrorKind::MissingInverseTimeFeed { code: name }))?;
-                Ok(Some(length_mm * f / 60.0))
+                Ok(Some(length_mm() * f / 60.0))
             } else {
                 state
                     .feed_mm_s
@@ -1575,7 +1586,7 @@ impl State {
                 }
             }
             self.check_position(col, &m)?;
-            let f = feed(self, (m - self.pos_mm).norm())?;
+            let f = feed(self, &|| (m - self.pos_mm).norm())?;
             self.push_line(line, col, rapid, m, f, out);
             self.ended_comp = None;
             self.resync();
@@ -1586,7 +1597,7 @@ impl State {
             // point, as in LinuxCNC: the exit move back to the programmed point.
             Motion::Rapid | Motion::Linear if first_axis.is_none() => {
                 if self.ended_comp.is_some() && on_line.is_some() {
-                    let f = feed(self, 0.0)?;
+                    let f = feed(self, &|| 0.0)?;
                     self.push_line(line, col, rapid, self.pos_mm, f, out);
                     self.ended_comp = None;
                 }
@@ -1595,7 +1606,7 @@ impl State {
                 let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
                 self.check_position(col, &m)?;
-                let f = feed(self, (m - self.pos_mm).norm())?;
+                let f = feed(self, &|| (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
                 self.ended_comp = None;
@@ -1617,7 +1628,7 @@ impl State {
                 }
                 let element = self.arc(b, line, col, mode == Motion::Cw)?;
                 let mut element = element;
-                element.feed_mm_s = feed(self, element.length_mm())?;
+                element.feed_mm_s = feed(self, &|| element.length_mm())?;
                 out.push_back(Item::Motion(element));
             }
         }
