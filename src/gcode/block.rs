@@ -101,6 +101,7 @@ enum Known {
     Unknown,
 }
 
+#[inline]
 fn classify_g(tenths: u32) -> Known {
     use Known::*;
     match tenths {
@@ -144,6 +145,7 @@ fn classify_g(tenths: u32) -> Known {
     }
 }
 
+#[inline]
 fn classify_m(number: u32) -> Known {
     use Known::*;
     match number {
@@ -166,6 +168,7 @@ const LETTERS: [char; 18] = [
 ];
 
 /// The index of `letter` in [`LETTERS`] (a `match`, not a search: it runs for every word).
+#[inline]
 fn letter_index(letter: char) -> Option<usize> {
     let k = match letter {
         'X' => 0,
@@ -193,6 +196,7 @@ fn letter_index(letter: char) -> Option<usize> {
 }
 
 /// The bit of `letter` in [`Block::present`] (bit k for `LETTERS[k]`), 0 for other letters.
+#[inline]
 pub(super) fn letter_bit(letter: char) -> u32 {
     letter_index(letter).map_or(0, |k| 1 << k)
 }
@@ -223,6 +227,7 @@ fn invalid(word: &Word, expected: &'static str) -> BlockError {
 }
 
 /// A G or M value as tenths: non-negative, at most one decimal.
+#[inline]
 fn code_tenths(word: &Word) -> Option<u32> {
     let tenths = word.value * 10.0;
     let rounded = tenths.round();
@@ -351,6 +356,7 @@ impl Block {
         self.present
     }
 
+    #[inline]
     fn set_code(&mut self, group: Group, code: Code) -> Result<(), BlockError> {
         let Some(slot) = self.groups.get_mut(group.index()) else {
             return Ok(());
@@ -380,11 +386,13 @@ impl Block {
         Ok(())
     }
 
+    #[inline]
     fn get(&self, group: Group) -> Option<Code> {
         self.groups.get(group.index()).copied().flatten()
     }
 
     /// The word for `letter` (one of X Y Z I J K R P Q F S T D H L N).
+    #[inline]
     pub fn word(&self, letter: char) -> Option<Word> {
         letter_index(letter)
             .and_then(|k| self.words.get(k))

@@ -415,6 +415,7 @@ pub(super) fn real_value(
 /// digits, read as an integer, are at most 2^53 and there are at most 22 decimals, the integer
 /// and the power of ten are both exact and one IEEE division rounds correctly, to the value
 /// `str::parse` gives (Clinger's fast path, which it takes too). Other numbers go to it.
+#[inline]
 fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError> {
     let col = *i + 1;
     let start = *i;
