@@ -1972,9 +1972,6 @@ pub struct Interpreter<R> {
     /// The block of the line being run, kept from line to line (see [`Block::read_into`]).
     block: Block,
     buf: Vec<u8>,
-    /// The text of the main program's line being run, kept from line to line so that a line
-    /// costs no allocation.
-    line_text: String,
     /// The last line ended with `\r`: a `\n` next belongs to it.
     cr_pending: bool,
     queue: VecDeque<Item>,
@@ -2050,7 +2047,6 @@ impl<R: BufRead> Interpreter<R> {
             scanner: Scanner::default(),
             block: Block::default(),
             buf: Vec::new(),
-            line_text: String::new(),
             cr_pending: false,
             queue: VecDeque::new(),
             line: 0,
@@ -2352,14 +2348,20 @@ impl<R: BufRead> Interpreter<R> {
             self.done = true;
             return Ok(());
         }
-        let mut text = std::mem::take(&mut self.line_text);
-        text.clear();
-        match std::str::from_utf8(&self.buf) {
-            Ok(valid) => text.push_str(valid),
-            Err(_) => text.push_str(&String::from_utf8_lossy(&self.buf)),
+        // The line is run from its read buffer, not copied: whatever `run_line` reads next
+        // (a loop's lines, an M98 read ahead) comes into a new one.
+        let buf = std::mem::take(&mut self.buf);
+        let run = match std::str::from_utf8(&buf) {
+            Ok(text) => self.run_line(self.at, text, false),
+            Err(_) => {
+                let text = String::from_utf8_lossy(&buf).into_owned();
+                self.run_line(self.at, &text, false)
+            }
+        };
+        if self.buf.capacity() == 0 {
+            // Nothing else was read: the allocation serves the next line.
+            self.buf = buf;
         }
-        let run = self.run_line(self.at, &text, false);
-        self.line_text = text;
         run
     }
 
