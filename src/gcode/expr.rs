@@ -454,8 +454,13 @@ fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError>
         && exact
         && let Some(power) = POWERS_OF_TEN.get(decimals)
     {
-        // Exact: the mantissa is at most 2^53.
-        let value = mantissa as f64 / power;
+        // Exact: the mantissa is at most 2^53. (No division for a whole number: G and M
+        // codes, most F words.)
+        let value = if decimals == 0 {
+            mantissa as f64
+        } else {
+            mantissa as f64 / power
+        };
         return Ok(if negative { -value } else { value });
     }
     let text: String = chars.get(start..j).unwrap_or_default().iter().collect();
