@@ -872,21 +872,27 @@ where
     /// What [`Self::push`] queues (`None` for a line of no length), with the current point
     /// moved: for the caller that hands it out directly.
     fn output(&mut self, e: Element) -> Result<Option<Element>, Error> {
+        Ok(self.keep(&e)?.then_some(e))
+    }
+
+    /// Whether [`Self::output`] keeps `e`; moves the current point to its end if so.
+    fn keep(&mut self, e: &Element) -> Result<bool, Error> {
         if !finite(&e.start_mm) || !finite(&e.end_mm) {
-            return Err(self.geometry_error(&e, "a coordinate is not finite"));
+            return Err(self.geometry_error(e, "a coordinate is not finite"));
         }
         if e.kind == ElementKind::Line && e.start_mm == e.end_mm {
-            return Ok(None);
+            return Ok(false);
         }
         self.pos_mm = Some(e.end_mm);
-        Ok(Some(e))
+        Ok(true)
     }
 
     /// An element with no compensation open nor asked for: what [`Self::motion`] does with it,
-    /// handed back rather than queued.
-    fn pass(&mut self, e: Element) -> Result<Option<Element>, Error> {
-        let start_mm = *self.pos_mm.get_or_insert(e.start_mm);
-        self.output(Element { start_mm, ..e })
+    /// done in place (the element is not copied) and handed back rather than queued; `false`
+    /// when it is left out.
+    fn pass(&mut self, e: &mut Element) -> Result<bool, Error> {
+        e.start_mm = *self.pos_mm.get_or_insert(e.start_mm);
+        self.keep(e)
     }
 }
 
@@ -911,19 +917,22 @@ where
                 }
                 Some(Err(e)) => Err(e),
                 // Most programs run without compensation: their elements go straight out,
-                // not through the queue (a copy each way per element).
-                Some(Ok(Item::Motion(e)))
+                // in the item they came in, not through the queue (a copy each way).
+                Some(Ok(mut item)) => {
                     if self.open.is_none()
                         && self.out.is_empty()
-                        && matches!(e.comp, CompState::Off) =>
-                {
-                    match self.pass(e) {
-                        Ok(Some(e)) => return Some(Ok(Item::Motion(e))),
-                        Ok(None) => Ok(()),
-                        Err(e) => Err(e),
+                        && let Item::Motion(e) = &mut item
+                        && matches!(e.comp, CompState::Off)
+                    {
+                        match self.pass(e) {
+                            Ok(true) => return Some(Ok(item)),
+                            Ok(false) => Ok(()),
+                            Err(e) => Err(e),
+                        }
+                    } else {
+                        self.accept(item)
                     }
                 }
-                Some(Ok(item)) => self.accept(item),
             };
             if let Err(e) = step {
                 self.open = None;

@@ -101,6 +101,7 @@ enum Known {
     Unknown,
 }
 
+#[inline]
 fn classify_g(tenths: u32) -> Known {
     use Known::*;
     match tenths {
@@ -144,6 +145,7 @@ fn classify_g(tenths: u32) -> Known {
     }
 }
 
+#[inline]
 fn classify_m(number: u32) -> Known {
     use Known::*;
     match number {
@@ -166,6 +168,7 @@ const LETTERS: [char; 18] = [
 ];
 
 /// The index of `letter` in [`LETTERS`] (a `match`, not a search: it runs for every word).
+#[inline]
 fn letter_index(letter: char) -> Option<usize> {
     let k = match letter {
         'X' => 0,
@@ -192,11 +195,23 @@ fn letter_index(letter: char) -> Option<usize> {
     Some(k)
 }
 
+/// The bit of `letter` in [`Block::present`] (bit k for `LETTERS[k]`), 0 for other letters.
+#[inline]
+pub(super) fn letter_bit(letter: char) -> u32 {
+    letter_index(letter).map_or(0, |k| 1 << k)
+}
+
+/// The bits ([`letter_bit`]) of X, Y, Z, `@` and `^`: the words that make a move.
+const AXIS_BITS: u32 = 0b11 << 16 | 0b111;
+
 /// The words of one line, checked and sorted into modal groups.
 #[derive(Debug, Default, Clone)]
 pub(super) struct Block {
     groups: [Option<Code>; GROUPS],
     words: [Option<Word>; LETTERS.len()],
+    /// The letters present, one bit each ([`letter_bit`]): most lines use few of them, and
+    /// the interpreter's check for unused words is one mask test.
+    present: u32,
     /// The second coolant code of `M7 M8` (both on one line is allowed).
     pub coolant2: Option<Code>,
 }
@@ -212,6 +227,7 @@ fn invalid(word: &Word, expected: &'static str) -> BlockError {
 }
 
 /// A G or M value as tenths: non-negative, at most one decimal.
+#[inline]
 fn code_tenths(word: &Word) -> Option<u32> {
     let tenths = word.value * 10.0;
     let rounded = tenths.round();
@@ -228,9 +244,20 @@ pub(super) fn as_index(value: f64) -> Option<u32> {
 }
 
 impl Block {
-    /// Checks every word of a line; the first problem in line order is reported.
+    /// A block of `words` (see [`Block::read_into`]).
+    #[cfg(test)]
     pub fn read(words: &[Word]) -> Result<Block, BlockError> {
         let mut block = Block::default();
+        block.read_into(words)?;
+        Ok(block)
+    }
+
+    /// Checks every word of a line into `self`, whatever it held; the first problem in line
+    /// order is reported. The interpreter keeps one block for every line, so that a line
+    /// costs no copy of it (it is some 800 bytes).
+    pub fn read_into(&mut self, words: &[Word]) -> Result<(), BlockError> {
+        *self = Block::default();
+        let block = self;
         for (i, word) in words.iter().enumerate() {
             match word.letter {
                 'G' => {
@@ -316,13 +343,20 @@ impl Block {
                         return Err((word.col, ErrorKind::RepeatedWord { letter }));
                     }
                     *slot = Some(*word);
+                    block.present |= letter_bit(letter);
                     check_domain(word)?;
                 }
             }
         }
-        Ok(block)
+        Ok(())
     }
 
+    /// The letters present ([`letter_bit`]).
+    pub fn present(&self) -> u32 {
+        self.present
+    }
+
+    #[inline]
     fn set_code(&mut self, group: Group, code: Code) -> Result<(), BlockError> {
         let Some(slot) = self.groups.get_mut(group.index()) else {
             return Ok(());
@@ -352,11 +386,13 @@ impl Block {
         Ok(())
     }
 
+    #[inline]
     fn get(&self, group: Group) -> Option<Code> {
         self.groups.get(group.index()).copied().flatten()
     }
 
     /// The word for `letter` (one of X Y Z I J K R P Q F S T D H L N).
+    #[inline]
     pub fn word(&self, letter: char) -> Option<Word> {
         letter_index(letter)
             .and_then(|k| self.words.get(k))
@@ -364,18 +400,22 @@ impl Block {
             .flatten()
     }
 
-    /// The X, Y, Z words.
-    pub fn axes(&self) -> [Option<Word>; 3] {
-        [self.word('X'), self.word('Y'), self.word('Z')]
-    }
-
     /// The first axis word of the line (by column).
     pub fn first_axis(&self) -> Option<Word> {
-        let ([x, y, z], [distance, angle]) = (self.axes(), self.polar());
-        [x, y, z, distance, angle]
-            .into_iter()
-            .flatten()
-            .min_by_key(|w| w.col)
+        // Every line asks: read the slots where they are (collecting the five words into an
+        // array first cost a tenth of the front end's time, in stack copies).
+        if self.present & AXIS_BITS == 0 {
+            return None;
+        }
+        let mut first: Option<&Word> = None;
+        for k in [0, 1, 2, 16, 17] {
+            if let Some(Some(w)) = self.words.get(k)
+                && first.is_none_or(|f| w.col < f.col)
+            {
+                first = Some(w);
+            }
+        }
+        first.copied()
     }
 
     /// The polar coordinate words: `@` (distance) and `^` (angle, degrees).
@@ -511,6 +551,15 @@ mod tests {
             assert_eq!(letter_index(*l), Some(k));
         }
         assert_eq!(letter_index('G'), None);
+    }
+
+    #[test]
+    fn the_axis_bits_are_the_axis_letters() {
+        let bits = "XYZ@^".chars().fold(0, |m, c| m | letter_bit(c));
+        assert_eq!(bits, AXIS_BITS);
+        let b = read("G0 X1 Y2").unwrap();
+        assert_eq!(b.present(), letter_bit('X') | letter_bit('Y'));
+        assert!(read("G4 P1").unwrap().first_axis().is_none());
     }
 
     #[test]

@@ -415,6 +415,7 @@ pub(super) fn real_value(
 /// digits, read as an integer, are at most 2^53 and there are at most 22 decimals, the integer
 /// and the power of ten are both exact and one IEEE division rounds correctly, to the value
 /// `str::parse` gives (Clinger's fast path, which it takes too). Other numbers go to it.
+#[inline]
 fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError> {
     let col = *i + 1;
     let start = *i;
@@ -453,8 +454,13 @@ fn number(chars: &[char], i: &mut usize, letter: char) -> Result<f64, ExprError>
         && exact
         && let Some(power) = POWERS_OF_TEN.get(decimals)
     {
-        // Exact: the mantissa is at most 2^53.
-        let value = mantissa as f64 / power;
+        // Exact: the mantissa is at most 2^53. (No division for a whole number: G and M
+        // codes, most F words.)
+        let value = if decimals == 0 {
+            mantissa as f64
+        } else {
+            mantissa as f64 / power
+        };
         return Ok(if negative { -value } else { value });
     }
     let text: String = chars.get(start..j).unwrap_or_default().iter().collect();

@@ -32,7 +32,7 @@ use std::rc::Rc;
 
 use nalgebra::Vector3;
 
-use super::block::{Block, BlockError, Code, as_index};
+use super::block::{Block, BlockError, Code, as_index, letter_bit};
 use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
 use super::expr::Params;
 use super::lex::{
@@ -290,8 +290,8 @@ struct State {
     spindle: Spindle,
     /// Sticky values of the canned cycles.
     cycles: CycleState,
-    /// Letters of the current line that something used (bit = index in "XYZIJKRPQDHL").
-    used: u16,
+    /// Letters of the current line that something used ([`letter_bit`]).
+    used: u32,
     /// The modal state saved by M70/M73 at each call level (0: the main program).
     saved: Vec<Option<Saved>>,
     /// G7 (X words are diameters) rather than G8.
@@ -307,7 +307,12 @@ struct State {
     line_number: f64,
 }
 
+/// The letters a line may not hold unused, in the order they are reported.
 const CHECKED: &str = "XYZIJKRPQDHL@^";
+
+/// The bits ([`letter_bit`]) of [`CHECKED`]: X Y Z I J K R P Q (0 to 8), D H L (12 to 14),
+/// `@` `^` (16, 17).
+const CHECKED_BITS: u32 = 0b11 << 16 | 0b111 << 12 | 0b1_1111_1111;
 
 fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
     if deg == 0.0 {
@@ -618,6 +623,7 @@ impl State {
         }
     }
 
+    #[inline]
     fn to_machine(&self, prog: Vector3<f64>) -> Vector3<f64> {
         rotate_xy(prog + self.g92(), self.rotation_deg())
             + self.work_offsets_mm[self.coord]
@@ -637,21 +643,22 @@ impl State {
     }
 
     /// Marks a letter of the line as used and returns its word.
+    #[inline]
     fn take(&mut self, b: &Block, letter: char) -> Option<Word> {
         let w = b.word(letter)?;
-        if let Some(k) = CHECKED.find(letter) {
-            self.used |= 1 << k;
-        }
+        self.used |= letter_bit(letter);
         Some(w)
     }
 
     /// Value of a length word in mm.
+    #[inline]
     fn take_mm(&mut self, b: &Block, letter: char) -> Option<f64> {
         let scale = self.scale();
         self.take(b, letter).map(|w| w.value * scale)
     }
 
     /// The program-coordinate target of the line's axis words (G90/G91 applied).
+    #[inline]
     fn prog_target(&mut self, b: &Block) -> Vector3<f64> {
         let mut p = self.prog_mm;
         for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
@@ -666,6 +673,7 @@ impl State {
     /// degrees) included, as LinuxCNC: under G90 about the work system's origin (the word
     /// left out keeps the current point's distance or angle); under G91 both add to the
     /// current point's distance and angle about the origin (so not from the origin itself).
+    #[inline]
     fn prog_target_polar(&mut self, b: &Block) -> Result<Vector3<f64>, BlockError> {
         let [d, a] = b.polar();
         let Some(first) = d.or(a) else {
@@ -699,6 +707,7 @@ impl State {
 
     /// The machine point of a program target; axes whose program coordinate does not change
     /// keep their machine coordinate exactly.
+    #[inline]
     fn machine_of(&self, prog: Vector3<f64>) -> Vector3<f64> {
         let mut m = self.to_machine(prog);
         let same = |i: usize| prog[i] == self.prog_mm[i];
@@ -720,6 +729,7 @@ impl State {
         m
     }
 
+    #[inline]
     fn check_position(&self, col: usize, m: &Vector3<f64>) -> Result<(), BlockError> {
         if m.iter()
             .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
@@ -1533,7 +1543,11 @@ impl State {
         };
         let col = on_line.map_or_else(|| first_axis.map_or(0, |w| w.col), |c| c.col);
         let rapid = mode == Motion::Rapid;
-        let feed = |state: &State, length_mm: f64| -> Result<Option<f64>, BlockError> {
+        // The length is asked for under G93 only (a square root, or an arc's geometry, per
+        // move otherwise spent for nothing).
+        let feed = |state: &State,
+                    length_mm: &dyn Fn() -> f64|
+         -> Result<Option<f64>, BlockError> {
             if rapid {
                 return Ok(None);
             }
@@ -1545,7 +1559,7 @@ impl State {
             if state.inverse_time {
                 let f = inverse_f
                     .ok_or_else(|| err_at(col, ErrorKind::MissingInverseTimeFeed { code: name }))?;
-                Ok(Some(length_mm * f / 60.0))
+                Ok(Some(length_mm() * f / 60.0))
             } else {
                 state
                     .feed_mm_s
@@ -1572,7 +1586,7 @@ impl State {
                 }
             }
             self.check_position(col, &m)?;
-            let f = feed(self, (m - self.pos_mm).norm())?;
+            let f = feed(self, &|| (m - self.pos_mm).norm())?;
             self.push_line(line, col, rapid, m, f, out);
             self.ended_comp = None;
             self.resync();
@@ -1583,7 +1597,7 @@ impl State {
             // point, as in LinuxCNC: the exit move back to the programmed point.
             Motion::Rapid | Motion::Linear if first_axis.is_none() => {
                 if self.ended_comp.is_some() && on_line.is_some() {
-                    let f = feed(self, 0.0)?;
+                    let f = feed(self, &|| 0.0)?;
                     self.push_line(line, col, rapid, self.pos_mm, f, out);
                     self.ended_comp = None;
                 }
@@ -1592,7 +1606,7 @@ impl State {
                 let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
                 self.check_position(col, &m)?;
-                let f = feed(self, (m - self.pos_mm).norm())?;
+                let f = feed(self, &|| (m - self.pos_mm).norm())?;
                 self.push_line(line, col, rapid, m, f, out);
                 self.prog_mm = prog;
                 self.ended_comp = None;
@@ -1614,7 +1628,7 @@ impl State {
                 }
                 let element = self.arc(b, line, col, mode == Motion::Cw)?;
                 let mut element = element;
-                element.feed_mm_s = feed(self, element.length_mm())?;
+                element.feed_mm_s = feed(self, &|| element.length_mm())?;
                 out.push_back(Item::Motion(element));
             }
         }
@@ -1793,8 +1807,12 @@ impl State {
 
     /// Every word that needs a user must have found one.
     fn check_unused(&self, b: &Block) -> Result<(), BlockError> {
-        for (k, letter) in CHECKED.chars().enumerate() {
-            if self.used & (1 << k) != 0 {
+        // Every line runs this; nearly all pass.
+        if b.present() & CHECKED_BITS & !self.used == 0 {
+            return Ok(());
+        }
+        for letter in CHECKED.chars() {
+            if self.used & letter_bit(letter) != 0 {
                 continue;
             }
             if let Some(w) = b.word(letter) {
@@ -1951,10 +1969,9 @@ pub struct Interpreter<R> {
     state: State,
     params: Params,
     scanner: Scanner,
+    /// The block of the line being run, kept from line to line (see [`Block::read_into`]).
+    block: Block,
     buf: Vec<u8>,
-    /// The text of the main program's line being run, kept from line to line so that a line
-    /// costs no allocation.
-    line_text: String,
     /// The last line ended with `\r`: a `\n` next belongs to it.
     cr_pending: bool,
     queue: VecDeque<Item>,
@@ -2028,8 +2045,8 @@ impl<R: BufRead> Interpreter<R> {
             state,
             params,
             scanner: Scanner::default(),
+            block: Block::default(),
             buf: Vec::new(),
-            line_text: String::new(),
             cr_pending: false,
             queue: VecDeque::new(),
             line: 0,
@@ -2331,14 +2348,20 @@ impl<R: BufRead> Interpreter<R> {
             self.done = true;
             return Ok(());
         }
-        let mut text = std::mem::take(&mut self.line_text);
-        text.clear();
-        match std::str::from_utf8(&self.buf) {
-            Ok(valid) => text.push_str(valid),
-            Err(_) => text.push_str(&String::from_utf8_lossy(&self.buf)),
+        // The line is run from its read buffer, not copied: whatever `run_line` reads next
+        // (a loop's lines, an M98 read ahead) comes into a new one.
+        let buf = std::mem::take(&mut self.buf);
+        let run = match std::str::from_utf8(&buf) {
+            Ok(text) => self.run_line(self.at, text, false),
+            Err(_) => {
+                let text = String::from_utf8_lossy(&buf).into_owned();
+                self.run_line(self.at, &text, false)
+            }
+        };
+        if self.buf.capacity() == 0 {
+            // Nothing else was read: the allocation serves the next line.
+            self.buf = buf;
         }
-        let run = self.run_line(self.at, &text, false);
-        self.line_text = text;
         run
     }
 
@@ -2389,15 +2412,16 @@ impl<R: BufRead> Interpreter<R> {
                 self.code_seen = true;
                 let mut flow = Flow::Next;
                 if !self.scanner.words.is_empty() {
-                    let block =
-                        Block::read(&self.scanner.words).map_err(|(col, k)| self.error(col, k))?;
+                    self.block
+                        .read_into(&self.scanner.words)
+                        .map_err(|(col, k)| self.error(col, k))?;
                     if self.mdi && !in_frame {
-                        self.check_mdi(&block)?;
+                        self.check_mdi(&self.block)?;
                     }
                     let first_item = self.queue.len();
                     flow = self
                         .state
-                        .execute(&block, line, &mut self.queue)
+                        .execute(&self.block, line, &mut self.queue)
                         .map_err(|(col, k)| self.error(col, k))?;
                     if let Some(call) = self.file_call() {
                         let (line, col) = (call.line, call.col);
@@ -3145,3 +3169,15 @@ impl<R: BufRead> Iterator for Interpreter<R> {
 }
 
 impl<R: BufRead> std::iter::FusedIterator for Interpreter<R> {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_checked_bits_are_the_checked_letters() {
+        let bits = CHECKED.chars().fold(0, |m, c| m | letter_bit(c));
+        assert_eq!(bits, CHECKED_BITS);
+        assert!(CHECKED.chars().all(|c| letter_bit(c) != 0));
+    }
+}

@@ -222,11 +222,18 @@ impl Scanner {
                 c if c.is_whitespace() => i += 1,
                 '(' => {
                     let end = comment_end(chars, i)?;
-                    let body: String = chars.get(i + 1..end).unwrap_or_default().iter().collect();
-                    let trimmed = body.trim_start();
+                    // Only a `(MSG, ...)` comment is kept: the others are looked at where they
+                    // are, with no string made (CAM output has one on many lines).
+                    let body = chars.get(i + 1..end).unwrap_or_default();
+                    let start = body.iter().position(|c| !c.is_whitespace());
+                    let trimmed = start.map_or(&[][..], |k| body.get(k..).unwrap_or_default());
                     if let (Some(head), Some(rest)) = (trimmed.get(..4), trimmed.get(4..))
-                        && head.eq_ignore_ascii_case("msg,")
+                        && head
+                            .iter()
+                            .zip("msg,".chars())
+                            .all(|(a, b)| a.eq_ignore_ascii_case(&b))
                     {
+                        let rest: String = rest.iter().collect();
                         self.message = Some((col, rest.trim().to_owned()));
                     }
                     i = end + 1;

@@ -66,6 +66,11 @@
 //!
 //! Every number of a line is read in the units in force *after* that line's G20/G21, and a feed
 //! keeps its physical speed when the units change later.
+//!
+//! One machine, one state: [`Setup::carry`] starts an interpretation from what the last one on
+//! the machine left ([`Program::carry`], [`Interpreter::carry`]: modes, offsets, tools,
+//! parameters, with M2/M30's resets), as `canmotion serve` runs MDI lines ([`parse_mdi`]) and
+//! programs one after the other; see [`Carry`].
 
 mod block;
 mod element;
