@@ -819,12 +819,33 @@ pub fn run_with(
         None
     };
 
-    let runtime = tokio::runtime::Builder::new_multi_thread()
+    runtime().block_on(run_async(machine, bus, opts, source))
+}
+
+/// What the cyclic thread receives: every axis's feedback TPDO, its node's heartbeat (a boot-up
+/// freezes its axis in the cycle that reads it) and its EMCYs.
+pub(crate) fn cyclic_filters(machine: &Machine) -> Vec<Filter> {
+    machine
+        .axes
+        .iter()
+        .flat_map(|a| {
+            let node = u16::from(a.node);
+            [
+                Filter::exact(a.feedback_pdo.cob_id),
+                Filter::exact(crate::canopen::cob::HEARTBEAT + node),
+                Filter::exact(crate::canopen::cob::EMCY + node),
+            ]
+        })
+        .collect()
+}
+
+/// A tokio runtime for a gateway's non-cyclic side.
+pub(crate) fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
-        .expect("tokio runtime");
-    runtime.block_on(run_async(machine, bus, opts, source))
+        .expect("tokio runtime")
 }
 
 /// The machine's simulated drives on `bus`, each with the injected misbehaviours aimed at it.
@@ -905,19 +926,7 @@ async fn run_async(
     let m = machine.clone();
     // The TPDOs, the nodes' heartbeats (a boot-up freezes its axis in the cycle that reads it)
     // and their EMCYs: the cyclic thread supervises the nodes itself.
-    let tpdo_filters: Vec<Filter> = machine
-        .axes
-        .iter()
-        .flat_map(|a| {
-            let node = u16::from(a.node);
-            [
-                Filter::exact(a.feedback_pdo.cob_id),
-                Filter::exact(crate::canopen::cob::HEARTBEAT + node),
-                Filter::exact(crate::canopen::cob::EMCY + node),
-            ]
-        })
-        .collect();
-    let mut port = bus.open(&tpdo_filters)?;
+    let mut port = bus.open(&cyclic_filters(machine))?;
     let completed = source.completed_line();
     let cyc_bus = cyclic_bus::CyclicBus::new(
         machine,

@@ -863,6 +863,11 @@ impl CyclicMaster {
         self.motion = None;
         self.aborting = false;
         self.override_wanted.1 = false;
+        self.arm_here();
+    }
+
+    /// Armed where the setpoints stand: the next motion starts there.
+    fn arm_here(&mut self) {
         let mut p = Vector3::zeros();
         for (i, a) in self.axes.iter().enumerate() {
             if let Some(k) = a.xyz {
@@ -1061,14 +1066,7 @@ impl CyclicMaster {
                 });
                 if ready {
                     self.bit12_cycle = Some(self.cycle);
-                    let mut p = Vector3::zeros();
-                    for (i, a) in self.axes.iter().enumerate() {
-                        if let Some(k) = a.xyz {
-                            p[k] = self.sp_mm[i][0];
-                        }
-                    }
-                    self.armed_mm = Some(p);
-                    self.set_phase(Phase::Armed);
+                    self.arm_here();
                 } else {
                     let t = self.phase_time_s();
                     let mut late = LateAxes::default();

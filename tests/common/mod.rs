@@ -251,8 +251,14 @@ pub fn limits_held_all(machine: &Machine, rows: &[Vec<f64>]) {
         "motion from the first rows: {:?}",
         &rows[..first + 1]
     );
+    limits_held_rows(machine, &rows[first - 1..]);
+}
+
+/// Every axis's setpoints in `rows` (CSV log rows: cycle, time, then the setpoints) keep its
+/// velocity and acceleration limits (1 %), by finite differences.
+pub fn limits_held_rows(machine: &Machine, rows: &[Vec<f64>]) {
     let t = machine.cycle_s();
-    for w in rows[first - 1..].windows(3) {
+    for w in rows.windows(3) {
         for (i, a) in machine.axes.iter().enumerate() {
             let cmd = |r: &Vec<f64>| r[2 + i];
             let v = (cmd(&w[2]) - cmd(&w[1])) / t;

@@ -19,6 +19,45 @@ const SWITCHES: [&str; 6] = [
     "3:4000",
 ];
 
+/// `canmotion serve` on vcan0 with `machine_file`, its socket at `sock`, its log at `log`.
+fn spawn_serve(
+    machine_file: &str,
+    sock: &std::path::Path,
+    log: Option<&std::path::Path>,
+) -> std::process::Child {
+    let mut cmd = Command::new(BIN);
+    cmd.current_dir(ROOT)
+        .args([
+            "serve",
+            "--bus",
+            IFACE,
+            "--machine",
+            machine_file,
+            "--control",
+        ])
+        .arg(sock);
+    if let Some(log) = log {
+        cmd.arg("--log").arg(log);
+    }
+    cmd.stdout(Stdio::null())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start canmotion serve")
+}
+
+/// Waits (10 s at most) for the service's exit; it must be a success.
+fn ended_in_order(service: &mut std::process::Child) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let code = loop {
+        if let Some(st) = service.try_wait().unwrap() {
+            break st;
+        }
+        assert!(Instant::now() < deadline, "serve did not end");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(code.success(), "serve ended with {code}");
+}
+
 #[test]
 fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm() {
     let _g = lock();
@@ -28,23 +67,7 @@ fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm()
     let csv = dir.path().join("serve.csv");
     let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
     let m = Machine::load(std::path::Path::new(&machine_file)).unwrap();
-    let mut service = Command::new(BIN)
-        .current_dir(ROOT)
-        .args([
-            "serve",
-            "--bus",
-            IFACE,
-            "--machine",
-            &machine_file,
-            "--control",
-        ])
-        .arg(&sock)
-        .arg("--log")
-        .arg(&csv)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start canmotion serve");
+    let mut service = spawn_serve(&machine_file, &sock, Some(&csv));
     let mut c = Client::connect(&sock, Duration::from_secs(20));
     let status = |c: &mut Client| c.status();
     assert_eq!(status(&mut c)["state"], "disabled");
@@ -100,28 +123,12 @@ fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm()
     unsafe {
         libc::kill(pid, libc::SIGTERM);
     }
-    let deadline = Instant::now() + Duration::from_secs(10);
-    let code = loop {
-        if let Some(st) = service.try_wait().unwrap() {
-            break st;
-        }
-        assert!(Instant::now() < deadline, "serve did not end on SIGTERM");
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    assert!(code.success(), "serve ended with {code}");
+    ended_in_order(&mut service);
     // Every setpoint from the end of homing on within the limits.
     let rows = super::common::read_csv(&csv);
-    let t = m.cycle_s();
-    let rows: Vec<&Vec<f64>> = rows.iter().filter(|r| r[0] >= homed_cycle).collect();
+    let rows: Vec<Vec<f64>> = rows.into_iter().filter(|r| r[0] >= homed_cycle).collect();
     assert!(rows.len() > 100);
-    for w in rows.windows(3) {
-        for (i, a) in m.axes.iter().enumerate() {
-            let v = (w[2][2 + i] - w[1][2 + i]) / t;
-            let acc = (w[2][2 + i] - 2.0 * w[1][2 + i] + w[0][2 + i]) / (t * t);
-            assert!(v.abs() <= a.max_vel_mm_s * 1.01, "{} {v}", a.name);
-            assert!(acc.abs() <= a.max_acc_mm_s2 * 1.01, "{} {acc}", a.name);
-        }
-    }
+    super::common::limits_held_rows(&m, &rows);
 }
 
 #[test]
@@ -132,21 +139,7 @@ fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_
     let dir = tempfile::tempdir().unwrap();
     let sock = dir.path().join("cm.sock");
     let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
-    let mut service = Command::new(BIN)
-        .current_dir(ROOT)
-        .args([
-            "serve",
-            "--bus",
-            IFACE,
-            "--machine",
-            &machine_file,
-            "--control",
-        ])
-        .arg(&sock)
-        .stdout(Stdio::null())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start canmotion serve");
+    let mut service = spawn_serve(&machine_file, &sock, None);
     let mut c = Client::connect(&sock, Duration::from_secs(20));
     c.ok("enable");
     let a = c.cmd("home X");
@@ -190,13 +183,5 @@ fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_
     assert!(y > 0.0 && y < 149.0, "{s}");
     assert!(s["alarm"].is_null(), "{s}");
     assert_eq!(c.cmd("quit"), "ok bye");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    let code = loop {
-        if let Some(st) = service.try_wait().unwrap() {
-            break st;
-        }
-        assert!(Instant::now() < deadline, "serve did not end on quit");
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    assert!(code.success(), "serve ended with {code}");
+    ended_in_order(&mut service);
 }

@@ -156,12 +156,7 @@ pub fn serve(machine: &Machine, bus: &Bus, opts: &ServeOptions) -> Result<(), Ga
     } else {
         None
     };
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .expect("tokio runtime");
-    runtime.block_on(serve_async(machine, bus, opts))
+    super::runtime().block_on(serve_async(machine, bus, opts))
 }
 
 async fn serve_async(

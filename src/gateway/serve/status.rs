@@ -125,16 +125,7 @@ fn alarm_kind(a: &Alarm) -> (String, Option<u8>) {
         .next()
         .unwrap_or("")
         .to_string();
-    let node = match a {
-        Alarm::DriveFault { node, .. }
-        | Alarm::FollowingError { node, .. }
-        | Alarm::MissingProcessData { node, .. }
-        | Alarm::BootUp { node, .. }
-        | Alarm::FaultResetFailed { node, .. }
-        | Alarm::Emcy { node, .. }
-        | Alarm::HeartbeatLost { node, .. } => Some(*node),
-        _ => None,
-    };
+    let node = a.node();
     (kind, node)
 }
 

@@ -6,7 +6,7 @@
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
 
-use crate::bus::{Bus, Filter, Frame, Port};
+use crate::bus::{Bus, Frame, Port};
 use crate::config::Machine;
 use crate::config::machine::MAX_AXES;
 use crate::gateway::GatewayError;
@@ -128,19 +128,7 @@ impl Thread {
         snapshot: Arc<Mutex<Snapshot>>,
         log: Option<mpsc::SyncSender<CycleRecord>>,
     ) -> Result<Thread, GatewayError> {
-        let filters: Vec<Filter> = machine
-            .axes
-            .iter()
-            .flat_map(|a| {
-                let node = u16::from(a.node);
-                [
-                    Filter::exact(a.feedback_pdo.cob_id),
-                    Filter::exact(crate::canopen::cob::HEARTBEAT + node),
-                    Filter::exact(crate::canopen::cob::EMCY + node),
-                ]
-            })
-            .collect();
-        let mut port = bus.open(&filters)?;
+        let mut port = bus.open(&crate::gateway::cyclic_filters(machine))?;
         let cyc_bus = CyclicBus::new(
             machine,
             bus.name(),
