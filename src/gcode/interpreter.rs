@@ -2090,7 +2090,9 @@ impl<R: BufRead> Interpreter<R> {
     }
 
     /// What this interpretation leaves for the next one on the machine, as of the line read
-    /// last: after M2/M30, with their resets. Give it to the next [`Setup::carry`].
+    /// last: after M2/M30, with their resets. Give it to the next [`Setup::carry`]. After an
+    /// error the state is partway through the failing line: keep the carry the run started
+    /// from ([`Program::collect`](super::Program::collect) gives none then).
     pub fn carry(&self) -> Carry {
         self.state.carry(&self.params)
     }
