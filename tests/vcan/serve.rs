@@ -185,3 +185,55 @@ fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_
     assert_eq!(c.cmd("quit"), "ok bye");
     ended_in_order(&mut service);
 }
+
+#[test]
+fn vcan0_serve_stays_up_in_alarm_after_a_drive_fault_and_works_again_after_reset() {
+    let _g = lock();
+    // Y's drive faults once (EMCY 0x2310), 5 s after it first followed setpoints.
+    let mut args = SWITCHES.to_vec();
+    args.extend(["--inject", "2:fault@5s"]);
+    let _drives = simdrive_with(&[1, 2, 3], None, &args);
+    let dir = tempfile::tempdir().unwrap();
+    let sock = dir.path().join("cm.sock");
+    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
+    let mut service = spawn_serve(&machine_file, &sock, None);
+    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    c.ok("enable");
+    c.ok("home all");
+    let prog = dir.path().join("long.ngc");
+    std::fs::write(&prog, "G21 G90\nG1 X150 Y150 F1200\nM2\n").unwrap();
+    c.ok(&format!("run {}", prog.display()));
+    let s = c.wait_state("alarm", Duration::from_secs(15));
+    assert_eq!(s["alarm"]["node"], 2, "{s}");
+    assert!(
+        s["alarm"]["kind"] == "Emcy" || s["alarm"]["kind"] == "DriveFault",
+        "{s}"
+    );
+    let a = c.cmd(&format!("run {}", prog.display()));
+    assert!(a.starts_with("error: alarm"), "{a}");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while c.status()["phase"] != "Disabled" {
+        assert!(Instant::now() < deadline, "{}", c.status());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let a = c.ok("reset");
+    assert!(a.contains("enabled"), "{a}");
+    let a = c.cmd("mdi G0 Y10");
+    assert!(a.contains("is not homed"), "{a}");
+    c.ok("home all");
+    c.ok("mdi G0 X10 Y10");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let s = c.status();
+        if s["state"] == "idle"
+            && (s["axes"][1]["actual_mm"].as_f64().unwrap() - 10.0).abs() < 0.002
+        {
+            break;
+        }
+        assert!(s["alarm"].is_null(), "{s}");
+        assert!(Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(c.cmd("quit"), "ok bye");
+    ended_in_order(&mut service);
+}
