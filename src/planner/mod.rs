@@ -36,7 +36,9 @@
 //! (bow-height) error of one period's step is held within ε (`shared/seeds` 001, 003):
 //! `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
 //! `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk budget `J` by
-//! `j_t ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ J/4`.
+//! `|j_t| ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ (√7/4)·J`: its two parts are orthogonal, so
+//! its magnitude is at most `√((3J/4)² + (√7·J/4)²) = J` (a plain sum of the three terms,
+//! `J/4` for the last, left a short arc under half the acceleration it may use).
 //!
 //! # Junctions
 //!
@@ -1991,6 +1993,11 @@ struct ArcLimits {
     axis_jerk_mm_s3: Vector3<f64>,
 }
 
+/// Share of the jerk budget `J` an arc's path acceleration may put on its normal, `3·v·κ·a_t`:
+/// the tangential jerk (`J/2`) and the jerk of following the curve (`J/4`) take `3J/4` along
+/// the tangent and binormal, and the normal is orthogonal to both, so `√(1 − (3/4)²) = √7/4`.
+const ARC_NORMAL_JERK_SHARE: f64 = 0.661_437_827_766_147_7;
+
 fn arc_limits(
     arc: &ArcGeometry,
     feed_mm_s: f64,
@@ -2034,10 +2041,12 @@ fn arc_limits(
     // - chord: one period's step covers the angle v·T·cos α/r, and the chord of a helix bows
     //   only radially (its axial part is linear in the angle on both), so the in-plane rule
     //   holds for v·cos α: v ≤ 2·√(2rε − ε²)/(T·cos α);
-    // - jerk: at constant speed the acceleration v²κ·N turns with N, whose rate is
-    //   v·√(κ² + τ²) = v·cos α/r, so the jerk of following the curve is v³·κ·cos α/r =
-    //   v³·cos³α/r² ≤ J/4; the term of the path acceleration, 3·v·κ·a_t ≤ J/4, gives
-    //   a_t ≤ J·r/(12·v·cos²α).
+    // - jerk: the jerk is (j_t − v³κ²)·T + 3·v·κ·a_t·N + v³κτ·B (Frenet). At constant speed
+    //   the acceleration v²κ·N turns with N, whose rate is v·√(κ² + τ²) = v·cos α/r, so the
+    //   jerk of following the curve is v³·κ·cos α/r = v³·cos³α/r² ≤ J/4. With |j_t| ≤ J/2
+    //   the parts along T and B together stay within 3J/4, and the part along N, orthogonal
+    //   to both, may take the rest of J in quadrature: 3·v·κ·a_t ≤ (√7/4)·J, so
+    //   a_t ≤ √7·J·r/(12·v·cos²α). N is radial, so the helix axis sees none of it.
     let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
     let curvature_per_mm = cos_a * cos_a / radius_mm;
     let centripetal_mm_s2 = acc_budget_mm_s2 * (0.75f64).sqrt();
@@ -2048,7 +2057,7 @@ fn arc_limits(
             .min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / (cfg.period_s * cos_a));
     }
     if cfg.jerk_limited() {
-        // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ J/4 below).
+        // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ (√7/4)·J below).
         v_max_mm_s =
             v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt() / cos_a);
     }
@@ -2062,7 +2071,9 @@ fn arc_limits(
     let mut jerk_mm_s3 = 0.5 * jerk_budget_mm_s3;
     if cfg.jerk_limited() {
         if v_max_mm_s > 0.0 {
-            acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 / (12.0 * v_max_mm_s * curvature_per_mm));
+            acc_mm_s2 = acc_mm_s2.min(
+                ARC_NORMAL_JERK_SHARE * jerk_budget_mm_s3 / (3.0 * v_max_mm_s * curvature_per_mm),
+            );
         }
     } else {
         jerk_mm_s3 = f64::INFINITY;
