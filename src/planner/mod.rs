@@ -80,6 +80,15 @@
 //!   with the acceleration `A` on both sides it passes the dip's position at `c + A·T_f/4`. So a
 //!   junction whose cap is below either neighbour's speed is planned `A·T_f/4` lower, and one
 //!   where that leaves nothing becomes a stop (`Planner::junction_caps`).
+//! - **Plateaus.** Where such stops would be dense (CAM chords whose rounding turns many
+//!   vertices sharply), the filtered speed is bounded another way: it is the distance the plan
+//!   covers in one filter time, over `T_f`, and that window contains the time the plan passes
+//!   the junction. If the plan's speed stays within the cap `c` over `c·T_f` on either side, it
+//!   cannot leave that stretch within `T_f`, so the filtered speed at the junction is at most
+//!   `c`. The junction waits until the elements within reach are known; if they are all short
+//!   (at most `c·T_f`), they are capped at `c` and the junction keeps its cap
+//!   (`Planner::finalize_junction`). A plateau takes `2·T_f` at `c`, more than one stop, so an
+//!   isolated sharp corner still stops.
 //! - **Stops.** Where the plan stops after a filtered move, it stands still for the filters'
 //!   settling time ([`Smoothing::settle_periods`]) before anything else: the filtered motion
 //!   then reaches the stop exactly, and exact stops, dwells, program stops and the program's
