@@ -1282,6 +1282,11 @@ impl Planner {
         ) else {
             return true;
         };
+        if idx == 0 {
+            // It starts at the speed already settled, whatever its cap.
+            self.window[0].provisional = None;
+            return true;
+        }
         let reach_mm = raw.limit_mm_s * smoothing.time_law_s(self.config.period_s);
         let n = self.window.len();
         let known = if flush { n } else { n - 1 };
@@ -1315,9 +1320,17 @@ impl Planner {
             plateau = len_mm <= reach_mm;
             covered_mm += len_mm;
         }
-        // The window's first element starts at the speed already settled.
-        if from == 0 && self.v_settled_mm_s > raw.fed_mm_s {
-            plateau = false;
+        // The window starts at the speed already settled: the plan must still come down to
+        // the plateau from it.
+        if plateau && self.v_settled_mm_s > raw.fed_mm_s {
+            let (mut room_mm, mut acc) = (0.0, f64::INFINITY);
+            for p in self.window.range(..from) {
+                room_mm += p.seg.length_mm;
+                acc = acc.min(p.limits.a_max_mm_s2());
+            }
+            let v0 = self.v_settled_mm_s;
+            let c = raw.fed_mm_s;
+            plateau = from > 0 && v0 * v0 <= (c * c + 2.0 * acc * room_mm) * (1.0 - 1e-9);
         }
         // A plateau takes `2·T_f` at `c`, more than one stop costs: it pays where other
         // junctions within reach would stop too (a dense run of low caps, as on a chorded
@@ -1332,12 +1345,9 @@ impl Planner {
                 after.cap_start_mm_s = after.cap_start_mm_s.min(raw.fed_mm_s);
                 after.cap_start_limit_mm_s = after.cap_start_limit_mm_s.min(raw.limit_mm_s);
             }
-            let (mut a, mut b) = (self.window[idx - 1], self.window[idx]);
+            let b = &mut self.window[idx];
             b.cap_start_mm_s = raw.fed_mm_s;
             b.cap_start_limit_mm_s = raw.limit_mm_s;
-            share_acceleration(&mut a, &mut b);
-            self.window[idx - 1] = a;
-            self.window[idx] = b;
             // Every junction of the plateau within both its elements' speeds (other plateaus
             // may have capped them a rounding lower).
             for k in from.max(1)..=end.min(n - 1) {
@@ -1349,13 +1359,16 @@ impl Planner {
                 b.cap_start_limit_mm_s = b.cap_start_limit_mm_s.min(limit);
             }
         }
-        let p = &mut self.window[idx];
-        p.provisional = None;
-        p.kink_in = if p.cap_start_mm_s > 0.0 {
-            raw.kink
-        } else {
-            Vector3::zeros()
-        };
+        let (mut a, mut b) = (self.window[idx - 1], self.window[idx]);
+        b.provisional = None;
+        b.kink_in = Vector3::zeros();
+        if b.cap_start_mm_s > 0.0 {
+            // Joined at speed: the filter's window spans the junction.
+            b.kink_in = raw.kink;
+            share_acceleration(&mut a, &mut b);
+        }
+        self.window[idx - 1] = a;
+        self.window[idx] = b;
         true
     }
 
