@@ -833,7 +833,7 @@ struct Provisional {
 
 /// Most elements on each side of a junction a plateau ([`Planner::finalize_junction`]) may
 /// span: it bounds the work per element.
-const MAX_PLATEAU_ELEMENTS: usize = 64;
+const MAX_PLATEAU_ELEMENTS: usize = 256;
 
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
 /// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
