@@ -418,3 +418,93 @@ fn moves_alone_keep_their_corners_within_a_tiny_tolerance() {
     assert!(worst <= 0.0001, "{worst} mm off the zigzag");
     setpoints::limits_hold(plan, &limits(), &cfg).unwrap();
 }
+
+/// Issue 11: on an arc the jerk of the motion is `(j_t − v³κ²)·T + 3·v·κ·a_t·N`, two
+/// orthogonal parts, so with `|j_t| ≤ J/2` and `v³κ² ≤ J/4` the path acceleration may take
+/// `3·v·κ·a_t ≤ (√7/4)·J` (`(3/4)² + (√7/4)² = 1`), not the `J/4` a plain sum of the three
+/// parts left it: a short arc in the jerk-limited mode speeds up 2.6 times as hard as before
+/// (seen in the setpoints), and every axis still keeps its limits.
+#[test]
+fn arcs_accelerate_with_the_whole_jerk_budget() {
+    let cfg = config(ProfileKind::SCurve);
+    let l = limits();
+    // The arcs are in XY: the budgets are the smaller of X's and Y's, times the share.
+    let jerk = cfg.path_acc_share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y);
+    let acc = cfg.path_acc_share * l.max_acc_mm_s2.x.min(l.max_acc_mm_s2.y);
+    for r in [2.0, 3.0, 5.0] {
+        let text = format!(
+            "G21 G90 G17 G61\nG3 X0 Y{d} I0 J{r} F9000\nM2\n",
+            d = 2.0 * r
+        );
+        let prog = parse_program(&text, "arc.ngc", Vector3::zeros()).unwrap();
+        let plan = plan_with(&prog, &l, &cfg).unwrap();
+        let v_max = (acc * 0.75f64.sqrt() * r)
+            .sqrt()
+            .min((0.25 * jerk * r * r).cbrt());
+        let before = jerk * r / (12.0 * v_max);
+        let now = (7.0f64.sqrt() / 4.0 * jerk * r / (3.0 * v_max)).min(0.5 * acc);
+        let mut interp = Interpolator::new(plan.clone(), T).unwrap();
+        let (mut q, mut prev) = (Vector3::zeros(), Vector3::zeros());
+        let mut speeds = Vec::new();
+        while !interp.is_finished() {
+            interp.update(&mut q);
+            speeds.push((q - prev).norm() / T);
+            prev = q;
+        }
+        let a_seen = speeds
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs() / T)
+            .fold(0.0, f64::max);
+        assert!(
+            a_seen > 0.9 * now && a_seen > 1.5 * before,
+            "r = {r}: path acceleration {a_seen} mm/s² (bound {now}, before {before})"
+        );
+        setpoints::limits_hold(plan, &l, &cfg).unwrap();
+    }
+}
+
+/// Issue 11, the time-law filter's dips: on an arc of CAM chords of 16 µm written in inches
+/// with 4 decimals (LinuxCNC's `performance/contour.ngc`, at a 1 ms cycle), the rounding turns
+/// many vertices sharply and their caps are low, below the `A·T_f/4` by which the filter
+/// rounds a V-shaped dip, so each was planned as a stop and the filters settled there (tens of
+/// milliseconds each). A plateau at the cap over the filter's reach on either side keeps the
+/// filtered speed under it without stopping: the arc runs with hardly a stop, within the limits
+/// and the tolerance.
+#[test]
+fn dense_low_caps_are_a_plateau_not_stops() {
+    let n = 10_000.0;
+    let point = |k: u32| {
+        let a = std::f64::consts::TAU * f64::from(k) / n;
+        (a.sin(), a.cos())
+    };
+    let (x, y) = point(1000);
+    let mut text = format!("G20 G90 G17 G64 F9999\nG1 X{x:.4} Y{y:.4}\n");
+    for k in 1001..1400 {
+        let (x, y) = point(k);
+        text.push_str(&format!("G1 X{x:.4} Y{y:.4}\n"));
+    }
+    text.push_str("M2\n");
+    let prog = parse_program(&text, "contour.ngc", Vector3::zeros()).unwrap();
+    let cfg = PlannerConfig {
+        period_s: 0.001,
+        ..config(ProfileKind::SCurve)
+    };
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let stops = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line > 2 && s.line < 401 && s.v_end_mm_s == 0.0)
+        .count();
+    // 304 of the 398 vertices stopped (9.05 s) before the plateaus; a few remain where
+    // the run of low caps begins, before any is known to be dense.
+    assert!(
+        stops < 10,
+        "{stops} stops on the arc ({} s)",
+        plan.duration_s()
+    );
+    setpoints::limits_hold(plan.clone(), &limits(), &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}

@@ -36,7 +36,9 @@
 //! (bow-height) error of one period's step is held within ε (`shared/seeds` 001, 003):
 //! `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
 //! `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk budget `J` by
-//! `j_t ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ J/4`.
+//! `|j_t| ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ (√7/4)·J`: its two parts are orthogonal, so
+//! its magnitude is at most `√((3J/4)² + (√7·J/4)²) = J` (a plain sum of the three terms,
+//! `J/4` for the last, left a short arc under half the acceleration it may use).
 //!
 //! # Junctions
 //!
@@ -78,6 +80,15 @@
 //!   with the acceleration `A` on both sides it passes the dip's position at `c + A·T_f/4`. So a
 //!   junction whose cap is below either neighbour's speed is planned `A·T_f/4` lower, and one
 //!   where that leaves nothing becomes a stop (`Planner::junction_caps`).
+//! - **Plateaus.** Where such stops would be dense (CAM chords whose rounding turns many
+//!   vertices sharply), the filtered speed is bounded another way: it is the distance the plan
+//!   covers in one filter time, over `T_f`, and that window contains the time the plan passes
+//!   the junction. If the plan's speed stays within the cap `c` over `c·T_f` on either side, it
+//!   cannot leave that stretch within `T_f`, so the filtered speed at the junction is at most
+//!   `c`. The junction waits until the elements within reach are known; if they are all short
+//!   (at most `c·T_f`), they are capped at `c` and the junction keeps its cap
+//!   (`Planner::finalize_junction`). A plateau takes `2·T_f` at `c`, more than one stop, so an
+//!   isolated sharp corner still stops.
 //! - **Stops.** Where the plan stops after a filtered move, it stands still for the filters'
 //!   settling time ([`Smoothing::settle_periods`]) before anything else: the filtered motion
 //!   then reaches the stop exactly, and exact stops, dwells, program stops and the program's
@@ -798,7 +809,31 @@ struct Pending {
     /// The discrete curvature `Δu/L̄` of the vertex at its start (zero where the motion stops
     /// there or the path is tangent), `L̄` the mean length of the two elements.
     kink_in: Vector3<f64>,
+    /// The junction at its start, while the plan does not yet know whether its dip is planned
+    /// as a plateau or lowered ([`Planner::finalize_junction`]); its caps are the lowered
+    /// ones meanwhile.
+    provisional: Option<Provisional>,
+    /// Its place in the program's sequence of elements (to find it in the window).
+    seq: u64,
+    /// Whether the time-law filter's dip left nothing of the cap at its start (a stop, or a
+    /// plateau instead): where such junctions are dense, plateaus pay.
+    low_cap: bool,
 }
+
+/// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
+/// elements after it within reach have not all come ([`Planner::finalize_junction`]).
+#[derive(Debug, Clone, Copy)]
+struct Provisional {
+    /// The junction's caps before the dip (under the feeds; by the machine alone).
+    fed_mm_s: f64,
+    limit_mm_s: f64,
+    /// The discrete curvature of the vertex, [`Pending::kink_in`] if the motion passes it.
+    kink: Vector3<f64>,
+}
+
+/// Most elements on each side of a junction a plateau ([`Planner::finalize_junction`]) may
+/// span: it bounds the work per element.
+const MAX_PLATEAU_ELEMENTS: usize = 256;
 
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
 /// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
@@ -831,6 +866,10 @@ pub struct Planner {
     /// A move planned alone (without the time-law filter) ended here, at rest, and the axis
     /// filters have not been given time to settle.
     axes_unsettled: Option<Unsettled>,
+    /// The sequence number of the next element pushed ([`Pending::seq`]).
+    next_seq: u64,
+    /// The elements of the window whose start junction is provisional, in order.
+    provisional: VecDeque<u64>,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -880,6 +919,8 @@ impl Planner {
             off_grid: 0,
             smoothing: Smoothing::for_machine(limits, config),
             axes_unsettled: None,
+            next_seq: 0,
+            provisional: VecDeque::new(),
         })
     }
 
@@ -897,16 +938,33 @@ impl Planner {
                 };
                 match blend {
                     None => {
-                        (p.cap_start_mm_s, p.cap_start_limit_mm_s) = match self.window.back() {
-                            Some(prev) => self.junction_caps(prev, &p),
-                            None => (0.0, 0.0),
-                        };
-                        if let Some(prev) = self.window.back_mut()
-                            && p.cap_start_mm_s > 0.0
-                        {
-                            p.kink_in = discrete_curvature(prev, &p);
-                            if self.smoothing.is_some() {
-                                share_acceleration(prev, &mut p);
+                        let raw = self.window.back().map(|prev| {
+                            let raw = self.raw_junction_caps(prev, &p);
+                            (raw, self.dip_caps(prev, &p, raw))
+                        });
+                        (p.cap_start_mm_s, p.cap_start_limit_mm_s) =
+                            raw.map_or((0.0, 0.0), |(_, dipped)| dipped);
+                        let ((fed_mm_s, limit_mm_s), _) = raw.unwrap_or_default();
+                        p.low_cap = raw.is_some() && p.cap_start_mm_s == 0.0;
+                        // Only a dip that would become a stop (a shallower one costs less than
+                        // a plateau), among others.
+                        let provisional = self.smoothing.is_some()
+                            && fed_mm_s > 0.0
+                            && p.low_cap
+                            && self.dense_before(limit_mm_s);
+                        if let Some(prev) = self.window.back_mut() {
+                            if provisional {
+                                // Planned once the elements within the filter's reach are known.
+                                p.provisional = Some(Provisional {
+                                    fed_mm_s,
+                                    limit_mm_s,
+                                    kink: discrete_curvature(prev, &p),
+                                });
+                            } else if p.cap_start_mm_s > 0.0 {
+                                p.kink_in = discrete_curvature(prev, &p);
+                                if self.smoothing.is_some() {
+                                    share_acceleration(prev, &mut p);
+                                }
                             }
                         }
                     }
@@ -931,11 +989,19 @@ impl Planner {
                                 share_acceleration(&mut arc, &mut p);
                             }
                         }
+                        arc.seq = self.next_seq;
+                        self.next_seq += 1;
                         self.window.push_back(arc);
                     }
                 }
                 self.position_mm = p.seg.end_mm;
+                p.seq = self.next_seq;
+                self.next_seq += 1;
+                if p.provisional.is_some() {
+                    self.provisional.push_back(p.seq);
+                }
                 self.window.push_back(p);
+                self.finalize_junctions(false);
                 if self.window.len() >= self.config.lookahead {
                     self.replan(false)?;
                 }
@@ -1060,10 +1126,16 @@ impl Planner {
     /// The backward and forward passes over the window, then the settled elements out
     /// (`all`: every element, the last ending at rest).
     fn replan(&mut self, all: bool) -> Result<(), PlanError> {
+        if all {
+            self.finalize_junctions(true);
+        }
         let n = self.window.len();
         if n == 0 {
             return Ok(());
         }
+        // Elements within reach of a provisional junction wait for it (more elements can only
+        // raise its cap).
+        let hold_from = if all { n } else { self.held_from() };
         // Backward: the highest start speed of each element from which the rest of the window
         // can still stop at its end.
         self.back_mm_s.clear();
@@ -1080,7 +1152,10 @@ impl Planner {
                 p.cap_start_mm_s
             };
             v_next = start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits);
-            anchored = anchored || v_next >= cap;
+            if v_next >= cap {
+                // A provisional cap may still rise.
+                anchored = i == 0 || p.provisional.is_none();
+            }
             self.back_mm_s[i] = v_next;
             self.back_anchored[i] = anchored;
         }
@@ -1105,7 +1180,7 @@ impl Planner {
             // More elements can only raise the backward bound from the window's end; one that
             // comes from a junction's own cap stays.
             let fixed = all
-                || (!last && (fwd <= back || self.back_anchored[i + 1]))
+                || (!last && i < hold_from && (fwd <= back || self.back_anchored[i + 1]))
                 || (!last && settled < quarter && n >= self.config.lookahead);
             if !fixed {
                 break;
@@ -1116,7 +1191,185 @@ impl Planner {
         }
         self.window.drain(..settled);
         self.v_settled_mm_s = v0;
+        // A provisional junction settled by force keeps its lowered caps.
+        let front = self.window.front().map_or(u64::MAX, |p| p.seq);
+        while self.provisional.front().is_some_and(|&seq| seq < front) {
+            self.provisional.pop_front();
+        }
         Ok(())
+    }
+
+    /// The window's index of the first element that a provisional junction's plateau could
+    /// still cap (`window.len()` if none).
+    fn held_from(&self) -> usize {
+        let (Some(&seq), Some(front), Some(smoothing)) = (
+            self.provisional.front(),
+            self.window.front(),
+            self.smoothing,
+        ) else {
+            return self.window.len();
+        };
+        let Some(idx) = seq.checked_sub(front.seq).map(|i| i as usize) else {
+            return self.window.len();
+        };
+        let Some(raw) = self.window.get(idx).and_then(|p| p.provisional) else {
+            return self.window.len();
+        };
+        let reach_mm = raw.limit_mm_s * smoothing.time_law_s(self.config.period_s);
+        let mut from = idx;
+        let mut covered_mm = 0.0;
+        while from > 0 && idx - from < MAX_PLATEAU_ELEMENTS && covered_mm < reach_mm {
+            from -= 1;
+            covered_mm += self.window[from].seg.length_mm;
+        }
+        from
+    }
+
+    /// Whether the elements at the end of the window within the reach of a plateau at
+    /// `limit_mm_s` ([`Planner::finalize_junction`]) are short, and a junction among them stops
+    /// or waits for its own plateau: a plateau for the next junction may pay. Elsewhere (an
+    /// isolated sharp corner) the junction is lowered at once, its neighbours' rules knowing
+    /// whether the motion passes it.
+    fn dense_before(&self, limit_mm_s: f64) -> bool {
+        let Some(smoothing) = self.smoothing else {
+            return false;
+        };
+        let reach_mm = limit_mm_s * smoothing.time_law_s(self.config.period_s);
+        let mut covered_mm = 0.0;
+        let mut stop = false;
+        for p in self.window.iter().rev().take(MAX_PLATEAU_ELEMENTS) {
+            if covered_mm >= reach_mm {
+                break;
+            }
+            if p.seg.length_mm > reach_mm {
+                return false;
+            }
+            covered_mm += p.seg.length_mm;
+            stop |= p.low_cap;
+        }
+        stop && covered_mm >= reach_mm
+    }
+
+    /// Plans the provisional junctions whose elements within reach have all come (`flush`:
+    /// all of them, the window ending at rest).
+    fn finalize_junctions(&mut self, flush: bool) {
+        while let (Some(&seq), Some(front)) = (self.provisional.front(), self.window.front()) {
+            let Some(idx) = seq.checked_sub(front.seq).map(|i| i as usize) else {
+                self.provisional.pop_front();
+                continue;
+            };
+            if !self.finalize_junction(idx, flush) {
+                break;
+            }
+            self.provisional.pop_front();
+        }
+    }
+
+    /// The junction at the start of the window's element `idx`, whose cap `c` is below its
+    /// neighbours' speeds: the time-law filter would round the dip of the plan there by up to
+    /// `A·T_f/4` (see [`Planner::dip_caps`]). If every element within `c·T_f` of it on either
+    /// side is short (at most `c·T_f`, as on a chorded curve), they are capped at `c`
+    /// instead (a plateau): the filtered speed at the junction is the distance the plan
+    /// covers in one filter time `T_f` around it, over `T_f`, and the plan cannot leave the
+    /// plateau within `T_f` at `c`, so it passes at most at `c` and the junction keeps its
+    /// cap. Otherwise the lowered caps stay (a stop where nothing is left). `false` while the
+    /// elements after it within reach have not all come (the last element of the window may
+    /// still be shortened by a blend).
+    fn finalize_junction(&mut self, idx: usize, flush: bool) -> bool {
+        let (Some(smoothing), Some(raw)) = (
+            self.smoothing,
+            self.window.get(idx).and_then(|p| p.provisional),
+        ) else {
+            return true;
+        };
+        if idx == 0 {
+            // It starts at the speed already settled, whatever its cap.
+            self.window[0].provisional = None;
+            return true;
+        }
+        let reach_mm = raw.limit_mm_s * smoothing.time_law_s(self.config.period_s);
+        let n = self.window.len();
+        let known = if flush { n } else { n - 1 };
+        // After the elements within reach.
+        let mut end = idx;
+        let mut covered_mm = 0.0;
+        let mut plateau = raw.fed_mm_s >= profile::MIN_LIMIT && reach_mm.is_finite();
+        while plateau && covered_mm < reach_mm {
+            if end >= known {
+                if !flush {
+                    return false;
+                }
+                // The motion stops at the window's end.
+                break;
+            }
+            let len_mm = self.window[end].seg.length_mm;
+            plateau = len_mm <= reach_mm && end - idx < MAX_PLATEAU_ELEMENTS;
+            covered_mm += len_mm;
+            end += 1;
+        }
+        // Before: still in the window, not settled.
+        let mut from = idx;
+        covered_mm = 0.0;
+        while plateau && covered_mm < reach_mm {
+            if from == 0 || idx - from >= MAX_PLATEAU_ELEMENTS {
+                plateau = false;
+                break;
+            }
+            from -= 1;
+            let len_mm = self.window[from].seg.length_mm;
+            plateau = len_mm <= reach_mm;
+            covered_mm += len_mm;
+        }
+        // The window starts at the speed already settled: the plan must still come down to
+        // the plateau from it.
+        if plateau && self.v_settled_mm_s > raw.fed_mm_s {
+            let (mut room_mm, mut acc) = (0.0, f64::INFINITY);
+            for p in self.window.range(..from) {
+                room_mm += p.seg.length_mm;
+                acc = acc.min(p.limits.a_max_mm_s2());
+            }
+            let v0 = self.v_settled_mm_s;
+            let c = raw.fed_mm_s;
+            plateau = from > 0 && v0 * v0 <= (c * c + 2.0 * acc * room_mm) * (1.0 - 1e-9);
+        }
+        // A plateau takes `2·T_f` at `c`, more than one stop costs: it pays where other
+        // junctions within reach would stop too (a dense run of low caps, as on a chorded
+        // curve whose chords are rounded).
+        plateau = plateau && (from + 1..end).any(|k| k != idx && self.window[k].low_cap);
+        if plateau {
+            for k in from..end {
+                cap_speed(&mut self.window[k], raw.fed_mm_s, raw.limit_mm_s);
+            }
+            // The junction after the plateau is within it too.
+            if let Some(after) = self.window.get_mut(end) {
+                after.cap_start_mm_s = after.cap_start_mm_s.min(raw.fed_mm_s);
+                after.cap_start_limit_mm_s = after.cap_start_limit_mm_s.min(raw.limit_mm_s);
+            }
+            let b = &mut self.window[idx];
+            b.cap_start_mm_s = raw.fed_mm_s;
+            b.cap_start_limit_mm_s = raw.limit_mm_s;
+            // Every junction of the plateau within both its elements' speeds (other plateaus
+            // may have capped them a rounding lower).
+            for k in from.max(1)..=end.min(n - 1) {
+                let (a, b) = (&self.window[k - 1], &self.window[k]);
+                let fed = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
+                let limit = a.v_limit_mm_s.min(b.v_limit_mm_s);
+                let b = &mut self.window[k];
+                b.cap_start_mm_s = b.cap_start_mm_s.min(fed);
+                b.cap_start_limit_mm_s = b.cap_start_limit_mm_s.min(limit);
+            }
+        }
+        let (mut a, mut b) = (self.window[idx - 1], self.window[idx]);
+        b.provisional = None;
+        b.kink_in = Vector3::zeros();
+        if b.cap_start_mm_s > 0.0 {
+            // Joined at speed: the filter's window spans the junction.
+            b.kink_in = raw.kink;
+            share_acceleration(&mut a, &mut b);
+        }
+        self.window[idx - 1] = a;
+        self.window[idx] = b;
+        true
     }
 
     /// Settles the window's element `i` with the boundary speeds `v0`, `v1`.
@@ -1223,9 +1476,20 @@ impl Planner {
     /// limits do not depend on the feed, so the first is the second under both elements'
     /// speed limits.
     fn junction_caps(&self, a: &Pending, b: &Pending) -> (f64, f64) {
+        let raw = self.raw_junction_caps(a, b);
+        self.dip_caps(a, b, raw)
+    }
+
+    /// [`junction_caps`](Self::junction_caps) before the time-law filter's dip.
+    fn raw_junction_caps(&self, a: &Pending, b: &Pending) -> (f64, f64) {
         let v = self.junction_limit_mm_s(a, b);
         let fed = v.min(a.limits.v_max_mm_s()).min(b.limits.v_max_mm_s());
         let limit = v.min(a.v_limit_mm_s).min(b.v_limit_mm_s);
+        (fed, limit)
+    }
+
+    /// The caps `(fed, limit)` lowered for the time-law filter's rounding of a dip.
+    fn dip_caps(&self, a: &Pending, b: &Pending, (fed, limit): (f64, f64)) -> (f64, f64) {
         let Some(smoothing) = self.smoothing else {
             return (fed, limit);
         };
@@ -1319,6 +1583,18 @@ impl Planner {
     ///   `v²·|Δκ|·T_k²/12`, uncompensated; both are held within the tolerance
     ///   ([`Planner::filter_tolerance_mm`]). Along an arc the pull is pre-compensated.
     fn smoothed_junction_limit_mm_s(&self, a: &Pending, b: &Pending, smoothing: &Smoothing) -> f64 {
+        if let Some(raw) = a.provisional {
+            // Whether the motion passes `a`'s start vertex is not known yet: the rules must
+            // hold either way.
+            let (mut passed, mut stopped) = (*a, *a);
+            passed.provisional = None;
+            stopped.provisional = None;
+            passed.kink_in = raw.kink;
+            stopped.kink_in = Vector3::zeros();
+            return self
+                .smoothed_junction_limit_mm_s(&passed, b, smoothing)
+                .min(self.smoothed_junction_limit_mm_s(&stopped, b, smoothing));
+        }
         let cfg = &self.config;
         let tk = smoothing.axis_s(cfg.period_s);
         let mut v = f64::INFINITY;
@@ -1579,6 +1855,9 @@ impl Planner {
             },
             alone: alone_limits(self.smoothing, a.v_max_mm_s, a.acc_mm_s2, jerk_mm_s3),
             kink_in: Vector3::zeros(),
+            provisional: None,
+            seq: 0,
+            low_cap: false,
         })
     }
 
@@ -1678,6 +1957,9 @@ impl Planner {
                     },
                     alone: alone_limits(self.smoothing, v_max_mm_s, acc_mm_s2, jerk_mm_s3),
                     kink_in: Vector3::zeros(),
+                    provisional: None,
+                    seq: 0,
+                    low_cap: false,
                 }
             }
             ElementKind::Arc { .. } => {
@@ -1854,6 +2136,29 @@ fn share_acceleration(a: &mut Pending, b: &mut Pending) {
     }
 }
 
+/// Caps an element of a plateau ([`Planner::finalize_junction`]) at `fed_mm_s` (and its
+/// ceiling under a feed override at `limit_mm_s`).
+fn cap_speed(p: &mut Pending, fed_mm_s: f64, limit_mm_s: f64) {
+    if p.limits.v_max_mm_s() > fed_mm_s
+        && let Some(lower) = ProfileLimits::trapezoid(fed_mm_s, p.limits.a_max_mm_s2())
+    {
+        p.limits = lower;
+    }
+    p.v_limit_mm_s = p.v_limit_mm_s.min(limit_mm_s);
+    p.cap_start_mm_s = p.cap_start_mm_s.min(fed_mm_s);
+    p.cap_start_limit_mm_s = p.cap_start_limit_mm_s.min(limit_mm_s);
+    if let Some(alone) = p.alone
+        && alone.v_max_mm_s() > fed_mm_s
+    {
+        p.alone = ProfileLimits::new(
+            fed_mm_s,
+            alone.a_max_mm_s2(),
+            alone.j_max_mm_s3(),
+            alone.shape(),
+        );
+    }
+}
+
 /// Most taps of the axis filters' combined kernel the corner-cut estimate follows (two moving
 /// averages of `N_k` samples: `2·N_k − 1` taps); longer filters are estimated from the first
 /// ones, which over-estimates the cut (their later taps would weigh points nearer the corner).
@@ -1991,6 +2296,11 @@ struct ArcLimits {
     axis_jerk_mm_s3: Vector3<f64>,
 }
 
+/// Share of the jerk budget `J` an arc's path acceleration may put on its normal, `3·v·κ·a_t`:
+/// the tangential jerk (`J/2`) and the jerk of following the curve (`J/4`) take `3J/4` along
+/// the tangent and binormal, and the normal is orthogonal to both, so `√(1 − (3/4)²) = √7/4`.
+const ARC_NORMAL_JERK_SHARE: f64 = 0.661_437_827_766_147_7;
+
 fn arc_limits(
     arc: &ArcGeometry,
     feed_mm_s: f64,
@@ -2034,10 +2344,12 @@ fn arc_limits(
     // - chord: one period's step covers the angle v·T·cos α/r, and the chord of a helix bows
     //   only radially (its axial part is linear in the angle on both), so the in-plane rule
     //   holds for v·cos α: v ≤ 2·√(2rε − ε²)/(T·cos α);
-    // - jerk: at constant speed the acceleration v²κ·N turns with N, whose rate is
-    //   v·√(κ² + τ²) = v·cos α/r, so the jerk of following the curve is v³·κ·cos α/r =
-    //   v³·cos³α/r² ≤ J/4; the term of the path acceleration, 3·v·κ·a_t ≤ J/4, gives
-    //   a_t ≤ J·r/(12·v·cos²α).
+    // - jerk: the jerk is (j_t − v³κ²)·T + 3·v·κ·a_t·N + v³κτ·B (Frenet). At constant speed
+    //   the acceleration v²κ·N turns with N, whose rate is v·√(κ² + τ²) = v·cos α/r, so the
+    //   jerk of following the curve is v³·κ·cos α/r = v³·cos³α/r² ≤ J/4. With |j_t| ≤ J/2
+    //   the parts along T and B together stay within 3J/4, and the part along N, orthogonal
+    //   to both, may take the rest of J in quadrature: 3·v·κ·a_t ≤ (√7/4)·J, so
+    //   a_t ≤ √7·J·r/(12·v·cos²α). N is radial, so the helix axis sees none of it.
     let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
     let curvature_per_mm = cos_a * cos_a / radius_mm;
     let centripetal_mm_s2 = acc_budget_mm_s2 * (0.75f64).sqrt();
@@ -2048,7 +2360,7 @@ fn arc_limits(
             .min(2.0 * (2.0 * radius_mm * eps - eps * eps).sqrt() / (cfg.period_s * cos_a));
     }
     if cfg.jerk_limited() {
-        // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ J/4 below).
+        // v³·cos³α/r² ≤ J/4 (and 3·v·κ·a_t ≤ (√7/4)·J below).
         v_max_mm_s =
             v_max_mm_s.min((0.25 * jerk_budget_mm_s3 * radius_mm * radius_mm).cbrt() / cos_a);
     }
@@ -2062,7 +2374,9 @@ fn arc_limits(
     let mut jerk_mm_s3 = 0.5 * jerk_budget_mm_s3;
     if cfg.jerk_limited() {
         if v_max_mm_s > 0.0 {
-            acc_mm_s2 = acc_mm_s2.min(jerk_budget_mm_s3 / (12.0 * v_max_mm_s * curvature_per_mm));
+            acc_mm_s2 = acc_mm_s2.min(
+                ARC_NORMAL_JERK_SHARE * jerk_budget_mm_s3 / (3.0 * v_max_mm_s * curvature_per_mm),
+            );
         }
     } else {
         jerk_mm_s3 = f64::INFINITY;
