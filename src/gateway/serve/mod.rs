@@ -382,33 +382,7 @@ impl Controller<'_> {
     /// Between commands: jobs that ended, the next job, the jog's dead-man, a new alarm.
     async fn tick(&mut self) {
         let s = self.snapshot();
-        if let Some(c) = &self.current
-            && s.motions_ended >= c.seq
-        {
-            if c.kind == JobKind::Jog {
-                self.jog = None;
-            }
-            self.current = None;
-        }
-        if s.failure.is_some() && !self.alarm_seen {
-            // A fault stop: what was queued will not run, and the axes must be homed again
-            // (a drive that faulted or reset may have lost its position).
-            self.alarm_seen = true;
-            self.drop_queue();
-            self.current = None;
-            self.jog = None;
-            for (h, a) in self.homed.iter_mut().zip(&self.m.axes) {
-                *h = a
-                    .homing
-                    .as_ref()
-                    .is_some_and(|h| h.method == crate::config::operation::HomingMethod::Absolute);
-            }
-            for i in 0..self.m.axes.len() {
-                let _ = self
-                    .ask(Request::TravelChecked(i, self.travel_checked(i)))
-                    .await;
-            }
-        }
+        self.observe(&s).await;
         if let Some(j) = &self.jog
             && j.deadline.is_some_and(|d| Instant::now() >= d)
         {
@@ -449,6 +423,39 @@ impl Controller<'_> {
         if !self.queue.is_empty() {
             self.queue.clear();
             self.carry.clone_from(&self.started_carry);
+        }
+    }
+
+    /// What the cyclic thread did since the last look: the job that ended, and a new alarm (a
+    /// fault stop: what was queued will not run, and the axes must be homed again, since a
+    /// drive that faulted or reset may have lost its position). Runs between commands and
+    /// before each one, so that no command sees a state the alarm made stale.
+    async fn observe(&mut self, s: &Snapshot) {
+        if let Some(c) = &self.current
+            && s.motions_ended >= c.seq
+        {
+            if c.kind == JobKind::Jog {
+                self.jog = None;
+            }
+            self.current = None;
+        }
+        if s.failure.is_some() && !self.alarm_seen {
+            self.alarm_seen = true;
+            self.drop_queue();
+            self.current = None;
+            self.jog = None;
+            for (h, a) in self.homed.iter_mut().zip(&self.m.axes) {
+                *h = a
+                    .homing
+                    .as_ref()
+                    .is_some_and(|h| h.method == crate::config::operation::HomingMethod::Absolute);
+            }
+            for i in 0..self.m.axes.len() {
+                let _ = self
+                    .ask(Request::TravelChecked(i, self.travel_checked(i)))
+                    .await;
+            }
+            self.publish();
         }
     }
 
@@ -495,6 +502,8 @@ impl Controller<'_> {
     }
 
     async fn handle(&mut self, cmd: Command) -> Result<String, ServeError> {
+        let s = self.snapshot();
+        self.observe(&s).await;
         // Any command but the same jog again stops a jog.
         if let Some(j) = self.jog.clone() {
             let same = matches!(&cmd, Command::Jog { axis, speed_mm_s, dist_mm: None }
