@@ -396,7 +396,7 @@ impl CyclicMaster {
     }
 
     fn check_no_alarm(&self) -> Result<(), Refusal> {
-        if self.reset.iter().any(|r| *r) || (self.failure.is_some() && self.phase == Phase::Done) {
+        if self.any_reset() || (self.failure.is_some() && self.phase == Phase::Done) {
             return Err(Refusal::NeedsStartUp);
         }
         if self.failure.is_some() {
@@ -410,7 +410,7 @@ impl CyclicMaster {
     /// on disabled. Refused while stopping, and when a drive reset or the bus was lost (the
     /// drives must be started up again).
     pub fn reset_alarm(&mut self) -> Result<(), Refusal> {
-        if self.reset.iter().any(|r| *r) || self.phase == Phase::Done {
+        if self.any_reset() || self.phase == Phase::Done {
             return Err(Refusal::NeedsStartUp);
         }
         if self.phase != Phase::Disabled {
@@ -645,6 +645,11 @@ impl CyclicMaster {
             .map(|(a, _)| a.node)
             .collect()
     }
+    /// Whether a drive reset during the run (without allocating, for the cyclic path).
+    pub fn any_reset(&self) -> bool {
+        self.reset.iter().any(|r| *r)
+    }
+
     /// Nodes of the axes an alarm froze.
     pub fn frozen_nodes(&self) -> Vec<u8> {
         self.axes

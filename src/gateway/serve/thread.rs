@@ -260,7 +260,7 @@ fn run(
             if s.failure.as_ref() != master.failure() {
                 s.failure = master.failure().cloned();
             }
-            s.needs_startup = !master.reset_nodes().is_empty() || master.phase() == Phase::Done;
+            s.needs_startup = master.any_reset() || master.phase() == Phase::Done;
             s.line = master.line();
             s.motions_started = started;
             s.motions_ended = ended;
