@@ -293,6 +293,16 @@ enum SdoOp {
 }
 
 /// `plan --override`: a percentage from 1 to 200.
+/// The machine file given with `--machine`, or the embedded demo machine.
+fn machine_or_demo(
+    path: Option<&std::path::Path>,
+) -> Result<Machine, canmotion::config::ConfigError> {
+    match path {
+        Some(p) => Machine::load(p),
+        None => Ok(Machine::demo()),
+    }
+}
+
 /// `--home-switch NODE:COUNTS`.
 fn parse_home_switch(s: &str) -> Result<(u8, i32), String> {
     let (node, counts) = s
@@ -487,10 +497,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             if let Some(p) = &plot {
                 canmotion::plot::PlotFormat::of(p)?;
             }
-            let machine = match machine {
-                Some(p) => Machine::load(&p)?,
-                None => Machine::demo(),
-            };
+            let machine = machine_or_demo(machine.as_deref())?;
             let opts = canmotion::offline::PlanOptions {
                 path_out: path,
                 setpoints_out: setpoints,
@@ -519,10 +526,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             machine,
             no_trace,
         } => {
-            let machine = match machine {
-                Some(p) => Machine::load(&p)?,
-                None => Machine::demo(),
-            };
+            let machine = machine_or_demo(machine.as_deref())?;
             // Bytes, bounded, read as `plan` reads them (a Latin-1 comment is no error).
             let (name, text) = if program.as_os_str() == "-" {
                 let stdin = std::path::Path::new("<stdin>");
@@ -551,10 +555,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
             control,
             log,
         } => {
-            let machine = match machine {
-                Some(p) => Machine::load(&p)?,
-                None => Machine::demo(),
-            };
+            let machine = machine_or_demo(machine.as_deref())?;
             canmotion::rt::signal::route_stop_signals()
                 .map_err(|e| format!("cannot route SIGINT and SIGTERM: {e}"))?;
             let bus = Bus::from_arg(&bus.unwrap_or_else(|| machine.interface.clone()));
@@ -610,10 +611,7 @@ fn real_main() -> Result<(), Box<dyn std::error::Error>> {
                 }
                 _ => None,
             });
-            let machine = match machine {
-                Some(p) => Machine::load(&p)?,
-                None => Machine::demo(),
-            };
+            let machine = machine_or_demo(machine.as_deref())?;
             let (name, text) = match program {
                 Some(p) if p.as_os_str() == "-" => {
                     let mut text = String::new();

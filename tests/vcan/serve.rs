@@ -19,12 +19,16 @@ const SWITCHES: [&str; 6] = [
     "3:4000",
 ];
 
-/// `canmotion serve` on vcan0 with `machine_file`, its socket at `sock`, its log at `log`.
-fn spawn_serve(
-    machine_file: &str,
-    sock: &std::path::Path,
-    log: Option<&std::path::Path>,
-) -> std::process::Child {
+/// The demo machine file.
+fn machine_file() -> String {
+    format!("{ROOT}/dictionaries/machines/demo-xyz.toml")
+}
+
+/// `canmotion serve` on vcan0 with the demo machine, its socket (and its CSV log, `serve.csv`,
+/// with `log`) in a new temporary folder; a client connected to it.
+fn start_serve(log: bool) -> (tempfile::TempDir, std::process::Child, Client) {
+    let dir = tempfile::tempdir().unwrap();
+    let sock = dir.path().join("cm.sock");
     let mut cmd = Command::new(BIN);
     cmd.current_dir(ROOT)
         .args([
@@ -32,17 +36,20 @@ fn spawn_serve(
             "--bus",
             IFACE,
             "--machine",
-            machine_file,
+            &machine_file(),
             "--control",
         ])
-        .arg(sock);
-    if let Some(log) = log {
-        cmd.arg("--log").arg(log);
+        .arg(&sock);
+    if log {
+        cmd.arg("--log").arg(dir.path().join("serve.csv"));
     }
-    cmd.stdout(Stdio::null())
+    let service = cmd
+        .stdout(Stdio::null())
         .stderr(Stdio::inherit())
         .spawn()
-        .expect("start canmotion serve")
+        .expect("start canmotion serve");
+    let c = Client::connect(&sock, Duration::from_secs(20));
+    (dir, service, c)
 }
 
 /// Waits (10 s at most) for the service's exit; it must be a success.
@@ -62,13 +69,9 @@ fn ended_in_order(service: &mut std::process::Child) {
 fn vcan0_serve_homes_jogs_runs_mdi_then_a_program_and_ends_in_order_on_sigterm() {
     let _g = lock();
     let _drives = simdrive_with(&[1, 2, 3], None, &SWITCHES);
-    let dir = tempfile::tempdir().unwrap();
-    let sock = dir.path().join("cm.sock");
+    let (dir, mut service, mut c) = start_serve(true);
     let csv = dir.path().join("serve.csv");
-    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
-    let m = Machine::load(std::path::Path::new(&machine_file)).unwrap();
-    let mut service = spawn_serve(&machine_file, &sock, Some(&csv));
-    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    let m = Machine::load(std::path::Path::new(&machine_file())).unwrap();
     let status = |c: &mut Client| c.status();
     assert_eq!(status(&mut c)["state"], "disabled");
     c.ok("enable");
@@ -136,11 +139,7 @@ fn vcan0_serve_reports_a_homing_error_with_its_node_and_aborts_a_program_on_its_
     let _g = lock();
     // X's drive has no home switch; Y's and Z's have.
     let _drives = simdrive_with(&[1, 2, 3], None, &SWITCHES[2..]);
-    let dir = tempfile::tempdir().unwrap();
-    let sock = dir.path().join("cm.sock");
-    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
-    let mut service = spawn_serve(&machine_file, &sock, None);
-    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    let (dir, mut service, mut c) = start_serve(false);
     c.ok("enable");
     let a = c.cmd("home X");
     assert!(
@@ -193,11 +192,7 @@ fn vcan0_serve_stays_up_in_alarm_after_a_drive_fault_and_works_again_after_reset
     let mut args = SWITCHES.to_vec();
     args.extend(["--inject", "2:fault@5s"]);
     let _drives = simdrive_with(&[1, 2, 3], None, &args);
-    let dir = tempfile::tempdir().unwrap();
-    let sock = dir.path().join("cm.sock");
-    let machine_file = format!("{ROOT}/dictionaries/machines/demo-xyz.toml");
-    let mut service = spawn_serve(&machine_file, &sock, None);
-    let mut c = Client::connect(&sock, Duration::from_secs(20));
+    let (dir, mut service, mut c) = start_serve(false);
     c.ok("enable");
     c.ok("home all");
     let prog = dir.path().join("long.ngc");
