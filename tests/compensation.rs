@@ -57,6 +57,14 @@ fn compensate_with(text: &str, options: CompOptions) -> Result<Vec<Item>, Error>
     Ok(items)
 }
 
+/// The source's C-type outside corners (extended, inserted), which the square, D-shape, lens
+/// and pocket tests below compute by hand; the default is LinuxCNC's arcs.
+fn lines() -> CompOptions {
+    CompOptions {
+        outside_corners: OutsideCorners::Lines,
+    }
+}
+
 fn compensate(text: &str) -> Result<Vec<Item>, Error> {
     compensate_with(text, CompOptions::default())
 }
@@ -122,7 +130,7 @@ fn square_clockwise_with_g41_lies_2_mm_outside() {
     // x = 22, y = −2); the right-angle corners (α = 90°) extended by the radius. Start-up:
     // +X then +Y is an inside corner for the tool, so it ends on y = 12 and x = −2. G40, as
     // in LinuxCNC: the last side ends at its offset end (−2,10), the exit runs from there.
-    let path = comp_path(&square("G41", true), CompOptions::default());
+    let path = comp_path(&square("G41", true), lines());
     assert_polyline(
         &path,
         &[
@@ -150,7 +158,7 @@ fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
     // Tool left of a counter-clockwise path: inside, on x = 2, y = 2, x = 18, y = 18, every
     // corner shortened to the intersection. The start-up (+X then −Y) is an outside corner
     // for the tool: extended by the radius. The last side ends at its offset end (2,10).
-    let path = comp_path(&square("G41", false), CompOptions::default());
+    let path = comp_path(&square("G41", false), lines());
     assert_polyline(
         &path,
         &[
@@ -169,7 +177,7 @@ fn square_counter_clockwise_with_g41_lies_2_mm_inside() {
 #[test]
 fn square_with_g42_mirrors() {
     // Clockwise with the tool right: inside.
-    let path = comp_path(&square("G42", true), CompOptions::default());
+    let path = comp_path(&square("G42", true), lines());
     assert_polyline(
         &path,
         &[
@@ -184,7 +192,7 @@ fn square_with_g42_mirrors() {
         ],
     );
     // Counter-clockwise with the tool right: outside.
-    let path = comp_path(&square("G42", false), CompOptions::default());
+    let path = comp_path(&square("G42", false), lines());
     assert_polyline(
         &path,
         &[
@@ -252,7 +260,7 @@ fn circle(code: &str) -> String {
 fn circle_offsets_concentric() {
     // Clockwise: G41 puts the tool outside (radius 12), G42 inside (radius 8).
     for (code, radius, x) in [("G41", 12.0, -2.0), ("G42", 8.0, 2.0)] {
-        let path = comp_path(&circle(code), CompOptions::default());
+        let path = comp_path(&circle(code), lines());
         assert_eq!(path.len(), 3, "{path:#?}");
         let start = Vector3::new(x, 0.0, 0.0);
         assert!(close(path[0].end_mm, start), "{code}: {}", path[0].end_mm);
@@ -292,7 +300,7 @@ fn line_arc_joins_outside_are_extended_along_the_tangent() {
     // by 90° (α = 90°): the edge extends 2 mm to (−2,22), a straight connector along the
     // arc's tangent reaches the arc's offset start (0,22); at the bottom the arc ends at
     // (0,−2), a connector to (−2,−2), the edge from there to its offset end (−2,5) (G40).
-    let path = comp_path(&d_shape("G41"), CompOptions::default());
+    let path = comp_path(&d_shape("G41"), lines());
     assert_eq!(path.len(), 7, "{path:#?}");
     assert_polyline(
         &path[..3],
@@ -332,7 +340,7 @@ fn line_arc_joins_inside_meet_on_the_offset_circle() {
     // G42 on the clockwise D: inside. Edge on x = 2, arc radius 8 about (0,10); they meet
     // where x = 2 cuts that circle: y = 10 ± √60. The start-up corner is outside for the
     // tool (extended by the radius); the last edge ends at its offset end (2,5) (G40).
-    let path = comp_path(&d_shape("G42"), CompOptions::default());
+    let path = comp_path(&d_shape("G42"), lines());
     assert_eq!(path.len(), 5, "{path:#?}");
     let r60 = 60f64.sqrt();
     assert_polyline(&path[..2], &[(-10.0, 5.0), (2.0, 3.0), (2.0, 10.0 + r60)]);
@@ -358,7 +366,7 @@ fn lens(code: &str) -> String {
 fn arc_arc_joins() {
     // G41: the tool inside, both arcs radius 8. The corners (turning left by 73.7°) are
     // inside: the circles of radius 8 about (±6,0) meet at (0, ±√28).
-    let path = comp_path(&lens("G41"), CompOptions::default());
+    let path = comp_path(&lens("G41"), lines());
     assert_eq!(path.len(), 5, "{path:#?}");
     let r28 = 28f64.sqrt();
     let pts = [
@@ -378,7 +386,7 @@ fn arc_arc_joins() {
 
     // G42: the tool outside, radius 12; the corners are outside with α = 106.3°, extended by
     // 2·tan(36.87°) = 1.5 along both tangents: from (1.2,9.6) to (0,10.5) to (−1.2,9.6).
-    let path = comp_path(&lens("G42"), CompOptions::default());
+    let path = comp_path(&lens("G42"), lines());
     let conns: Vec<&Element> = path
         .iter()
         .filter(|e| e.kind == ElementKind::Line && e.comp != CompState::Off && e.line != 3)
@@ -442,7 +450,7 @@ fn pocket_with_fillets_cam_style() {
     let text = "G21 G17 G90 G94\nG0 Z5\nG0 X30 Y-10\nG1 Z-1 F300\nG41 D1\nG1 X30 Y0 F600\n\
                 X55\nG3 X60 Y5 I0 J5\nG1 Y25\nG3 X55 Y30 I-5 J0\nG1 X5\nG3 X0 Y25 I0 J-5\n\
                 G1 Y5\nG3 X5 Y0 I5 J0\nG1 X30\nG40 Y-10\nG0 Z5\nM2\n";
-    let path = comp_path(text, CompOptions::default());
+    let path = comp_path(text, lines());
     let z = -1.0;
     let p = |x: f64, y: f64| Vector3::new(x, y, z);
     let want_lines = [
@@ -699,12 +707,13 @@ fn plan_path(program: &str, machine: Option<&Path>) -> Vec<Record> {
         .collect()
 }
 
-/// A machine file like the demo's with `outside_corners = "arc"` (LinuxCNC's corners).
-fn arc_corner_machine(dir: &Path) -> std::path::PathBuf {
+/// A machine file like the demo's with `outside_corners = "lines"` (the source's C-type
+/// corners; the demo's default is LinuxCNC's arcs).
+fn lines_corner_machine(dir: &Path) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries");
     let demo = std::fs::read_to_string(root.join("machines/demo-xyz.toml")).unwrap();
     let text = demo
-        .replace("[program]", "[program]\noutside_corners = \"arc\"")
+        .replace("[program]", "[program]\noutside_corners = \"lines\"")
         .replace("../", &format!("{}/", root.display()));
     let file = dir.join("machine.toml");
     std::fs::write(&file, text).unwrap();
@@ -795,11 +804,11 @@ fn an_arc_starts_compensation_as_in_linuxcnc() {
 }
 
 /// An outside corner after an entry arc (G42, radius 2): the entry arc as in run 1 above ends
-/// at (112,100) heading +Y; the line into −X turns left, away from the tool. With
+/// at (112,100) heading +Y; the line into −X turns left, away from the tool. With the default
 /// `outside_corners = "arc"` (LinuxCNC's) the corner is a counter-clockwise arc of radius 2
 /// about the programmed corner (110,100) from (112,100) to the line's offset start (110,102);
-/// with the default (C-type lines, α = 90°) both offsets are extended by 2·tan 45° = 2 to meet
-/// at (112,102).
+/// with `outside_corners = "lines"` (C-type, α = 90°) both offsets are extended by 2·tan 45° = 2
+/// to meet at (112,102).
 #[test]
 fn an_outside_corner_after_an_entry_arc() {
     let entry = (
@@ -808,9 +817,9 @@ fn an_outside_corner_after_an_entry_arc() {
         Some(([100.0 + 11.0 / 6.0, 100.0], false)),
     );
     let dir = tempfile::tempdir().unwrap();
-    let machine = arc_corner_machine(dir.path());
+    let machine = lines_corner_machine(dir.path());
     check_path(
-        &plan_path("comp_arc_entry_corner.ngc", Some(&machine)),
+        &plan_path("comp_arc_entry_corner.ngc", None),
         &[
             (3, [100.0, 90.0], None),
             entry,
@@ -820,7 +829,7 @@ fn an_outside_corner_after_an_entry_arc() {
         ],
     );
     check_path(
-        &plan_path("comp_arc_entry_corner.ngc", None),
+        &plan_path("comp_arc_entry_corner.ngc", Some(&machine)),
         &[
             (3, [100.0, 90.0], None),
             entry,
@@ -1053,7 +1062,7 @@ fn a_straight_entry_into_an_acute_inside_corner_as_in_linuxcnc() {
     ];
     check_path(&plan_path("comp_entry_acute.ngc", None), &want);
     let dir = tempfile::tempdir().unwrap();
-    let machine = arc_corner_machine(dir.path());
+    let machine = lines_corner_machine(dir.path());
     check_path(&plan_path("comp_entry_acute.ngc", Some(&machine)), &want);
 }
 
@@ -1072,16 +1081,16 @@ fn a_straight_entry_into_an_acute_inside_corner_as_in_linuxcnc() {
 /// Line 7, G40: the last move keeps its end; the G1 runs to (40,10). The old code joined the
 /// exit to the last move as an inside corner (ending the last move short of its end).
 ///
-/// With the default `outside_corners = "lines"` the corner is the C-type extension instead
-/// (not LinuxCNC's, a documented choice): both offsets run on to their intersection, y = 22
+/// With `outside_corners = "lines"` the corner is the C-type extension instead (not
+/// LinuxCNC's, a machine file's choice; the default is LinuxCNC's arc): both offsets run on to their intersection, y = 22
 /// with the line through (21.414214, 21.414214) along (1,−1): x = 20 + 2√2 − 2 = 20.828427.
 #[test]
 fn a_straight_entry_onto_an_outside_corner_as_in_linuxcnc() {
     let h = std::f64::consts::SQRT_2;
     let dir = tempfile::tempdir().unwrap();
-    let machine = arc_corner_machine(dir.path());
+    let machine = lines_corner_machine(dir.path());
     check_path(
-        &plan_path("comp_entry_obtuse.ngc", Some(&machine)),
+        &plan_path("comp_entry_obtuse.ngc", None),
         &[
             (3, [10.0, 20.0], None),
             (5, [20.0, 22.0], None),
@@ -1091,7 +1100,7 @@ fn a_straight_entry_onto_an_outside_corner_as_in_linuxcnc() {
         ],
     );
     check_path(
-        &plan_path("comp_entry_obtuse.ngc", None),
+        &plan_path("comp_entry_obtuse.ngc", Some(&machine)),
         &[
             (3, [10.0, 20.0], None),
             (5, [18.0 + 2.0 * h, 22.0], None),

@@ -283,6 +283,18 @@ fn lines_of(path: &[Record], line: u64) -> Vec<([f64; 3], [f64; 3])> {
         .collect()
 }
 
+/// The demo machine with the demo tool table, tool 1 loaded, and `outside_corners = MODE`.
+fn corners_machine(dir: &Path, mode: &str) -> PathBuf {
+    let tools = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries/tools/demo-tools.toml");
+    machine_file(
+        dir,
+        &format!(
+            "[program]\ntool_table = {:?}\nloaded_tool = 1\noutside_corners = {mode:?}",
+            tools.display().to_string()
+        ),
+    )
+}
+
 /// A 20 mm square (corners (20, 20) and (40, 40)), entered and left diagonally from (10, 10) at
 /// the corner (20, 20), with the tool 1 of the demo table (radius 2 mm). Lines 4 to 7 are the
 /// four sides, in the order `sides` gives their far corners.
@@ -297,13 +309,16 @@ fn square(g4x: &str, sides: [(f64, f64); 4]) -> String {
 
 #[test]
 fn g41_on_a_clockwise_square_runs_two_millimetres_outside_with_extended_corners() {
-    // Clockwise: up the left side first; G41 keeps the tool left of the motion: outside.
+    // Clockwise: up the left side first; G41 keeps the tool left of the motion: outside. With
+    // `outside_corners = "lines"` (the source's C-type; the default is LinuxCNC's arcs).
+    let dir = tempfile::tempdir().unwrap();
+    let lines = corners_machine(dir.path(), "lines");
     let path = plan_path(
         &square(
             "G41",
             [(20.0, 40.0), (40.0, 40.0), (40.0, 20.0), (20.0, 20.0)],
         ),
-        None,
+        Some(&lines),
     );
     // Each side is one straight element on the line 2 mm outside it; the three corners the
     // sides share are outside corners of 90°, extended until the offsets meet.
@@ -359,22 +374,20 @@ fn g41_on_a_counter_clockwise_square_runs_two_millimetres_inside_with_shortened_
 fn g42_mirrors_g41_and_outside_corners_can_be_arcs() {
     // G42 on the counter-clockwise square is outside, like G41 on the clockwise one.
     let ccw = [(40.0, 20.0), (40.0, 40.0), (20.0, 40.0), (20.0, 20.0)];
-    let path = plan_path(&square("G42", ccw), None);
+    let dir = tempfile::tempdir().unwrap();
+    let lines = corners_machine(dir.path(), "lines");
+    let path = plan_path(&square("G42", ccw), Some(&lines));
     let sides: Vec<_> = (4..=7).map(|l| lines_of(&path, l)[0]).collect();
     assert!(sides[0].0[1] == 18.0 && near(sides[0].1, [42.0, 18.0, 0.0]));
     assert!(near(sides[1].1, [42.0, 42.0, 0.0]));
     assert!(near(sides[2].1, [18.0, 42.0, 0.0]));
 
-    // With `outside_corners = "arc"` each outside corner is a 2 mm arc about the programmed
-    // corner, from one side's offset to the next's.
-    let dir = tempfile::tempdir().unwrap();
-    let tools = Path::new(env!("CARGO_MANIFEST_DIR")).join("dictionaries/tools/demo-tools.toml");
-    let machine = machine_file(
-        dir.path(),
-        &format!(
-            "[program]\ntool_table = {:?}\nloaded_tool = 1\noutside_corners = \"arc\"",
-            tools.display().to_string()
-        ),
+    // With the default `outside_corners = "arc"` (LinuxCNC's) each outside corner is a 2 mm
+    // arc about the programmed corner, from one side's offset to the next's.
+    let machine = corners_machine(dir.path(), "arc");
+    assert_eq!(
+        plan_path(&square("G42", ccw), None),
+        plan_path(&square("G42", ccw), Some(&machine))
     );
     let path = plan_path(&square("G42", ccw), Some(&machine));
     let arcs: Vec<&Record> = path.iter().filter(|r| r.1 == "arc").collect();

@@ -159,10 +159,11 @@ const MIN_ARC_LENGTH_MM: f64 = 1.0e-6;
 #[serde(rename_all = "lowercase")]
 pub enum OutsideCorners {
     /// The source's C-type classes: extended (90° ≤ α < 180°) and inserted (α < 90°), with
-    /// straight extensions and insertions.
-    #[default]
+    /// straight extensions and insertions. Not LinuxCNC's path: chosen by the machine file.
     Lines,
-    /// A tool-radius arc about the programmed corner, for every outside corner (LinuxCNC).
+    /// A tool-radius arc about the programmed corner, for every outside corner, as LinuxCNC
+    /// joins them (the default: a program's path is the one LinuxCNC computes).
+    #[default]
     Arc,
 }
 

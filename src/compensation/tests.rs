@@ -19,8 +19,16 @@ fn run_with(text: &str, options: CompOptions) -> Result<Vec<Item>, Error> {
     items.into_iter().collect()
 }
 
+/// With the source's C-type outside corners ([`OutsideCorners::Lines`]), the classes most of
+/// these tests compute by hand; [`arc_options`] is LinuxCNC's join, the default.
 fn run(text: &str) -> Result<Vec<Item>, Error> {
-    run_with(text, CompOptions::default())
+    run_with(text, lines_options())
+}
+
+fn lines_options() -> CompOptions {
+    CompOptions {
+        outside_corners: OutsideCorners::Lines,
+    }
 }
 
 fn arc_options() -> CompOptions {
@@ -668,8 +676,11 @@ fn options_deserialize_from_config_text() {
     }
     let d: Doc = toml::from_str("[compensation]\noutside_corners = \"arc\"\n").unwrap();
     assert_eq!(d.compensation, arc_options());
+    let d: Doc = toml::from_str("[compensation]\noutside_corners = \"lines\"\n").unwrap();
+    assert_eq!(d.compensation, lines_options());
+    // Unset: LinuxCNC's join.
     let d: Doc = toml::from_str("[compensation]\n").unwrap();
-    assert_eq!(d.compensation.outside_corners, OutsideCorners::Lines);
+    assert_eq!(d.compensation.outside_corners, OutsideCorners::Arc);
     assert!(toml::from_str::<Doc>("[compensation]\noutside_corners = \"round\"\n").is_err());
     assert!(toml::from_str::<Doc>("[compensation]\nradius = 1\n").is_err());
 }
