@@ -255,6 +255,15 @@ fn m70_to_m73_save_invalidate_and_restore_the_modal_state() {
             "{text}"
         );
     }
+    // G7/G8 belong to the saved state (LinuxCNC's list).
+    check(
+        "modal_lathe.ngc",
+        &[
+            (3, "line", R, [10.0, 0.0, 0.0], None),
+            (6, "line", F, [5.0, 0.0, 0.0], None),
+            (8, "line", F, [10.0, 0.0, 0.0], None),
+        ],
+    );
     // A restore that would switch cutter compensation is refused.
     let e = err("G21 F60\nM70\nG41.1 D2\nM72\n");
     assert_eq!((e.line, e.col), (4, 1));
@@ -591,6 +600,25 @@ fn predefined_named_parameters_read_the_interpreter_s_state() {
         e.unsupported_feature(),
         Some("predefined parameter #<_mist>")
     );
+    // LinuxCNC's INI and HAL readers: named as unsupported, with line and column.
+    for (text, name) in [
+        (
+            "G21\nG0 X#<_ini[AXIS_X]MAX_VELOCITY>\n",
+            "#<_ini[axis_x]max_velocity>",
+        ),
+        (
+            "G21\nG0 X[1 + #<_hal[motion.spindle-speed]>]\n",
+            "#<_hal[motion.spindle-speed]>",
+        ),
+    ] {
+        let e = parse_program(text, "p", Vector3::zeros()).unwrap_err();
+        assert_eq!(e.line, 2, "{e}");
+        assert_eq!(
+            e.unsupported_feature(),
+            Some(format!("parameter {name}").as_str()),
+            "{e}"
+        );
+    }
     // EXISTS knows them; a global of one's own still works.
     let p = parse_program(
         "G21\n#<_mine> = 2\nG0 X[EXISTS[#<_mist>] + EXISTS[#<_nope>] + #<_mine>]\n",

@@ -184,6 +184,12 @@ impl Params {
             ParamRef::Name(name) if name.starts_with('_') && is_predefined(name) => {
                 self.predefined(name)
             }
+            ParamRef::Name(name) if name.starts_with("_ini[") || name.starts_with("_hal[") => {
+                Err(ErrorKind::Unsupported {
+                    what: format!("parameter #<{name}>"),
+                    reason: "LinuxCNC reads it from its INI file or a HAL pin; this controller has a TOML machine file and no HAL: put the value in the program or in a parameter of your own",
+                })
+            }
             ParamRef::Name(name) => {
                 let map = if name.starts_with('_') {
                     &self.global

@@ -227,8 +227,9 @@ impl Motion {
     }
 }
 
-/// The modal state M70/M73 save and M72 restores (LinuxCNC's list, less what has no effect
-/// here: spindle speed mode, coolant, override switches; the motion mode is not saved).
+/// The modal state M70/M73 save and M72 restores (LinuxCNC's list, G7/G8 included, less what
+/// has no effect here: spindle speed mode, coolant, override switches; the motion mode is not
+/// saved).
 #[derive(Debug, Clone, PartialEq)]
 struct Modal {
     inch: bool,
@@ -243,6 +244,8 @@ struct Modal {
     blend: BlendMode,
     feed_mm_s: Option<f64>,
     spindle: Spindle,
+    /// G7 rather than G8 (lathe diameter mode).
+    diameter_mode: bool,
 }
 
 /// A saved modal state, and whether it comes back when its subroutine returns (M73).
@@ -518,6 +521,7 @@ impl State {
             blend: self.blend,
             feed_mm_s: self.feed_mm_s,
             spindle: self.spindle,
+            diameter_mode: self.diameter_mode,
         }
     }
 
@@ -545,6 +549,7 @@ impl State {
         self.blend = m.blend;
         self.feed_mm_s = m.feed_mm_s;
         self.spindle = m.spindle;
+        self.diameter_mode = m.diameter_mode;
         self.resync();
         Ok(())
     }
