@@ -508,3 +508,53 @@ fn dense_low_caps_are_a_plateau_not_stops() {
         .check()
         .unwrap();
 }
+
+/// Issue 11: where a line meets an arc tangentially, the acceleration steps by `v²/r` towards
+/// the centre, which the axis filters spread over `2·T_k` (jerk `v²/(r·T_k)`). Each of a
+/// junction's rules took half of the jerk budget its elements leave, for steps that may meet
+/// in the filters' output; an isolated step (no turn of the tangent, both elements longer than
+/// `2·T_k` at their top speed) now takes all of it: the line runs into the arc at
+/// `√(T_k·(J − used)·r/1.05)` less the time-law filter's dip (`√2` times the old cap), and
+/// every axis keeps its limits and the path its tolerance.
+#[test]
+fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let r = 10.0;
+    // A line along X, a quarter circle of radius r (CCW, centre above: the step is along Y),
+    // a line along Y.
+    let text = format!(
+        "G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG3 X{x} Y{r} I0 J{r}\nG1 Y40\nM2\n",
+        x = 30.0 + r
+    );
+    let prog = parse_program(&text, "tangent.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let line = plan
+        .segments()
+        .iter()
+        .find(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
+        .unwrap();
+    // The filters of `Smoothing::for_machine`: T_k = 8 ms in whole periods, T_f the smallest
+    // A/J (37.5 ms) in whole periods.
+    let t_k = (0.008 / T).ceil().max(2.0) * T;
+    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    // The arc takes the share of Y's jerk that its own motion may use; the line none of Y's.
+    let share = cfg.path_acc_share;
+    let arc_jerk = share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y);
+    let left = cfg.max_jerk_mm_s3.y - arc_jerk;
+    let cap = |budget: f64| (t_k * budget * r / 1.05).sqrt();
+    // The line's tangential acceleration under the time-law filter rounds the dip by A·T_f/4.
+    let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
+    let dip = 0.25 * acc * t_f;
+    let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
+    assert!(
+        line.v_end_mm_s > 0.99 * now && line.v_end_mm_s <= now * (1.0 + 1e-9),
+        "junction {} mm/s, expected {now} (before: {before})",
+        line.v_end_mm_s
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}

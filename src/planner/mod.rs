@@ -103,7 +103,12 @@
 //!   period (`Planner::smoothed_junction_limit_mm_s`). Their price is contour error,
 //!   `v·|Δu|·2·T_k/8` at a corner and `2·v²·T_k²/(24·r)` on an arc, which the junction and arc
 //!   speeds keep within the tolerance: half the G64 P tolerance (the corner blends take the
-//!   other half), else `chord_tol_mm`.
+//!   other half), else `chord_tol_mm`. A step `Δa` of the acceleration (where an arc begins
+//!   or ends) reaches the drive as a jerk of at most `Δa/T_k` for `2·T_k`; the rules of one
+//!   junction share the jerk budget its elements leave in halves, since steps of neighbouring
+//!   junctions may meet in the filters' output, except that a curvature step at a tangent
+//!   junction between two elements each at least `2·T_k` long at its top speed meets no other
+//!   and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //!
@@ -194,6 +199,12 @@ pub const PRECOMP_STEP_RESIDUAL: f64 = 0.3;
 /// Factor on the jerk of a curvature step through the axis filters that their pre-compensation
 /// adds (measured 1.013 at most against `v²·|Δκ|/T_k`, in the same cases).
 pub const PRECOMP_JERK: f64 = 1.05;
+
+/// Largest turn `|Δu|` of the tangent at a junction whose curvature step may take the whole
+/// jerk budget its elements leave (`Planner::smoothed_junction_limit_mm_s`): a tangent junction
+/// as G-code writes it, within the rounding of its arcs' centres. The velocity step of such a
+/// turn, `v·|Δuᵢ|/T_k²` of jerk at most, is charged against that budget too.
+const ISOLATED_TURN: f64 = 1.0e-6;
 
 /// Default of [`PlannerConfig::default_tolerance_mm`]: 0.01 mm, the deviation a bare `G64`
 /// allows in the jerk-limited mode.
@@ -1577,7 +1588,11 @@ impl Planner {
     ///   through the change of the discrete curvature `Δu/L̄` from one vertex to the next,
     ///   held like a step of an arc's curvature;
     /// - a step of the curvature vector (an arc's end, or between vertices):
-    ///   `v²·|Δκᵢ|·`[`PRECOMP_JERK`]` ≤ T_k·(J_i − used_i)/2`;
+    ///   `v²·|Δκᵢ|·`[`PRECOMP_JERK`]` ≤ T_k·(J_i − used_i)/2`, or `T_k·(J_i − used_i)` where
+    ///   the step is isolated: the tangent does not turn ([`ISOLATED_TURN`]) and both elements
+    ///   last at least `2·T_k` at their top speed, so no other junction's step meets this one
+    ///   in the filters' output, whose jerk is then the elements' own (within `used_i`) plus
+    ///   this step's `v²·|Δκᵢ|/T_k`;
     /// - contour: the filters cut the corner by at most `v·|Δu|·2·T_k/8`, and where the
     ///   curvature steps they leave [`PRECOMP_STEP_RESIDUAL`] of an arc's pull,
     ///   `v²·|Δκ|·T_k²/12`, uncompensated; both are held within the tolerance
@@ -1626,6 +1641,14 @@ impl Planner {
         let kink_mean_norm = kink_mean.norm();
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
+        // A curvature step alone in its filter time: no turn of the tangent here, and both
+        // elements long enough (`2·T_k` at their top speed, `b` after a blend at its end took
+        // up to half of it) that no other junction's step reaches the filters' output while
+        // this one's does. Its jerk then adds only to the elements' own, and may take all the
+        // budget they leave, not half of it.
+        let isolated = du_norm <= ISOLATED_TURN
+            && a.seg.length_mm >= 2.0 * tk * a.v_limit_mm_s
+            && b.seg.length_mm - 0.5 * b.full_length_mm >= 2.0 * tk * b.v_limit_mm_s;
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1657,7 +1680,12 @@ impl Planner {
             }
             let k = dk[i].abs();
             if k > 0.0 {
-                v = v.min((tk * jerk_budget / (PRECOMP_JERK * k)).sqrt());
+                let budget = if isolated {
+                    isolated_step_budget(jerk_budget, self.limits.max_feed_mm_s * d, tk)
+                } else {
+                    jerk_budget
+                };
+                v = v.min((tk * budget / (PRECOMP_JERK * k)).sqrt());
             }
             let k = dk_vertex[i].abs();
             if k > 0.0 && noise_mm_s3(k) > jerk_budget {
@@ -2120,6 +2148,15 @@ fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
     } else {
         (2.0 * c) / (1.0 + (1.0 + 4.0 * k * c).sqrt())
     }
+}
+
+/// The jerk budget of an isolated curvature step ([`ISOLATED_TURN`]): all that the elements
+/// leave, `2·half_budget` (the rules of a junction each take half of it where several steps
+/// may meet in the filters' output), less the jerk `v·|Δuᵢ|/T_k²` of the junction's tiny turn
+/// at any speed up to the max feed (`jump_mm_s`: the max feed times `|Δuᵢ|`); never below
+/// the half budget.
+fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
+    (2.0 * half_budget - jump_mm_s / (tk * tk)).max(half_budget)
 }
 
 /// Under the time-law filter the acceleration of one element reaches the next through a
