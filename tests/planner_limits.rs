@@ -558,3 +558,52 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         .check()
         .unwrap();
 }
+
+/// Issue 11: where a move planned through the time-law filter stops (a sharp corner), the plan
+/// stood still until both the time-law filter and the axis filters had settled before the next
+/// move started. Only the time-law filter must (the time law switches at rest); the axis
+/// filters settle only where mixing the two legs could cut the corner beyond the tolerance, as
+/// after a move planned alone: under `G64 P0.05` the next move starts `2·(N_k − 1)` periods
+/// sooner, under `G64 P0.00001` the axis filters still settle. Every axis keeps its limits, the
+/// path its tolerance.
+#[test]
+fn a_filtered_stop_waits_for_the_axis_filters_only_where_the_corner_needs_it() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    // `Smoothing::for_machine`: N_f covers the smallest A/J (37.5 ms), N_k 8 ms, at least 2.
+    let n_f = (0.0375f64 / T - 1e-9).ceil();
+    let n_k = (0.008 / T - 1e-9).ceil().max(2.0);
+    for (p, y, settled) in [(0.05, 0.05, false), (0.00001, 0.0001, true)] {
+        // The second line is reached at speed (a slight turn), so it runs through the
+        // time-law filter, and stops at the right angle after it.
+        let text = format!("G21 G90 G17 G64 P{p}\nG1 X10 F6000\nG1 X20 Y{y}\nG1 X20 Y20\nM2\n");
+        let prog = parse_program(&text, "stop.ngc", Vector3::zeros()).unwrap();
+        let plan = plan_with(&prog, &l, &cfg).unwrap();
+        let second = plan.segments().iter().find(|s| s.line == 3).unwrap();
+        assert!(
+            second.v_start_mm_s > 0.0 && second.time_law,
+            "P{p}: {second:?}"
+        );
+        let still_s: f64 = plan
+            .segments()
+            .iter()
+            .filter(|s| s.line == 3 && s.length_mm == 0.0)
+            .map(|s| s.duration_s())
+            .sum();
+        let expected = if settled {
+            n_f - 1.0 + 2.0 * (n_k - 1.0)
+        } else {
+            n_f - 1.0
+        };
+        assert!(
+            (still_s / T - expected).abs() < 1e-6,
+            "P{p}: stood still {} periods at the corner, expected {expected}",
+            still_s / T
+        );
+        setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+        path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+            .unwrap()
+            .check()
+            .unwrap();
+    }
+}

@@ -89,10 +89,14 @@
 //!   (at most `c·T_f`), they are capped at `c` and the junction keeps its cap
 //!   (`Planner::finalize_junction`). A plateau takes `2·T_f` at `c`, more than one stop, so an
 //!   isolated sharp corner still stops.
-//! - **Stops.** Where the plan stops after a filtered move, it stands still for the filters'
-//!   settling time ([`Smoothing::settle_periods`]) before anything else: the filtered motion
-//!   then reaches the stop exactly, and exact stops, dwells, program stops and the program's
-//!   end are exact.
+//! - **Stops.** Where the plan stops after a filtered move, it stands still until the time-law
+//!   filter has settled (`T_f`), so that the filtered time law reaches the stop exactly before
+//!   anything else moves; before dwells, program stops and the program's end the axis filters
+//!   settle too ([`Smoothing::settle_periods`] in all), so these are exact. Before the next
+//!   move they settle only where their mix of the two legs could cut the corner beyond the
+//!   tolerance, as after a move alone (below); an estimate that over-states the cut
+//!   (`filtered_stop_behind_mm`). Each leg keeps its limits on its own and both are at rest
+//!   with no acceleration where they meet, so the moving averages of their sum keep them too.
 //! - **Moves alone.** A move from rest to rest (a sharp corner before and after it) is planned
 //!   as an exact, time-optimal S-curve of its own and bypasses the time-law filter, which would
 //!   cost it `T_f` of standing still; the filter is switched only at rest.
@@ -1462,17 +1466,34 @@ impl Planner {
         } else if let Some(smoothing) = self.smoothing
             && v1 == 0.0
         {
+            // The time-law filter catches up before anything else starts: its output then
+            // stands exactly at the element's end. The axis filters settle too before an exact
+            // stop, a program stop or dwell and the program's end (`settle_axes`), and before
+            // the next move only where mixing the two legs could cut the corner beyond the
+            // tolerance, as after a move alone (see the start of this function).
+            let behind = filtered_stop_behind_mm(&profile, smoothing, self.config.period_s);
+            let periods = match behind {
+                Some(_) => smoothing.time_law_periods - 1,
+                None => smoothing.settle_periods(),
+            };
             self.axes_unsettled = None;
-            // The filters catch up before anything else starts: the motion stands exactly at
-            // the element's end (an exact stop, a program stop or dwell, the program's end).
             let settle = still(
                 line,
                 seg.end_mm,
                 SegmentPath::Dwell,
-                smoothing.settle_periods() as f64 * self.config.period_s,
+                periods as f64 * self.config.period_s,
                 self.time_s,
             );
             self.push_still(settle)?;
+            if let Some(behind_mm) = behind {
+                self.axes_unsettled = Some(Unsettled {
+                    line,
+                    at_mm: seg.end_mm,
+                    tangent: self.window[i].tangent_end,
+                    behind_mm,
+                    tol_mm: self.filter_tolerance_mm(self.window[i].blend),
+                });
+            }
         }
         Ok(())
     }
@@ -2233,6 +2254,45 @@ fn corner_cut_mm(
         worst = worst.max(sa.min(sb));
     }
     worst
+}
+
+/// Where the time-law filter's output stands behind the end of a filtered move that stops
+/// (`profile`, the last element's), once that filter has settled (`N_f − 1` periods after
+/// the plan stops): at each of the axis filters' last `2·N_k − 1` samples before then (index
+/// `k`: `k + 1` periods before), the mean of the plan's distances behind its end over the
+/// `N_f` samples the filter averages, each taken one period earlier than the sample's time on
+/// the grid could be (a sample falls anywhere within its period of the end, and the distance
+/// behind only grows backwards in time, so this over-estimates it and the corner cut of
+/// [`corner_cut_mm`]). `None` where those samples reach back before the element's start.
+fn filtered_stop_behind_mm(
+    profile: &SpeedProfile,
+    smoothing: Smoothing,
+    period_s: f64,
+) -> Option<[f64; MAX_FILTER_TAPS]> {
+    let n_f = smoothing.time_law_periods.max(1);
+    let taps = (2 * smoothing.axis_periods.max(1) - 1).min(MAX_FILTER_TAPS);
+    let duration_s = profile.duration_s();
+    if (taps + 1) as f64 * period_s > duration_s {
+        return None;
+    }
+    // The plan's distance behind its end `m` periods before it stops (none at or after).
+    let behind = |m: isize| {
+        if m <= 0 {
+            0.0
+        } else {
+            profile.length_mm() - profile.at(duration_s - m as f64 * period_s).s_mm
+        }
+    };
+    let mut out = [0.0; MAX_FILTER_TAPS];
+    for (k, d) in out.iter_mut().enumerate().take(taps) {
+        // The sample `k + 1` periods before the filter settles averages the plan's samples
+        // `k + 1 − (N_f − 1) + j` periods before its stop, `j < N_f`; one more for the grid.
+        let sum: f64 = (0..n_f)
+            .map(|j| behind((k + j + 2) as isize - n_f as isize))
+            .sum();
+        *d = sum / n_f as f64;
+    }
+    Some(out)
 }
 
 /// The discrete curvature `Δu/L̄` of the vertex from `a` into `b`: the turn of the tangent
