@@ -607,3 +607,42 @@ fn a_filtered_stop_waits_for_the_axis_filters_only_where_the_corner_needs_it() {
             .unwrap();
     }
 }
+
+/// Issue 11: a turn of the tangent between two long lines steps each axis's velocity by
+/// `v·|Δuᵢ|`, which the axis filters spread over `2·T_k` (jerk `v·|Δuᵢ|/T_k²`). Alone in the
+/// filters' output (both lines longer than `2·T_k` at their top speed, no curvature step), it
+/// now takes the whole jerk budget the lines leave, not half: the corner is passed twice as
+/// fast (less the time-law filter's dip), and every axis keeps its limits.
+#[test]
+fn a_turn_alone_takes_the_whole_jerk_budget() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let turn = 4f64.to_radians();
+    let (x, y) = (30.0 + 30.0 * turn.cos(), 30.0 * turn.sin());
+    let text = format!("G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG1 X{x:.6} Y{y:.6}\nM2\n");
+    let prog = parse_program(&text, "turn.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let first = plan.segments().iter().find(|s| s.line == 2).unwrap();
+    let u2 = Vector3::new(x - 30.0, y, 0.0).normalize();
+    let du_y = u2.y.abs();
+    // The second line's tangential jerk on Y, `|u_y|·share·min_i J_i/|u_i|`.
+    let jerk_t = (cfg.path_acc_share * cfg.max_jerk_mm_s3.x / u2.x.abs())
+        .min(cfg.path_acc_share * cfg.max_jerk_mm_s3.y / u2.y.abs());
+    let left = cfg.max_jerk_mm_s3.y - du_y * jerk_t;
+    let t_k = (0.008 / T).ceil().max(2.0) * T;
+    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
+    let dip = 0.25 * acc * t_f;
+    let cap = |budget: f64| t_k * t_k * budget / du_y;
+    let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
+    assert!(
+        first.v_end_mm_s > 0.99 * now && first.v_end_mm_s <= now * (1.0 + 1e-9),
+        "junction {} mm/s, expected {now} (before: {before})",
+        first.v_end_mm_s
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}

@@ -110,9 +110,10 @@
 //!   other half), else `chord_tol_mm`. A step `Δa` of the acceleration (where an arc begins
 //!   or ends) reaches the drive as a jerk of at most `Δa/T_k` for `2·T_k`; the rules of one
 //!   junction share the jerk budget its elements leave in halves, since steps of neighbouring
-//!   junctions may meet in the filters' output, except that a curvature step at a tangent
-//!   junction between two elements each at least `2·T_k` long at its top speed meets no other
-//!   and takes all of it.
+//!   junctions may meet in the filters' output, except where a step is alone: between two
+//!   elements each at least `2·T_k` long at its top speed (whatever blends may still take of
+//!   them), a turn of the tangent between two lines, or a curvature step at a tangent
+//!   junction, meets no other and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //!
@@ -833,6 +834,9 @@ struct Pending {
     /// Whether the time-law filter's dip left nothing of the cap at its start (a stop, or a
     /// plateau instead): where such junctions are dense, plateaus pay.
     low_cap: bool,
+    /// Whether it is a corner's blend arc ([`Planner::blend_arc`]): the lines on either side
+    /// give it their ends.
+    is_blend_arc: bool,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -1603,8 +1607,9 @@ impl Planner {
     ///
     /// - acceleration: `v·|Δuᵢ| ≤ T_k·(A_i − used_i)`, shared like the one-period rule among
     ///   the `1 + v·T_k/L` junctions of elements of length `L` within one filter time;
-    /// - jerk: `v·|Δuᵢ| ≤ T_k²·(J_i − used_i)/2`. Junctions closer than a filter time's
-    ///   travel add up: as the curve they approximate, whose own jerk
+    /// - jerk: `v·|Δuᵢ| ≤ T_k²·(J_i − used_i)/2` (`T_k²·(J_i − used_i)` for a turn alone in
+    ///   its filter time between two lines, as for a curvature step below). Junctions closer
+    ///   than a filter time's travel add up: as the curve they approximate, whose own jerk
     ///   `v³·|Δuᵢ|·|Δu|/L² ≤ (J_i − used_i)/2` is bounded as the curvature of an arc is, and
     ///   through the change of the discrete curvature `Δu/L̄` from one vertex to the next,
     ///   held like a step of an arc's curvature;
@@ -1662,14 +1667,16 @@ impl Planner {
         let kink_mean_norm = kink_mean.norm();
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
-        // A curvature step alone in its filter time: no turn of the tangent here, and both
-        // elements long enough (`2·T_k` at their top speed, `b` after a blend at its end took
-        // up to half of it) that no other junction's step reaches the filters' output while
-        // this one's does. Its jerk then adds only to the elements' own, and may take all the
-        // budget they leave, not half of it.
-        let isolated = du_norm <= ISOLATED_TURN
-            && a.seg.length_mm >= 2.0 * tk * a.v_limit_mm_s
-            && b.seg.length_mm - 0.5 * b.full_length_mm >= 2.0 * tk * b.v_limit_mm_s;
+        // A step alone in its filter time: both elements long enough (`2·T_k` at their top
+        // speed, whatever blends may still take of them) that no other junction's step
+        // reaches the filters' output while this one's does, and only one kind of step here:
+        // a turn of the tangent between elements of equal curvature (two lines), or a
+        // curvature step without a turn ([`ISOLATED_TURN`]). Its jerk then adds only to the
+        // elements' own, and may take all the budget they leave, not half of it.
+        let (a_mm, b_mm) = self.shortest_mm(a, b);
+        let long = a_mm >= 2.0 * tk * a.v_limit_mm_s && b_mm >= 2.0 * tk * b.v_limit_mm_s;
+        let turn_alone = long && dk_norm == 0.0;
+        let curvature_alone = long && du_norm <= ISOLATED_TURN;
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1689,7 +1696,12 @@ impl Planner {
                 let k_curve = (tk * kink_mean[i].abs() / d).min(tk / l_mm);
                 v = v.min(shared_jump_mm_s(tk * acc_budget, d, k_curve));
                 if noise_mm_s3(d / mean_mm) > jerk_budget {
-                    v = v.min(tk * tk * jerk_budget / d);
+                    let budget = if turn_alone {
+                        2.0 * jerk_budget
+                    } else {
+                        jerk_budget
+                    };
+                    v = v.min(tk * tk * budget / d);
                 }
                 // The jerk of following that curve, `v³·κ̄ᵢ·|κ̄| ≤ budget` (at most `|Δu|/L`
                 // each, the vertex's own turn over the shorter element).
@@ -1701,7 +1713,7 @@ impl Planner {
             }
             let k = dk[i].abs();
             if k > 0.0 {
-                let budget = if isolated {
+                let budget = if curvature_alone {
                     isolated_step_budget(jerk_budget, self.limits.max_feed_mm_s * d, tk)
                 } else {
                     jerk_budget
@@ -1714,6 +1726,24 @@ impl Planner {
             }
         }
         v.max(0.0)
+    }
+
+    /// The shortest `a` and `b`, either side of a junction, may still become: a line gives a
+    /// corner's blend arc up to half of its programmed length, at `a`'s end and `b`'s start
+    /// where the other is that arc (the junction's caps are computed before the line is
+    /// shortened), and at `b`'s end where its tolerance may blend it.
+    fn shortest_mm(&self, a: &Pending, b: &Pending) -> (f64, f64) {
+        let line = |p: &Pending| matches!(p.seg.path, SegmentPath::Line { .. });
+        let half = |p: &Pending, ends: usize| {
+            if line(p) {
+                p.seg.length_mm - ends as f64 * 0.5 * p.full_length_mm
+            } else {
+                p.seg.length_mm
+            }
+        };
+        let b_ends =
+            usize::from(a.is_blend_arc) + usize::from(self.blend_tolerance_mm(b.blend) > 0.0);
+        (half(a, usize::from(b.is_blend_arc)), half(b, b_ends))
     }
 
     /// The deviation from the path the axis filters may take under `blend`: half the G64 P
@@ -1817,6 +1847,7 @@ impl Planner {
                 (arc, tangent_mm) = smaller;
             }
         }
+        arc.is_blend_arc = true;
         // The speeds into and out of the arc: tangent, so only its curvature (S-curves) and
         // the neighbours' limits bound them.
         let cap_in = self.junction_caps(a, &arc);
@@ -1907,6 +1938,7 @@ impl Planner {
             provisional: None,
             seq: 0,
             low_cap: false,
+            is_blend_arc: false,
         })
     }
 
@@ -2009,6 +2041,7 @@ impl Planner {
                     provisional: None,
                     seq: 0,
                     low_cap: false,
+                    is_blend_arc: false,
                 }
             }
             ElementKind::Arc { .. } => {
