@@ -646,3 +646,47 @@ fn a_turn_alone_takes_the_whole_jerk_budget() {
         .check()
         .unwrap();
 }
+
+/// Issue 11: a junction whose own cap `c` the time-law filter's dip (`A·T_f/4`) leaves
+/// nothing of is a stop. When both moves through it are filtered, the plan stood there until
+/// the filter had settled (`T_f`), so that its output stopped at the corner; passing it at `c`
+/// is enough, which a stand of `T_f − 2·√(c·T_f/A)` gives. Here a right angle between two
+/// filtered moves: the plan stands there for part of `T_f` only, and every axis keeps its
+/// limits, the path its tolerance.
+#[test]
+fn a_stop_between_filtered_moves_stands_only_until_the_corner_is_within_its_cap() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let n_f = (0.0375f64 / T - 1e-9).ceil();
+    // Lines 3 and 4 are reached or left at speed through slight turns (so both run through the
+    // time-law filter), and meet at a right angle.
+    let text = "G21 G90 G17 G64 P0.05\nG1 X10 F6000\nG1 X20 Y0.05\nG1 X20 Y20\n\
+                G1 X20.05 Y30\nG1 X20.05 Y40\nM2\n";
+    let prog = parse_program(text, "corner.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let seg = |line: usize| {
+        plan.segments()
+            .iter()
+            .find(|s| s.line == line && s.length_mm > 0.0)
+            .unwrap()
+    };
+    assert!(seg(3).time_law && seg(3).v_end_mm_s == 0.0, "{:?}", seg(3));
+    assert!(seg(4).time_law && seg(4).v_end_mm_s > 0.0, "{:?}", seg(4));
+    let still_periods: f64 = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 3 && s.length_mm == 0.0)
+        .map(|s| s.duration_s())
+        .sum::<f64>()
+        / T;
+    assert!(
+        still_periods > 0.5 && still_periods < n_f - 1.5,
+        "stood {still_periods} periods at the corner (the time-law filter settles in {})",
+        n_f - 1.0
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}

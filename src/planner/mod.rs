@@ -97,6 +97,12 @@
 //!   tolerance, as after a move alone (below); an estimate that over-states the cut
 //!   (`filtered_stop_behind_mm`). Each leg keeps its limits on its own and both are at rest
 //!   with no acceleration where they meet, so the moving averages of their sum keep them too.
+//!   Where the stop is a junction whose own cap `c > 0` the dip left nothing of, and the next
+//!   move runs through the time-law filter too, the plan stands only `T_f − 2·√(c·T_f/A)`:
+//!   the filter's output then passes the junction at `A·(T_f − h)²/(4·T_f) ≤ c` after a
+//!   stand of `h` (the V-shaped dip with its bottom held), within the junction's rules
+//!   (`Planner::partial_hold_periods`); a move alone after it, a dwell, a program stop or the
+//!   end wait for the rest.
 //! - **Moves alone.** A move from rest to rest (a sharp corner before and after it) is planned
 //!   as an exact, time-optimal S-curve of its own and bypasses the time-law filter, which would
 //!   cost it `T_f` of standing still; the filter is switched only at rest.
@@ -837,6 +843,9 @@ struct Pending {
     /// Whether it is a corner's blend arc ([`Planner::blend_arc`]): the lines on either side
     /// give it their ends.
     is_blend_arc: bool,
+    /// The junction at its start's cap under the feeds before the time-law filter's dip
+    /// ([`Planner::dip_caps`]); 0 where none is known (after a blend arc, at the start).
+    raw_cap_start_mm_s: f64,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -885,6 +894,9 @@ pub struct Planner {
     /// A move planned alone (without the time-law filter) ended here, at rest, and the axis
     /// filters have not been given time to settle.
     axes_unsettled: Option<Unsettled>,
+    /// A filtered move stopped here at a junction its time-law filter may pass slowly, and the
+    /// plan stood still only part of that filter's settling time.
+    time_law_unsettled: Option<TimeLawUnsettled>,
     /// The sequence number of the next element pushed ([`Pending::seq`]).
     next_seq: u64,
     /// The elements of the window whose start junction is provisional, in order.
@@ -905,6 +917,21 @@ struct Unsettled {
     behind_mm: [f64; MAX_FILTER_TAPS],
     /// The deviation the axis filters may take at its end.
     tol_mm: f64,
+}
+
+/// The end of a filtered move that stopped at a junction whose cap the time-law filter's dip
+/// left nothing of: the plan stood still for part of that filter's settling time, so that its
+/// output passes the junction no faster than the junction's own cap (`Planner::settle`).
+#[derive(Debug, Clone, Copy)]
+struct TimeLawUnsettled {
+    line: usize,
+    at_mm: Vector3<f64>,
+    /// Periods of the time-law filter's settling time still to stand, if the next move needs
+    /// it settled (a move alone, a dwell, a program stop, the end).
+    periods: usize,
+    /// The axis filters' state once it has settled (see [`Unsettled`]); `None`: they settle
+    /// too.
+    axes: Option<Unsettled>,
 }
 
 impl Planner {
@@ -938,6 +965,7 @@ impl Planner {
             off_grid: 0,
             smoothing: Smoothing::for_machine(limits, config),
             axes_unsettled: None,
+            time_law_unsettled: None,
             next_seq: 0,
             provisional: VecDeque::new(),
         })
@@ -964,6 +992,7 @@ impl Planner {
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) =
                             raw.map_or((0.0, 0.0), |(_, dipped)| dipped);
                         let ((fed_mm_s, limit_mm_s), _) = raw.unwrap_or_default();
+                        p.raw_cap_start_mm_s = fed_mm_s;
                         p.low_cap = raw.is_some() && p.cap_start_mm_s == 0.0;
                         // Only a dip that would become a stop (a shallower one costs less than
                         // a plateau), among others.
@@ -1073,6 +1102,7 @@ impl Planner {
     /// Before an exact stop (a dwell, a program stop, the end): the axis filters settle after a
     /// move planned alone (after a filtered move [`settle`](Self::settle) already waited).
     fn settle_axes(&mut self) -> Result<(), PlanError> {
+        self.settle_time_law()?;
         let (Some(smoothing), Some(Unsettled { line, at_mm, .. })) =
             (self.smoothing, self.axes_unsettled.take())
         else {
@@ -1089,6 +1119,30 @@ impl Planner {
             periods as f64 * self.config.period_s,
             self.time_s,
         ))
+    }
+
+    /// Before a move alone or an exact stop: the time-law filter settles after a filtered move
+    /// that stopped for part of its settling time only; then the axis filters are left as after
+    /// a whole one (to settle where the next move needs it).
+    fn settle_time_law(&mut self) -> Result<(), PlanError> {
+        let (Some(smoothing), Some(u)) = (self.smoothing, self.time_law_unsettled.take()) else {
+            return Ok(());
+        };
+        let periods = match u.axes {
+            Some(_) => u.periods,
+            None => u.periods + 2 * (smoothing.axis_periods - 1),
+        };
+        if periods > 0 {
+            self.push_still(still(
+                u.line,
+                u.at_mm,
+                SegmentPath::Dwell,
+                periods as f64 * self.config.period_s,
+                self.time_s,
+            ))?;
+        }
+        self.axes_unsettled = u.axes;
+        Ok(())
     }
 
     /// The next settled segment, in time order.
@@ -1414,6 +1468,15 @@ impl Planner {
                 Err(_) => self.off_grid += 1,
             }
         }
+        if v0 == 0.0 && self.time_law_unsettled.is_some() {
+            if alone.is_some() {
+                // A move alone switches the time-law filter off, at rest: it settles first.
+                self.settle_time_law()?;
+            } else {
+                // The time law runs on through the junction, within its cap.
+                self.time_law_unsettled = None;
+            }
+        }
         if v0 == 0.0
             && let (Some(smoothing), Some(u)) = (self.smoothing, self.axes_unsettled)
         {
@@ -1476,30 +1539,65 @@ impl Planner {
             // the next move only where mixing the two legs could cut the corner beyond the
             // tolerance, as after a move alone (see the start of this function).
             let behind = filtered_stop_behind_mm(&profile, smoothing, self.config.period_s);
-            let periods = match behind {
+            let full = match behind {
                 Some(_) => smoothing.time_law_periods - 1,
                 None => smoothing.settle_periods(),
             };
-            self.axes_unsettled = None;
-            let settle = still(
+            let axes = behind.map(|behind_mm| Unsettled {
                 line,
-                seg.end_mm,
-                SegmentPath::Dwell,
-                periods as f64 * self.config.period_s,
-                self.time_s,
-            );
-            self.push_still(settle)?;
-            if let Some(behind_mm) = behind {
-                self.axes_unsettled = Some(Unsettled {
+                at_mm: seg.end_mm,
+                tangent: self.window[i].tangent_end,
+                behind_mm,
+                tol_mm: self.filter_tolerance_mm(self.window[i].blend),
+            });
+            self.axes_unsettled = None;
+            let hold = self
+                .partial_hold_periods(i, smoothing)
+                .filter(|&h| h < full);
+            let periods = hold.unwrap_or(full);
+            if periods > 0 {
+                let settle = still(
                     line,
-                    at_mm: seg.end_mm,
-                    tangent: self.window[i].tangent_end,
-                    behind_mm,
-                    tol_mm: self.filter_tolerance_mm(self.window[i].blend),
-                });
+                    seg.end_mm,
+                    SegmentPath::Dwell,
+                    periods as f64 * self.config.period_s,
+                    self.time_s,
+                );
+                self.push_still(settle)?;
+            }
+            match hold {
+                Some(h) => {
+                    self.time_law_unsettled = Some(TimeLawUnsettled {
+                        line,
+                        at_mm: seg.end_mm,
+                        periods: smoothing.time_law_periods - 1 - h,
+                        axes,
+                    });
+                }
+                None => self.axes_unsettled = axes,
             }
         }
         Ok(())
+    }
+
+    /// Where the filtered element `i` stops at a junction that the motion could pass at its
+    /// own cap `c > 0` (the time-law filter's dip, `A·T_f/4`, left nothing of it): the periods
+    /// the plan must stand there so that the filter's output passes no faster than `c`. The
+    /// plan reaches the stop and leaves it with the acceleration `A` at most, so through a
+    /// stand of `h` the filtered speed at the junction is at most `A·(T_f − h)²/(4·T_f)` (the
+    /// V of [`Planner::dip_caps`] with its bottom held for `h`; `A·T_f/4` without it, 0 from
+    /// `h = T_f`), within `c` from `h = T_f − 2·√(c·T_f/A)`. `None` without such a cap.
+    fn partial_hold_periods(&self, i: usize, smoothing: Smoothing) -> Option<usize> {
+        let (a, b) = (&self.window[i], self.window.get(i + 1)?);
+        let c = b.raw_cap_start_mm_s;
+        if c.is_nan() || c <= 0.0 || b.cap_start_mm_s != 0.0 {
+            return None;
+        }
+        let acc = a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2());
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let hold_s = t_f - 2.0 * (c * t_f / acc).sqrt();
+        let periods = (hold_s / self.config.period_s - 1e-9).ceil().max(0.0);
+        periods.is_finite().then_some(periods as usize)
     }
 
     /// Highest speed through the junction from `a` into `b` (see the module documentation).
@@ -1939,6 +2037,7 @@ impl Planner {
             seq: 0,
             low_cap: false,
             is_blend_arc: false,
+            raw_cap_start_mm_s: 0.0,
         })
     }
 
@@ -2042,6 +2141,7 @@ impl Planner {
                     seq: 0,
                     low_cap: false,
                     is_blend_arc: false,
+                    raw_cap_start_mm_s: 0.0,
                 }
             }
             ElementKind::Arc { .. } => {
