@@ -508,3 +508,185 @@ fn dense_low_caps_are_a_plateau_not_stops() {
         .check()
         .unwrap();
 }
+
+/// Issue 11: where a line meets an arc tangentially, the acceleration steps by `v²/r` towards
+/// the centre, which the axis filters spread over `2·T_k` (jerk `v²/(r·T_k)`). Each of a
+/// junction's rules took half of the jerk budget its elements leave, for steps that may meet
+/// in the filters' output; an isolated step (no turn of the tangent, both elements longer than
+/// `2·T_k` at their top speed) now takes all of it: the line runs into the arc at
+/// `√(T_k·(J − used)·r/1.05)` less the time-law filter's dip (`√2` times the old cap), and
+/// every axis keeps its limits and the path its tolerance.
+#[test]
+fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let r = 10.0;
+    // A line along X, a quarter circle of radius r (CCW, centre above: the step is along Y),
+    // a line along Y.
+    let text = format!(
+        "G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG3 X{x} Y{r} I0 J{r}\nG1 Y40\nM2\n",
+        x = 30.0 + r
+    );
+    let prog = parse_program(&text, "tangent.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let line = plan
+        .segments()
+        .iter()
+        .find(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
+        .unwrap();
+    // The filters of `Smoothing::for_machine`: T_k = 8 ms in whole periods, T_f the smallest
+    // A/J (37.5 ms) in whole periods.
+    let t_k = (0.008 / T).ceil().max(2.0) * T;
+    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    // The arc takes the share of Y's jerk that its own motion may use; the line none of Y's.
+    let share = cfg.path_acc_share;
+    let arc_jerk = share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y);
+    let left = cfg.max_jerk_mm_s3.y - arc_jerk;
+    let cap = |budget: f64| (t_k * budget * r / 1.05).sqrt();
+    // The line's tangential acceleration under the time-law filter rounds the dip by A·T_f/4.
+    let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
+    let dip = 0.25 * acc * t_f;
+    let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
+    assert!(
+        line.v_end_mm_s > 0.99 * now && line.v_end_mm_s <= now * (1.0 + 1e-9),
+        "junction {} mm/s, expected {now} (before: {before})",
+        line.v_end_mm_s
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}
+
+/// Issue 11: where a move planned through the time-law filter stops (a sharp corner), the plan
+/// stood still until both the time-law filter and the axis filters had settled before the next
+/// move started. Only the time-law filter must (the time law switches at rest); the axis
+/// filters settle only where mixing the two legs could cut the corner beyond the tolerance, as
+/// after a move planned alone: under `G64 P0.05` the next move starts `2·(N_k − 1)` periods
+/// sooner, under `G64 P0.00001` the axis filters still settle. Every axis keeps its limits, the
+/// path its tolerance.
+#[test]
+fn a_filtered_stop_waits_for_the_axis_filters_only_where_the_corner_needs_it() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    // `Smoothing::for_machine`: N_f covers the smallest A/J (37.5 ms), N_k 8 ms, at least 2.
+    let n_f = (0.0375f64 / T - 1e-9).ceil();
+    let n_k = (0.008 / T - 1e-9).ceil().max(2.0);
+    for (p, y, settled) in [(0.05, 0.05, false), (0.00001, 0.0001, true)] {
+        // The second line is reached at speed (a slight turn), so it runs through the
+        // time-law filter, and stops at the right angle after it.
+        let text = format!("G21 G90 G17 G64 P{p}\nG1 X10 F6000\nG1 X20 Y{y}\nG1 X20 Y20\nM2\n");
+        let prog = parse_program(&text, "stop.ngc", Vector3::zeros()).unwrap();
+        let plan = plan_with(&prog, &l, &cfg).unwrap();
+        let second = plan.segments().iter().find(|s| s.line == 3).unwrap();
+        assert!(
+            second.v_start_mm_s > 0.0 && second.time_law,
+            "P{p}: {second:?}"
+        );
+        let still_s: f64 = plan
+            .segments()
+            .iter()
+            .filter(|s| s.line == 3 && s.length_mm == 0.0)
+            .map(|s| s.duration_s())
+            .sum();
+        let expected = if settled {
+            n_f - 1.0 + 2.0 * (n_k - 1.0)
+        } else {
+            n_f - 1.0
+        };
+        assert!(
+            (still_s / T - expected).abs() < 1e-6,
+            "P{p}: stood still {} periods at the corner, expected {expected}",
+            still_s / T
+        );
+        setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+        path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+            .unwrap()
+            .check()
+            .unwrap();
+    }
+}
+
+/// Issue 11: a turn of the tangent between two long lines steps each axis's velocity by
+/// `v·|Δuᵢ|`, which the axis filters spread over `2·T_k` (jerk `v·|Δuᵢ|/T_k²`). Alone in the
+/// filters' output (both lines longer than `2·T_k` at their top speed, no curvature step), it
+/// now takes the whole jerk budget the lines leave, not half: the corner is passed twice as
+/// fast (less the time-law filter's dip), and every axis keeps its limits.
+#[test]
+fn a_turn_alone_takes_the_whole_jerk_budget() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let turn = 4f64.to_radians();
+    let (x, y) = (30.0 + 30.0 * turn.cos(), 30.0 * turn.sin());
+    let text = format!("G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG1 X{x:.6} Y{y:.6}\nM2\n");
+    let prog = parse_program(&text, "turn.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let first = plan.segments().iter().find(|s| s.line == 2).unwrap();
+    let u2 = Vector3::new(x - 30.0, y, 0.0).normalize();
+    let du_y = u2.y.abs();
+    // The second line's tangential jerk on Y, `|u_y|·share·min_i J_i/|u_i|`.
+    let jerk_t = (cfg.path_acc_share * cfg.max_jerk_mm_s3.x / u2.x.abs())
+        .min(cfg.path_acc_share * cfg.max_jerk_mm_s3.y / u2.y.abs());
+    let left = cfg.max_jerk_mm_s3.y - du_y * jerk_t;
+    let t_k = (0.008 / T).ceil().max(2.0) * T;
+    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
+    let dip = 0.25 * acc * t_f;
+    let cap = |budget: f64| t_k * t_k * budget / du_y;
+    let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
+    assert!(
+        first.v_end_mm_s > 0.99 * now && first.v_end_mm_s <= now * (1.0 + 1e-9),
+        "junction {} mm/s, expected {now} (before: {before})",
+        first.v_end_mm_s
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}
+
+/// Issue 11: a junction whose own cap `c` the time-law filter's dip (`A·T_f/4`) leaves
+/// nothing of is a stop. When both moves through it are filtered, the plan stood there until
+/// the filter had settled (`T_f`), so that its output stopped at the corner; passing it at `c`
+/// is enough, which a stand of `T_f − 2·√(c·T_f/A)` gives. Here a right angle between two
+/// filtered moves: the plan stands there for part of `T_f` only, and every axis keeps its
+/// limits, the path its tolerance.
+#[test]
+fn a_stop_between_filtered_moves_stands_only_until_the_corner_is_within_its_cap() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let n_f = (0.0375f64 / T - 1e-9).ceil();
+    // Lines 3 and 4 are reached or left at speed through slight turns (so both run through the
+    // time-law filter), and meet at a right angle.
+    let text = "G21 G90 G17 G64 P0.05\nG1 X10 F6000\nG1 X20 Y0.05\nG1 X20 Y20\n\
+                G1 X20.05 Y30\nG1 X20.05 Y40\nM2\n";
+    let prog = parse_program(text, "corner.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let seg = |line: usize| {
+        plan.segments()
+            .iter()
+            .find(|s| s.line == line && s.length_mm > 0.0)
+            .unwrap()
+    };
+    assert!(seg(3).time_law && seg(3).v_end_mm_s == 0.0, "{:?}", seg(3));
+    assert!(seg(4).time_law && seg(4).v_end_mm_s > 0.0, "{:?}", seg(4));
+    let still_periods: f64 = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 3 && s.length_mm == 0.0)
+        .map(|s| s.duration_s())
+        .sum::<f64>()
+        / T;
+    assert!(
+        still_periods > 0.5 && still_periods < n_f - 1.5,
+        "stood {still_periods} periods at the corner (the time-law filter settles in {})",
+        n_f - 1.0
+    );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}

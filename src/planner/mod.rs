@@ -89,10 +89,20 @@
 //!   (at most `c·T_f`), they are capped at `c` and the junction keeps its cap
 //!   (`Planner::finalize_junction`). A plateau takes `2·T_f` at `c`, more than one stop, so an
 //!   isolated sharp corner still stops.
-//! - **Stops.** Where the plan stops after a filtered move, it stands still for the filters'
-//!   settling time ([`Smoothing::settle_periods`]) before anything else: the filtered motion
-//!   then reaches the stop exactly, and exact stops, dwells, program stops and the program's
-//!   end are exact.
+//! - **Stops.** Where the plan stops after a filtered move, it stands still until the time-law
+//!   filter has settled (`T_f`), so that the filtered time law reaches the stop exactly before
+//!   anything else moves; before dwells, program stops and the program's end the axis filters
+//!   settle too ([`Smoothing::settle_periods`] in all), so these are exact. Before the next
+//!   move they settle only where their mix of the two legs could cut the corner beyond the
+//!   tolerance, as after a move alone (below); an estimate that over-states the cut
+//!   (`filtered_stop_behind_mm`). Each leg keeps its limits on its own and both are at rest
+//!   with no acceleration where they meet, so the moving averages of their sum keep them too.
+//!   Where the stop is a junction whose own cap `c > 0` the dip left nothing of, and the next
+//!   move runs through the time-law filter too, the plan stands only `T_f − 2·√(c·T_f/A)`:
+//!   the filter's output then passes the junction at `A·(T_f − h)²/(4·T_f) ≤ c` after a
+//!   stand of `h` (the V-shaped dip with its bottom held), within the junction's rules
+//!   (`Planner::partial_hold_periods`); a move alone after it, a dwell, a program stop or the
+//!   end wait for the rest.
 //! - **Moves alone.** A move from rest to rest (a sharp corner before and after it) is planned
 //!   as an exact, time-optimal S-curve of its own and bypasses the time-law filter, which would
 //!   cost it `T_f` of standing still; the filter is switched only at rest.
@@ -103,7 +113,13 @@
 //!   period (`Planner::smoothed_junction_limit_mm_s`). Their price is contour error,
 //!   `v·|Δu|·2·T_k/8` at a corner and `2·v²·T_k²/(24·r)` on an arc, which the junction and arc
 //!   speeds keep within the tolerance: half the G64 P tolerance (the corner blends take the
-//!   other half), else `chord_tol_mm`.
+//!   other half), else `chord_tol_mm`. A step `Δa` of the acceleration (where an arc begins
+//!   or ends) reaches the drive as a jerk of at most `Δa/T_k` for `2·T_k`; the rules of one
+//!   junction share the jerk budget its elements leave in halves, since steps of neighbouring
+//!   junctions may meet in the filters' output, except where a step is alone: between two
+//!   elements each at least `2·T_k` long at its top speed (whatever blends may still take of
+//!   them), a turn of the tangent between two lines, or a curvature step at a tangent
+//!   junction, meets no other and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //!
@@ -194,6 +210,12 @@ pub const PRECOMP_STEP_RESIDUAL: f64 = 0.3;
 /// Factor on the jerk of a curvature step through the axis filters that their pre-compensation
 /// adds (measured 1.013 at most against `v²·|Δκ|/T_k`, in the same cases).
 pub const PRECOMP_JERK: f64 = 1.05;
+
+/// Largest turn `|Δu|` of the tangent at a junction whose curvature step may take the whole
+/// jerk budget its elements leave (`Planner::smoothed_junction_limit_mm_s`): a tangent junction
+/// as G-code writes it, within the rounding of its arcs' centres. The velocity step of such a
+/// turn, `v·|Δuᵢ|/T_k²` of jerk at most, is charged against that budget too.
+const ISOLATED_TURN: f64 = 1.0e-6;
 
 /// Default of [`PlannerConfig::default_tolerance_mm`]: 0.01 mm, the deviation a bare `G64`
 /// allows in the jerk-limited mode.
@@ -818,6 +840,12 @@ struct Pending {
     /// Whether the time-law filter's dip left nothing of the cap at its start (a stop, or a
     /// plateau instead): where such junctions are dense, plateaus pay.
     low_cap: bool,
+    /// Whether it is a corner's blend arc ([`Planner::blend_arc`]): the lines on either side
+    /// give it their ends.
+    is_blend_arc: bool,
+    /// The junction at its start's cap under the feeds before the time-law filter's dip
+    /// ([`Planner::dip_caps`]); 0 where none is known (after a blend arc, at the start).
+    raw_cap_start_mm_s: f64,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -866,6 +894,9 @@ pub struct Planner {
     /// A move planned alone (without the time-law filter) ended here, at rest, and the axis
     /// filters have not been given time to settle.
     axes_unsettled: Option<Unsettled>,
+    /// A filtered move stopped here at a junction its time-law filter may pass slowly, and the
+    /// plan stood still only part of that filter's settling time.
+    time_law_unsettled: Option<TimeLawUnsettled>,
     /// The sequence number of the next element pushed ([`Pending::seq`]).
     next_seq: u64,
     /// The elements of the window whose start junction is provisional, in order.
@@ -886,6 +917,21 @@ struct Unsettled {
     behind_mm: [f64; MAX_FILTER_TAPS],
     /// The deviation the axis filters may take at its end.
     tol_mm: f64,
+}
+
+/// The end of a filtered move that stopped at a junction whose cap the time-law filter's dip
+/// left nothing of: the plan stood still for part of that filter's settling time, so that its
+/// output passes the junction no faster than the junction's own cap (`Planner::settle`).
+#[derive(Debug, Clone, Copy)]
+struct TimeLawUnsettled {
+    line: usize,
+    at_mm: Vector3<f64>,
+    /// Periods of the time-law filter's settling time still to stand, if the next move needs
+    /// it settled (a move alone, a dwell, a program stop, the end).
+    periods: usize,
+    /// The axis filters' state once it has settled (see [`Unsettled`]); `None`: they settle
+    /// too.
+    axes: Option<Unsettled>,
 }
 
 impl Planner {
@@ -919,6 +965,7 @@ impl Planner {
             off_grid: 0,
             smoothing: Smoothing::for_machine(limits, config),
             axes_unsettled: None,
+            time_law_unsettled: None,
             next_seq: 0,
             provisional: VecDeque::new(),
         })
@@ -945,6 +992,7 @@ impl Planner {
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) =
                             raw.map_or((0.0, 0.0), |(_, dipped)| dipped);
                         let ((fed_mm_s, limit_mm_s), _) = raw.unwrap_or_default();
+                        p.raw_cap_start_mm_s = fed_mm_s;
                         p.low_cap = raw.is_some() && p.cap_start_mm_s == 0.0;
                         // Only a dip that would become a stop (a shallower one costs less than
                         // a plateau), among others.
@@ -1054,6 +1102,7 @@ impl Planner {
     /// Before an exact stop (a dwell, a program stop, the end): the axis filters settle after a
     /// move planned alone (after a filtered move [`settle`](Self::settle) already waited).
     fn settle_axes(&mut self) -> Result<(), PlanError> {
+        self.settle_time_law()?;
         let (Some(smoothing), Some(Unsettled { line, at_mm, .. })) =
             (self.smoothing, self.axes_unsettled.take())
         else {
@@ -1070,6 +1119,30 @@ impl Planner {
             periods as f64 * self.config.period_s,
             self.time_s,
         ))
+    }
+
+    /// Before a move alone or an exact stop: the time-law filter settles after a filtered move
+    /// that stopped for part of its settling time only; then the axis filters are left as after
+    /// a whole one (to settle where the next move needs it).
+    fn settle_time_law(&mut self) -> Result<(), PlanError> {
+        let (Some(smoothing), Some(u)) = (self.smoothing, self.time_law_unsettled.take()) else {
+            return Ok(());
+        };
+        let periods = match u.axes {
+            Some(_) => u.periods,
+            None => u.periods + 2 * (smoothing.axis_periods - 1),
+        };
+        if periods > 0 {
+            self.push_still(still(
+                u.line,
+                u.at_mm,
+                SegmentPath::Dwell,
+                periods as f64 * self.config.period_s,
+                self.time_s,
+            ))?;
+        }
+        self.axes_unsettled = u.axes;
+        Ok(())
     }
 
     /// The next settled segment, in time order.
@@ -1395,6 +1468,15 @@ impl Planner {
                 Err(_) => self.off_grid += 1,
             }
         }
+        if v0 == 0.0 && self.time_law_unsettled.is_some() {
+            if alone.is_some() {
+                // A move alone switches the time-law filter off, at rest: it settles first.
+                self.settle_time_law()?;
+            } else {
+                // The time law runs on through the junction, within its cap.
+                self.time_law_unsettled = None;
+            }
+        }
         if v0 == 0.0
             && let (Some(smoothing), Some(u)) = (self.smoothing, self.axes_unsettled)
         {
@@ -1451,19 +1533,71 @@ impl Planner {
         } else if let Some(smoothing) = self.smoothing
             && v1 == 0.0
         {
-            self.axes_unsettled = None;
-            // The filters catch up before anything else starts: the motion stands exactly at
-            // the element's end (an exact stop, a program stop or dwell, the program's end).
-            let settle = still(
+            // The time-law filter catches up before anything else starts: its output then
+            // stands exactly at the element's end. The axis filters settle too before an exact
+            // stop, a program stop or dwell and the program's end (`settle_axes`), and before
+            // the next move only where mixing the two legs could cut the corner beyond the
+            // tolerance, as after a move alone (see the start of this function).
+            let behind = filtered_stop_behind_mm(&profile, smoothing, self.config.period_s);
+            let full = match behind {
+                Some(_) => smoothing.time_law_periods - 1,
+                None => smoothing.settle_periods(),
+            };
+            let axes = behind.map(|behind_mm| Unsettled {
                 line,
-                seg.end_mm,
-                SegmentPath::Dwell,
-                smoothing.settle_periods() as f64 * self.config.period_s,
-                self.time_s,
-            );
-            self.push_still(settle)?;
+                at_mm: seg.end_mm,
+                tangent: self.window[i].tangent_end,
+                behind_mm,
+                tol_mm: self.filter_tolerance_mm(self.window[i].blend),
+            });
+            self.axes_unsettled = None;
+            let hold = self
+                .partial_hold_periods(i, smoothing)
+                .filter(|&h| h < full);
+            let periods = hold.unwrap_or(full);
+            if periods > 0 {
+                let settle = still(
+                    line,
+                    seg.end_mm,
+                    SegmentPath::Dwell,
+                    periods as f64 * self.config.period_s,
+                    self.time_s,
+                );
+                self.push_still(settle)?;
+            }
+            match hold {
+                Some(h) => {
+                    self.time_law_unsettled = Some(TimeLawUnsettled {
+                        line,
+                        at_mm: seg.end_mm,
+                        periods: smoothing.time_law_periods - 1 - h,
+                        axes,
+                    });
+                }
+                None => self.axes_unsettled = axes,
+            }
         }
         Ok(())
+    }
+
+    /// Where the filtered element `i` stops at a junction that the motion could pass at its
+    /// own cap `c > 0` (the time-law filter's dip, `A·T_f/4`, left nothing of it): the periods
+    /// the plan must stand there so that the filter's output passes no faster than `c`. The
+    /// plan reaches the stop and leaves it with the acceleration `A` at most, so through a
+    /// stand of `h` the filtered speed at the junction is at most `A·(T_f − h)²/(4·T_f)` (the
+    /// V of [`Planner::dip_caps`] with its bottom held for `h`; `A·T_f/4` without it, 0 from
+    /// `h = T_f`), within `c` from `h = T_f − 2·√(c·T_f/A)`. `None` without such a cap.
+    fn partial_hold_periods(&self, i: usize, smoothing: Smoothing) -> Option<usize> {
+        let (a, b) = (&self.window[i], self.window.get(i + 1)?);
+        let c = b.raw_cap_start_mm_s;
+        if c.is_nan() || c <= 0.0 || b.cap_start_mm_s != 0.0 {
+            return None;
+        }
+        let acc = a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2());
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let hold_s = t_f - 2.0 * (c * t_f / acc).sqrt();
+        let periods = (hold_s / self.config.period_s - 1e-9).ceil().max(0.0);
+        periods.is_finite().then_some(periods as usize)
     }
 
     /// Highest speed through the junction from `a` into `b` (see the module documentation).
@@ -1571,13 +1705,18 @@ impl Planner {
     ///
     /// - acceleration: `v·|Δuᵢ| ≤ T_k·(A_i − used_i)`, shared like the one-period rule among
     ///   the `1 + v·T_k/L` junctions of elements of length `L` within one filter time;
-    /// - jerk: `v·|Δuᵢ| ≤ T_k²·(J_i − used_i)/2`. Junctions closer than a filter time's
-    ///   travel add up: as the curve they approximate, whose own jerk
+    /// - jerk: `v·|Δuᵢ| ≤ T_k²·(J_i − used_i)/2` (`T_k²·(J_i − used_i)` for a turn alone in
+    ///   its filter time between two lines, as for a curvature step below). Junctions closer
+    ///   than a filter time's travel add up: as the curve they approximate, whose own jerk
     ///   `v³·|Δuᵢ|·|Δu|/L² ≤ (J_i − used_i)/2` is bounded as the curvature of an arc is, and
     ///   through the change of the discrete curvature `Δu/L̄` from one vertex to the next,
     ///   held like a step of an arc's curvature;
     /// - a step of the curvature vector (an arc's end, or between vertices):
-    ///   `v²·|Δκᵢ|·`[`PRECOMP_JERK`]` ≤ T_k·(J_i − used_i)/2`;
+    ///   `v²·|Δκᵢ|·`[`PRECOMP_JERK`]` ≤ T_k·(J_i − used_i)/2`, or `T_k·(J_i − used_i)` where
+    ///   the step is isolated: the tangent does not turn ([`ISOLATED_TURN`]) and both elements
+    ///   last at least `2·T_k` at their top speed, so no other junction's step meets this one
+    ///   in the filters' output, whose jerk is then the elements' own (within `used_i`) plus
+    ///   this step's `v²·|Δκᵢ|/T_k`;
     /// - contour: the filters cut the corner by at most `v·|Δu|·2·T_k/8`, and where the
     ///   curvature steps they leave [`PRECOMP_STEP_RESIDUAL`] of an arc's pull,
     ///   `v²·|Δκ|·T_k²/12`, uncompensated; both are held within the tolerance
@@ -1626,6 +1765,16 @@ impl Planner {
         let kink_mean_norm = kink_mean.norm();
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
+        // A step alone in its filter time: both elements long enough (`2·T_k` at their top
+        // speed, whatever blends may still take of them) that no other junction's step
+        // reaches the filters' output while this one's does, and only one kind of step here:
+        // a turn of the tangent between elements of equal curvature (two lines), or a
+        // curvature step without a turn ([`ISOLATED_TURN`]). Its jerk then adds only to the
+        // elements' own, and may take all the budget they leave, not half of it.
+        let (a_mm, b_mm) = self.shortest_mm(a, b);
+        let long = a_mm >= 2.0 * tk * a.v_limit_mm_s && b_mm >= 2.0 * tk * b.v_limit_mm_s;
+        let turn_alone = long && dk_norm == 0.0;
+        let curvature_alone = long && du_norm <= ISOLATED_TURN;
         for i in 0..3 {
             let acc_budget =
                 self.limits.max_acc_mm_s2[i] - a.acc_used_mm_s2[i].max(b.acc_used_mm_s2[i]);
@@ -1645,7 +1794,12 @@ impl Planner {
                 let k_curve = (tk * kink_mean[i].abs() / d).min(tk / l_mm);
                 v = v.min(shared_jump_mm_s(tk * acc_budget, d, k_curve));
                 if noise_mm_s3(d / mean_mm) > jerk_budget {
-                    v = v.min(tk * tk * jerk_budget / d);
+                    let budget = if turn_alone {
+                        2.0 * jerk_budget
+                    } else {
+                        jerk_budget
+                    };
+                    v = v.min(tk * tk * budget / d);
                 }
                 // The jerk of following that curve, `v³·κ̄ᵢ·|κ̄| ≤ budget` (at most `|Δu|/L`
                 // each, the vertex's own turn over the shorter element).
@@ -1657,7 +1811,12 @@ impl Planner {
             }
             let k = dk[i].abs();
             if k > 0.0 {
-                v = v.min((tk * jerk_budget / (PRECOMP_JERK * k)).sqrt());
+                let budget = if curvature_alone {
+                    isolated_step_budget(jerk_budget, self.limits.max_feed_mm_s * d, tk)
+                } else {
+                    jerk_budget
+                };
+                v = v.min((tk * budget / (PRECOMP_JERK * k)).sqrt());
             }
             let k = dk_vertex[i].abs();
             if k > 0.0 && noise_mm_s3(k) > jerk_budget {
@@ -1665,6 +1824,24 @@ impl Planner {
             }
         }
         v.max(0.0)
+    }
+
+    /// The shortest `a` and `b`, either side of a junction, may still become: a line gives a
+    /// corner's blend arc up to half of its programmed length, at `a`'s end and `b`'s start
+    /// where the other is that arc (the junction's caps are computed before the line is
+    /// shortened), and at `b`'s end where its tolerance may blend it.
+    fn shortest_mm(&self, a: &Pending, b: &Pending) -> (f64, f64) {
+        let line = |p: &Pending| matches!(p.seg.path, SegmentPath::Line { .. });
+        let half = |p: &Pending, ends: usize| {
+            if line(p) {
+                p.seg.length_mm - ends as f64 * 0.5 * p.full_length_mm
+            } else {
+                p.seg.length_mm
+            }
+        };
+        let b_ends =
+            usize::from(a.is_blend_arc) + usize::from(self.blend_tolerance_mm(b.blend) > 0.0);
+        (half(a, usize::from(b.is_blend_arc)), half(b, b_ends))
     }
 
     /// The deviation from the path the axis filters may take under `blend`: half the G64 P
@@ -1768,6 +1945,7 @@ impl Planner {
                 (arc, tangent_mm) = smaller;
             }
         }
+        arc.is_blend_arc = true;
         // The speeds into and out of the arc: tangent, so only its curvature (S-curves) and
         // the neighbours' limits bound them.
         let cap_in = self.junction_caps(a, &arc);
@@ -1858,6 +2036,8 @@ impl Planner {
             provisional: None,
             seq: 0,
             low_cap: false,
+            is_blend_arc: false,
+            raw_cap_start_mm_s: 0.0,
         })
     }
 
@@ -1960,6 +2140,8 @@ impl Planner {
                     provisional: None,
                     seq: 0,
                     low_cap: false,
+                    is_blend_arc: false,
+                    raw_cap_start_mm_s: 0.0,
                 }
             }
             ElementKind::Arc { .. } => {
@@ -2122,6 +2304,15 @@ fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
     }
 }
 
+/// The jerk budget of an isolated curvature step ([`ISOLATED_TURN`]): all that the elements
+/// leave, `2·half_budget` (the rules of a junction each take half of it where several steps
+/// may meet in the filters' output), less the jerk `v·|Δuᵢ|/T_k²` of the junction's tiny turn
+/// at any speed up to the max feed (`jump_mm_s`: the max feed times `|Δuᵢ|`); never below
+/// the half budget.
+fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
+    (2.0 * half_budget - jump_mm_s / (tk * tk)).max(half_budget)
+}
+
 /// Under the time-law filter the acceleration of one element reaches the next through a
 /// junction taken at speed (the filter's window spans it), so both plan with the lower of
 /// their tangential accelerations.
@@ -2196,6 +2387,45 @@ fn corner_cut_mm(
         worst = worst.max(sa.min(sb));
     }
     worst
+}
+
+/// Where the time-law filter's output stands behind the end of a filtered move that stops
+/// (`profile`, the last element's), once that filter has settled (`N_f − 1` periods after
+/// the plan stops): at each of the axis filters' last `2·N_k − 1` samples before then (index
+/// `k`: `k + 1` periods before), the mean of the plan's distances behind its end over the
+/// `N_f` samples the filter averages, each taken one period earlier than the sample's time on
+/// the grid could be (a sample falls anywhere within its period of the end, and the distance
+/// behind only grows backwards in time, so this over-estimates it and the corner cut of
+/// [`corner_cut_mm`]). `None` where those samples reach back before the element's start.
+fn filtered_stop_behind_mm(
+    profile: &SpeedProfile,
+    smoothing: Smoothing,
+    period_s: f64,
+) -> Option<[f64; MAX_FILTER_TAPS]> {
+    let n_f = smoothing.time_law_periods.max(1);
+    let taps = (2 * smoothing.axis_periods.max(1) - 1).min(MAX_FILTER_TAPS);
+    let duration_s = profile.duration_s();
+    if (taps + 1) as f64 * period_s > duration_s {
+        return None;
+    }
+    // The plan's distance behind its end `m` periods before it stops (none at or after).
+    let behind = |m: isize| {
+        if m <= 0 {
+            0.0
+        } else {
+            profile.length_mm() - profile.at(duration_s - m as f64 * period_s).s_mm
+        }
+    };
+    let mut out = [0.0; MAX_FILTER_TAPS];
+    for (k, d) in out.iter_mut().enumerate().take(taps) {
+        // The sample `k + 1` periods before the filter settles averages the plan's samples
+        // `k + 1 − (N_f − 1) + j` periods before its stop, `j < N_f`; one more for the grid.
+        let sum: f64 = (0..n_f)
+            .map(|j| behind((k + j + 2) as isize - n_f as isize))
+            .sum();
+        *d = sum / n_f as f64;
+    }
+    Some(out)
 }
 
 /// The discrete curvature `Δu/L̄` of the vertex from `a` into `b`: the turn of the tangent
