@@ -715,6 +715,37 @@ pub fn check_element(
             _ => {}
         }
     }
+    // The auxiliary axes move linearly over an element: its ends are their extremes. A
+    // wrapped rotary axis has no travel limits.
+    if element.aux.moves() {
+        for (i, letter) in crate::gcode::AUX_LETTERS.into_iter().enumerate() {
+            if element.aux.start[i] == element.aux.end[i] {
+                continue;
+            }
+            let target_mm = element.aux.end[i];
+            match machine.axes.iter().find(|a| a.aux() == Some(i)) {
+                None => {
+                    return Err(GatewayError::NoSuchAxis {
+                        file: name.to_string(),
+                        line: element.line,
+                        axis: letter,
+                        machine: machine.name.clone(),
+                    });
+                }
+                Some(a) if a.has_travel() && !(a.min_mm..=a.max_mm).contains(&target_mm) => {
+                    return Err(GatewayError::OutOfTravel {
+                        file: name.to_string(),
+                        line: element.line,
+                        axis: a.name.clone(),
+                        target_mm,
+                        min_mm: a.min_mm,
+                        max_mm: a.max_mm,
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
     Ok(())
 }
 

@@ -766,6 +766,17 @@ impl MotionSource for Resumption<'_> {
             rapid: false,
             start_mm: armed_mm,
             end_mm: target,
+            // Programs that move the auxiliary axes are not resumed (`prepare`).
+            aux: crate::gcode::AuxMove::still(
+                self.motion
+                    .items
+                    .iter()
+                    .find_map(|(i, _)| match i {
+                        Item::Motion(e) => Some(e.aux.start),
+                        _ => None,
+                    })
+                    .unwrap_or_default(),
+            ),
             feed_mm_s: Some(APPROACH_MM_S),
             blend: BlendMode::ExactStop,
             comp: CompState::Off,
@@ -809,6 +820,16 @@ fn prepare(machine: &Machine, opts: &RunOptions, state: &ResumeState) -> Result<
     let program = interpret_program(machine, &opts.program_name, &opts.program_text, start)
         .map_err(|e| e.to_string())?;
     let items = program.items;
+    // A resume point records X, Y and Z only.
+    if let Some(e) = items.iter().find_map(|i| match i {
+        Item::Motion(e) if e.aux.moves() => Some(e),
+        _ => None,
+    }) {
+        return Err(format!(
+            "not resuming: {} line {} moves an A, B, C, U, V or W axis, and a resume point does not record them yet: run it from the start",
+            opts.program_name, e.line
+        ));
+    }
     let target = state.stop_point();
     let rest: Vec<(Item, Origin)> = match items.get(state.item) {
         None if state.item == items.len() => Vec::new(),

@@ -60,7 +60,8 @@
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
 //! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, NURBS
-//! (G5.2/G5.3), polar words on arcs and splines, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
+//! (G5.2/G5.3), polar words on arcs and splines, A/B/C/U/V/W words anywhere but on G0/G1/G2/G3/G53 moves (and
+//! their motion under cutter compensation), the other system parameters, spirals beyond the
 //! tolerance, computed labels on anything but `call` are [`ErrorKind::Unsupported`]; a
 //! subroutine neither defined nor found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
@@ -86,7 +87,8 @@ use std::io::BufRead;
 use nalgebra::Vector3;
 
 pub use element::{
-    ArcGeometry, BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane,
+    AUX_LETTERS, ArcGeometry, AuxMove, AuxPos, BlendMode, CompState, Element, ElementKind,
+    FULL_CIRCLE_EPS_MM, Plane,
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interpreter::{
@@ -742,6 +744,25 @@ pub enum ErrorKind {
     /// Axis words and no motion mode in force.
     #[error("axis words with no motion mode in force: add G0, G1, G2 or G3")]
     AxisWithoutMotion,
+    /// A word of an axis (A B C U V W) the machine does not have.
+    #[error(
+        "axis word '{letter}': the machine has no {letter} axis (add an [[axis]] with name = \"{letter}\" to the machine file)"
+    )]
+    AxisNotConfigured {
+        /// The axis letter.
+        letter: char,
+    },
+    /// An absolute (G90) position of a wrapped rotary axis outside (−360°, 360°), as LinuxCNC
+    /// refuses it.
+    #[error(
+        "{letter}{value_deg}: a wrapped rotary axis takes absolute positions between -360 and 360 degrees (exclusive)"
+    )]
+    WrappedPositionOutOfRange {
+        /// The axis letter.
+        letter: char,
+        /// The position given.
+        value_deg: f64,
+    },
     /// Axis words with G80 on the line.
     #[error("axis words with G80 (motion off)")]
     AxisWithG80,
