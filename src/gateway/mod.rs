@@ -19,6 +19,7 @@ use nalgebra::Vector3;
 use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
+use crate::gcode::AuxPos;
 use crate::interpolator::{Interpolator, OverrideRamp};
 use crate::master::alarm::{Alarm, Failure, SharedBusError};
 use crate::master::cyclic::{CycleRecord, CyclicMaster, Phase};
@@ -624,8 +625,19 @@ pub fn plan_program(
     text: &str,
     start_mm: Vector3<f64>,
 ) -> Result<Plan, GatewayError> {
+    plan_program_at(machine, name, text, start_mm, [0.0; 6])
+}
+
+/// [`plan_program`] with the auxiliary axes (A B C U V W) at `start_aux`.
+pub fn plan_program_at(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Result<Plan, GatewayError> {
     use crate::gcode::{Error as GcodeError, ErrorKind as GcodeErrorKind, Item};
-    let program = interpret_program(machine, name, text, start_mm)?;
+    let program = interpret_program_at(machine, name, text, start_mm, start_aux)?;
     for item in &program.items {
         match item {
             Item::Motion(e) => check_element(machine, name, e)?,
@@ -662,11 +674,36 @@ pub fn interpret_program(
     text: &str,
     start_mm: Vector3<f64>,
 ) -> Result<crate::gcode::Program, GatewayError> {
-    let program = crate::gcode::parse_program_with(text, name, machine.setup(start_mm))?;
+    interpret_program_at(machine, name, text, start_mm, [0.0; 6])
+}
+
+/// [`interpret_program`] with the auxiliary axes (A B C U V W) at `start_aux`.
+pub fn interpret_program_at(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Result<crate::gcode::Program, GatewayError> {
+    let mut setup = machine.setup(start_mm);
+    setup.start_aux = start_aux;
+    let program = crate::gcode::parse_program_with(text, name, setup)?;
     Ok(crate::compensation::compensate_program(
         &program,
         machine.program.compensation,
     )?)
+}
+
+/// The auxiliary axes' positions (A B C U V W, 0 for those the machine lacks) from the drives'
+/// counts, in machine order.
+pub fn aux_of_counts(machine: &Machine, counts: &[i32]) -> AuxPos {
+    let mut aux = [0.0; 6];
+    for (a, c) in machine.axes.iter().zip(counts) {
+        if let Some(k) = a.aux() {
+            aux[k] = a.counts_to_mm(*c);
+        }
+    }
+    aux
 }
 
 /// Checks one element of the tool-centre path against the machine: every axis it moves exists
@@ -784,8 +821,14 @@ pub trait MotionSource {
         start_mm: Vector3<f64>,
         start_counts: &[i32],
     ) -> Result<(), GatewayError>;
-    /// The motion from `armed_mm`, where the drives were enabled and armed (position actual).
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError>;
+    /// The motion from `armed_mm`, where the drives were enabled and armed (position actual),
+    /// the auxiliary axes at `armed_aux`.
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError>;
     /// The last program line completed before this motion starts (a resumed program's).
     fn completed_line(&self) -> Option<usize> {
         None
@@ -800,22 +843,29 @@ impl MotionSource for FromStart<'_> {
         &mut self,
         machine: &Machine,
         start_mm: Vector3<f64>,
-        _start_counts: &[i32],
+        start_counts: &[i32],
     ) -> Result<(), GatewayError> {
-        plan_program(
+        plan_program_at(
             machine,
             &self.0.program_name,
             &self.0.program_text,
             start_mm,
+            aux_of_counts(machine, start_counts),
         )
         .map(|_| ())
     }
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
-        plan_program(
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError> {
+        plan_program_at(
             machine,
             &self.0.program_name,
             &self.0.program_text,
             armed_mm,
+            armed_aux,
         )
     }
 }
@@ -953,7 +1003,7 @@ async fn run_async(
     let sup = supervision_from(machine, &io.health());
     let (control, progress) = (opts.control.clone(), opts.progress.clone());
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
-    let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
+    let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<(Vector3<f64>, AuxPos)>();
     let m = machine.clone();
     // The TPDOs, the nodes' heartbeats (a boot-up freezes its axis in the cycle that reads it)
     // and their EMCYs: the cyclic thread supervises the nodes itself.
@@ -987,8 +1037,8 @@ async fn run_async(
 
     // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
     let plan_result = match armed_rx.await {
-        Ok(armed_mm) => {
-            let r = source.plan(machine, armed_mm).and_then(|plan| {
+        Ok((armed_mm, armed_aux)) => {
+            let r = source.plan(machine, armed_mm, armed_aux).and_then(|plan| {
                 Interpolator::new(plan, machine.cycle_s())
                     .map(|i| match ramp {
                         Ok(r) => i.with_override_ramp(r),
@@ -1123,7 +1173,7 @@ struct CyclicLinks {
     /// The motion, once planned from the armed position.
     plan_rx: mpsc::Receiver<Interpolator>,
     /// The armed position (every drive following, setpoints = actual positions).
-    armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
+    armed_tx: tokio::sync::oneshot::Sender<(Vector3<f64>, AuxPos)>,
     /// One record per cycle for `--log`.
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
     /// The operator's override and hold.
@@ -1213,7 +1263,7 @@ fn cyclic_thread(
         if master.phase() == Phase::Armed
             && let Some(tx) = armed_tx.take()
         {
-            let _ = tx.send(master.armed_mm().expect("armed"));
+            let _ = tx.send((master.armed_mm().expect("armed"), master.armed_aux()));
         }
         if master.phase() == Phase::Armed {
             match plan_rx.try_recv() {

@@ -122,6 +122,9 @@ pub fn split_lines_inclusive(text: &[u8]) -> impl Iterator<Item = &[u8]> {
 pub const MM_PER_INCH: f64 = 25.4;
 
 /// One output of the interpreter, in program order.
+// Items pass through the stages one at a time, by value: boxing the element (the large variant
+// since it carries the auxiliary axes) would allocate once per motion line in the front end.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Item {
     /// A line, arc or helix.

@@ -113,7 +113,7 @@ pub(super) fn caps(cfg: &PlannerConfig, aux: &AuxMove, length: f64) -> AuxCaps {
         acc_mm_s2: f64::INFINITY,
         jerk_mm_s3: f64::INFINITY,
     };
-    if !aux.moves() || !(length > 0.0) {
+    if !aux.moves() || length.is_nan() || length <= 0.0 {
         return c;
     }
     let lim = &cfg.aux;
