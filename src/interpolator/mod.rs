@@ -1285,6 +1285,11 @@ impl Interpolator {
         self.queued_end_mm
     }
 
+    /// Where the queued motion leaves the auxiliary axes (`None` before a moving segment).
+    pub fn queued_end_aux(&self) -> Option<crate::gcode::AuxPos> {
+        self.aux.queued_end()
+    }
+
     /// End time of the queued motion (the whole program's duration once closed).
     pub fn duration_s(&self) -> f64 {
         self.queued_end_s

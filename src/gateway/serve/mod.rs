@@ -32,7 +32,7 @@ use super::io::NodeIo;
 use super::{GatewayError, startup};
 use crate::bus::Bus;
 use crate::config::Machine;
-use crate::gcode::{Item, Program};
+use crate::gcode::{AuxMove, AuxPos, Item, Program};
 use crate::interpolator::{Interpolator, OverrideRamp};
 use crate::master::cyclic::Phase;
 use crate::rt;
@@ -84,6 +84,8 @@ pub struct Current {
     seq: u64,
     /// Where it ends (the next job's start).
     end_mm: Vector3<f64>,
+    /// Where it leaves the auxiliary axes (`None`: where they were).
+    end_aux: Option<AuxPos>,
 }
 
 /// A jog under way.
@@ -397,6 +399,7 @@ impl Controller<'_> {
         {
             let seq = s.motions_started + 1;
             let end_mm = job.interp.queued_end_mm();
+            let end_aux = job.interp.queued_end_aux();
             match self.ask(Request::Start(Box::new(job.interp))).await {
                 Ok(()) => {
                     if job.kind != JobKind::Jog {
@@ -407,6 +410,7 @@ impl Controller<'_> {
                         name: job.name,
                         seq,
                         end_mm,
+                        end_aux,
                     });
                 }
                 Err(e) => {
@@ -479,6 +483,26 @@ impl Controller<'_> {
             }
         }
         p
+    }
+
+    /// Where the next job starts on the auxiliary axes (A B C U V W; 0 for those the machine
+    /// lacks), as [`tail_mm`](Self::tail_mm).
+    fn tail_aux(&self, s: &Snapshot) -> AuxPos {
+        let queued = match (self.queue.back(), &self.current) {
+            (Some(j), _) => j.interp.queued_end_aux(),
+            (None, Some(c)) => c.end_aux,
+            (None, None) => None,
+        };
+        if let Some(aux) = queued {
+            return aux;
+        }
+        let mut aux = [0.0; 6];
+        for (i, a) in self.m.axes.iter().enumerate() {
+            if let Some(k) = a.aux() {
+                aux[k] = s.axes[i].commanded_mm;
+            }
+        }
+        aux
     }
 
     fn busy(&self) -> bool {
@@ -664,7 +688,9 @@ impl Controller<'_> {
         s: &Snapshot,
     ) -> Result<String, ServeError> {
         let start = self.tail_mm(s);
+        let start_aux = self.tail_aux(s);
         let mut setup = self.m.setup(start);
+        setup.start_aux = start_aux;
         setup.carry = self.carry.clone();
         let program = if kind == JobKind::Mdi {
             crate::gcode::parse_mdi(text, setup)
@@ -676,7 +702,8 @@ impl Controller<'_> {
             crate::compensation::compensate_program(&program, self.m.program.compensation)
                 .map_err(|e| ServeError::Program(Box::new(GatewayError::from(e))))?;
         if let Some(line) = from_line {
-            from_line_on(&mut program, line, start).ok_or(ServeError::NoMotionFrom { line })?;
+            from_line_on(&mut program, line, start, start_aux)
+                .ok_or(ServeError::NoMotionFrom { line })?;
         }
         for item in &program.items {
             match item {
@@ -762,8 +789,11 @@ impl Controller<'_> {
         }
         let (lo, hi) = e.bounds_mm();
         for (i, a) in self.m.axes.iter().enumerate() {
-            let Some(k) = a.xyz() else { continue };
-            let moves = e.end_mm[k] != e.start_mm[k] || hi[k] > lo[k];
+            let moves = match (a.xyz(), a.aux()) {
+                (Some(k), _) => e.end_mm[k] != e.start_mm[k] || hi[k] > lo[k],
+                (None, Some(k)) => e.aux.start[k] != e.aux.end[k],
+                (None, None) => false,
+            };
             if moves && !self.homed[i] {
                 return Err(ServeError::NotHomed {
                     file: name.to_string(),
@@ -838,7 +868,10 @@ impl Controller<'_> {
             target[k],
             v * 60.0
         );
-        let program = crate::gcode::parse_program(&text, "jog", here)
+        // The auxiliary axes stay where they are.
+        let mut setup = crate::gcode::Setup::new(here);
+        setup.start_aux = self.tail_aux(&s);
+        let program = crate::gcode::parse_program_with(&text, "jog", setup)
             .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
         // Jogs are jerk-limited whatever the machine's planner mode: the jerk-limited profile
         // with the axes' max_jerk_mm_s3 (a single straight move: time-optimal for the limits).
@@ -865,12 +898,14 @@ impl Controller<'_> {
         };
         let seq = s.motions_started + 1;
         let end_mm = interp.queued_end_mm();
+        let end_aux = interp.queued_end_aux();
         self.ask(Request::Start(Box::new(interp))).await?;
         self.current = Some(Current {
             kind: JobKind::Jog,
             name: a.name.clone(),
             seq,
             end_mm,
+            end_aux,
         });
         self.jog = Some(Jog {
             axis,
@@ -1022,7 +1057,12 @@ impl Controller<'_> {
 /// modal state and position established by the lines before), preceded by a straight rapid
 /// move from `start` to where that element starts, which ends at rest (exact stop). `None`
 /// without motion from there.
-fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Option<()> {
+fn from_line_on(
+    program: &mut Program,
+    line: usize,
+    start: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Option<()> {
     let first = program
         .items
         .iter()
@@ -1038,8 +1078,12 @@ fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Opti
     lead_in.blend = crate::gcode::BlendMode::ExactStop;
     lead_in.start_mm = start;
     lead_in.end_mm = e.start_mm;
+    lead_in.aux = AuxMove {
+        start: start_aux,
+        end: e.aux.start,
+    };
     program.items.drain(..first);
-    if lead_in.start_mm != lead_in.end_mm {
+    if lead_in.start_mm != lead_in.end_mm || lead_in.aux.moves() {
         program.items.insert(0, Item::Motion(lead_in));
     }
     program.start_mm = start;
