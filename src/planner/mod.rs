@@ -107,6 +107,13 @@
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //!
+//! # Auxiliary axes
+//!
+//! A B C (degrees) and U V W ride along each element linearly in its path parameter; a move
+//! without X/Y/Z motion takes their length (U/V/W, else A/B/C) as its path. Their limits cap
+//! the element's speed, acceleration and jerk, their velocity steps cap the junctions, and
+//! corners where they move stay unblended: [`aux_axes`].
+//!
 //! # Look-ahead
 //!
 //! [`Planner`] keeps a window of up to [`PlannerConfig::lookahead`] elements. When it is full
