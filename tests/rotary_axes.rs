@@ -205,10 +205,15 @@ fn an_axis_the_machine_lacks_is_a_typed_error() {
     .unwrap_err();
     assert_eq!((e.line, e.col), (2, 7));
     assert_eq!(e.kind, ErrorKind::AxisNotConfigured { letter: 'B' });
-    // Axis words where nothing reads them (no offsets on these axes yet) are refused, never
-    // skipped.
-    let e = parse_program_with("G92 A10\n", "t.ngc", m.setup(Vector3::zeros())).unwrap_err();
-    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+    // Axis words where nothing reads them (no work offsets on these axes yet) are refused,
+    // never skipped.
+    for text in ["G10 L2 P1 A10\n", "G28 A0\n", "G0 Z1\nG81 Z-1 R0 A5 F100\n"] {
+        let e = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).unwrap_err();
+        assert!(
+            matches!(e.kind, ErrorKind::Unsupported { .. }),
+            "{text}: {e}"
+        );
+    }
     // Under cutter compensation the auxiliary axes may not move (not carried yet).
     let e = parse_program_with(
         "G0 X0 Y0\nG41 D1\nG1 X10 A5 F100\n",
@@ -218,6 +223,53 @@ fn an_axis_the_machine_lacks_is_a_typed_error() {
     .unwrap_err();
     assert_eq!(e.line, 3);
     assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+}
+
+#[test]
+fn g92_and_g52_offset_the_auxiliary_axes() {
+    let m = eight();
+    let text = "G0 A10\nG92 A0\nG1 A20 F3600\nG91 G1 A-5\nG90 G92.1\nG1 A5\n\
+                G52 U2\nG1 U1 F600\nG53 G0 U0\nG92.2\nG1 U1\nG92.3\nG1 U1.5\nM2\n";
+    let p = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).expect("interpret");
+    let ends: Vec<(usize, f64, f64)> = p
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Motion(e) => Some((e.line, e.aux.end[0], e.aux.end[3])),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        ends,
+        [
+            (1, 10.0, 0.0),
+            // G92 A0 there: A reads 0 at machine 10, so A20 is machine 30.
+            (3, 30.0, 0.0),
+            (4, 25.0, 0.0),
+            // G92.1 cleared it.
+            (6, 5.0, 0.0),
+            // G52 U2: U1 is machine 3; G53 ignores the offset.
+            (8, 5.0, 3.0),
+            (9, 5.0, 0.0),
+            // G92.2 suspends the offset, G92.3 brings it back.
+            (11, 5.0, 1.0),
+            (13, 5.0, 3.5),
+        ]
+    );
+    // On a wrapped axis the shortest way counts from the offset reading.
+    let m = xyza();
+    let text = "G0 A100\nG92 A0\nG0 A350\nM2\n";
+    let p = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).expect("interpret");
+    let last = p
+        .items
+        .iter()
+        .rev()
+        .find_map(|i| match i {
+            Item::Motion(e) => Some(e.aux.end[0]),
+            _ => None,
+        })
+        .unwrap();
+    assert_eq!(last, 90.0, "A reads 0 at 100: 350 is -10 away");
 }
 
 fn parse_machine(text: &str) -> Result<Machine, ConfigError> {

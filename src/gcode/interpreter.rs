@@ -277,8 +277,12 @@ struct Saved {
 #[derive(Debug, Clone)]
 struct State {
     pos_mm: Vector3<f64>,
-    /// The auxiliary axes' current position (machine = program coordinates: no offsets).
+    /// The auxiliary axes' current position, machine coordinates. Their program coordinate is
+    /// the machine's less the G92/G52 offset ([`State::aux_offset`]): no work offsets or
+    /// rotation apply to them.
     aux: AuxPos,
+    /// The auxiliary axes' G92/G52 offsets (in force while `g92_on`).
+    g92_aux: AuxPos,
     aux_axes: [bool; 6],
     aux_wrapped: [bool; 6],
     prog_mm: Vector3<f64>,
@@ -390,6 +394,7 @@ impl State {
         State {
             pos_mm: setup.start_mm,
             aux: setup.start_aux,
+            g92_aux: [0.0; 6],
             aux_axes: setup.aux_axes,
             aux_wrapped: setup.aux_wrapped,
             prog_mm: setup.start_mm - setup.work_offsets_mm[0],
@@ -1056,6 +1061,11 @@ impl State {
                             None => base[i],
                         };
                     }
+                    let base = self.aux_offset();
+                    let words = self.aux_words(b)?;
+                    for (i, w) in words.iter().enumerate() {
+                        self.g92_aux[i] = w.map_or(base[i], |v| self.aux[i] - v);
+                    }
                     self.g92_on = true;
                     self.resync();
                 }
@@ -1069,11 +1079,17 @@ impl State {
                     for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
                         self.g92_mm[i] = self.take_mm(b, letter).unwrap_or(base[i]);
                     }
+                    let base = self.aux_offset();
+                    let words = self.aux_words(b)?;
+                    for (i, w) in words.iter().enumerate() {
+                        self.g92_aux[i] = w.unwrap_or(base[i]);
+                    }
                     self.g92_on = true;
                     self.resync();
                 }
                 921 => {
                     self.g92_mm = Vector3::zeros();
+                    self.g92_aux = [0.0; 6];
                     self.g92_on = false;
                     self.resync();
                 }
@@ -1534,14 +1550,46 @@ impl State {
         self.aux = aux_end;
     }
 
+    /// The auxiliary axes' G92/G52 offsets in force.
+    fn aux_offset(&self) -> AuxPos {
+        if self.g92_on { self.g92_aux } else { [0.0; 6] }
+    }
+
+    /// The values of the line's A B C U V W words (U V W in mm), for G92 and G52; an axis the
+    /// machine lacks is an error.
+    fn aux_words(&mut self, b: &Block) -> Result<[Option<f64>; 6], BlockError> {
+        let mut out = [None; 6];
+        if b.present() & AUX_BITS == 0 {
+            return Ok(out);
+        }
+        let scale = self.scale();
+        for (i, letter) in AUX_LETTERS.into_iter().enumerate() {
+            if let Some(w) = self.take(b, letter) {
+                if !self.aux_axes[i] {
+                    return Err(err_at(w.col, ErrorKind::AxisNotConfigured { letter }));
+                }
+                out[i] = Some(if i >= 3 { w.value * scale } else { w.value });
+            }
+        }
+        Ok(out)
+    }
+
     /// The auxiliary axes' target of the line's A B C U V W words (G90/G91 applied; U V W in
     /// the program's units, A B C in degrees; a wrapped axis under G90 the shortest way).
     fn aux_target(&mut self, b: &Block) -> Result<AuxPos, BlockError> {
+        self.aux_target_in(b, false)
+    }
+
+    /// [`aux_target`](Self::aux_target), in machine coordinates (G53: absolute, no offset)
+    /// when `machine`.
+    fn aux_target_in(&mut self, b: &Block, machine: bool) -> Result<AuxPos, BlockError> {
         let mut t = self.aux;
         if b.present() & AUX_BITS == 0 {
             return Ok(t);
         }
         let scale = self.scale();
+        let off = if machine { [0.0; 6] } else { self.aux_offset() };
+        let incremental = self.incremental && !machine;
         for (i, letter) in AUX_LETTERS.into_iter().enumerate() {
             let Some(w) = self.take(b, letter) else {
                 continue;
@@ -1550,7 +1598,7 @@ impl State {
                 return Err(err_at(w.col, ErrorKind::AxisNotConfigured { letter }));
             }
             let v = if i >= 3 { w.value * scale } else { w.value };
-            t[i] = if self.incremental {
+            t[i] = if incremental {
                 t[i] + v
             } else if self.aux_wrapped[i] {
                 if v.abs() >= 360.0 {
@@ -1562,15 +1610,15 @@ impl State {
                         },
                     ));
                 }
-                // The shortest way from where the axis stands (modulo a turn) to `v`; half a
+                // The shortest way from where the axis reads (modulo a turn) to `v`; half a
                 // turn goes the positive way.
-                let mut d = (v - t[i]).rem_euclid(360.0);
+                let mut d = (v - (t[i] - off[i])).rem_euclid(360.0);
                 if d > 180.0 {
                     d -= 360.0;
                 }
                 t[i] + d
             } else {
-                v
+                v + off[i]
             };
             if !(t[i].is_finite() && t[i].abs() <= MAX_POSITION_MM) {
                 return Err(err_at(w.col, ErrorKind::PositionOutOfRange));
@@ -1691,11 +1739,7 @@ impl State {
                 }
             }
             self.check_position(col, &m)?;
-            // No offsets on the auxiliary axes: G53 reads them as G90 would.
-            let incremental = std::mem::replace(&mut self.incremental, false);
-            let aux = self.aux_target(b);
-            self.incremental = incremental;
-            let aux = aux?;
+            let aux = self.aux_target_in(b, true)?;
             let f = feed(self, &|| line_length(m - self.pos_mm, &self.aux, &aux))?;
             let f = rotary_feed(self, m, &aux, f);
             self.push_move(line, col, rapid, (m, aux), f, out);
@@ -1939,9 +1983,9 @@ impl State {
                     'X' | 'Y' | 'Z' => ErrorKind::AxisWithoutMotion,
                     'A' | 'B' | 'C' | 'U' | 'V' | 'W' => ErrorKind::Unsupported {
                         what: format!("axis word '{letter}' here"),
-                        reason: "A, B, C, U, V and W are read on G0, G1, G2 and G3 moves (and G53) only: \
-                                 not on G10, G28/G30, G52/G92 (no offsets on these axes), canned \
-                                 cycles or splines",
+                        reason: "A, B, C, U, V and W are read on G0, G1, G2, G3 and G53 moves and \
+                                 by G92 and G52 only: not on G10 (no work offsets on these axes), \
+                                 G28/G30, canned cycles or splines",
                     },
                     '@' | '^' => ErrorKind::Unsupported {
                         what: format!("polar coordinate word '{letter}' here"),

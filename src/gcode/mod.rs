@@ -399,6 +399,15 @@ impl Error {
         match &self.kind {
             ErrorKind::Unsupported { what, .. } => Some(what),
             ErrorKind::ArcRadiusMismatch { .. } => Some("spiral arc"),
+            // Valid G-code for a machine with that axis.
+            ErrorKind::AxisNotConfigured { letter } => Some(match letter {
+                'A' => "axis A (not on this machine)",
+                'B' => "axis B (not on this machine)",
+                'C' => "axis C (not on this machine)",
+                'U' => "axis U (not on this machine)",
+                'V' => "axis V (not on this machine)",
+                _ => "axis W (not on this machine)",
+            }),
             _ => None,
         }
     }
