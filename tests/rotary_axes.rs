@@ -616,3 +616,50 @@ fn a_run_on_the_in_process_bus_ends_on_the_programmed_counts() {
     let rows = common::read_csv(&log);
     common::limits_held_all(&m, &rows);
 }
+
+/// The programs of LinuxCNC's trajectory-planner corpus (`../shared/corpus/linuxcnc-tp`, when
+/// present) that move an auxiliary axis: refused on an X/Y/Z machine with the axis named, they
+/// plan on one that has it, and their setpoints keep every axis's limits in both profiles.
+#[test]
+fn corpus_programs_with_auxiliary_axes_plan_within_the_limits() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
+    let Ok(groups) = std::fs::read_dir(&dir) else {
+        println!("corpus {} is absent: skipping", dir.display());
+        return;
+    };
+    let mut files: Vec<_> = groups
+        .flatten()
+        .filter(|g| g.path().is_dir())
+        .flat_map(|g| std::fs::read_dir(g.path()).unwrap().flatten())
+        .map(|f| f.path())
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("ngc")))
+        .collect();
+    files.sort();
+    let m = eight();
+    let xyz = Machine::load(Path::new("dictionaries/machines/demo-xyz.toml")).unwrap();
+    let mut planned = Vec::new();
+    for path in &files {
+        let text = std::fs::read_to_string(path).unwrap();
+        let name = path.strip_prefix(&dir).unwrap().display().to_string();
+        match parse_program_with(&text, &name, xyz.setup(Vector3::zeros())) {
+            Err(e) if matches!(e.kind, ErrorKind::AxisNotConfigured { .. }) => {}
+            _ => continue,
+        }
+        let prog = parse_program_with(&text, &name, m.setup(Vector3::zeros()))
+            .unwrap_or_else(|e| panic!("{e}"));
+        for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+            let cfg = PlannerConfig {
+                profile,
+                ..m.planner
+            };
+            let plan =
+                plan_with(&prog, &limits(&m), &cfg).unwrap_or_else(|e| panic!("{name}: {e}"));
+            limits_hold(plan, &m, &cfg).unwrap_or_else(|e| panic!("{name} {profile:?}: {e}"));
+        }
+        planned.push(name);
+    }
+    println!("newly planned with auxiliary axes: {planned:?}");
+    if !files.is_empty() {
+        assert!(planned.len() >= 5, "{planned:?}");
+    }
+}
