@@ -205,9 +205,12 @@ fn an_axis_the_machine_lacks_is_a_typed_error() {
     .unwrap_err();
     assert_eq!((e.line, e.col), (2, 7));
     assert_eq!(e.kind, ErrorKind::AxisNotConfigured { letter: 'B' });
-    // Axis words where nothing reads them (no work offsets on these axes yet) are refused,
-    // never skipped.
-    for text in ["G10 L2 P1 A10\n", "G28 A0\n", "G0 Z1\nG81 Z-1 R0 A5 F100\n"] {
+    // Axis words where nothing reads them are refused, never skipped.
+    for text in [
+        "G10 L1 P1 R1 A10\n",
+        "G28 A0\n",
+        "G0 Z1\nG81 Z-1 R0 A5 F100\n",
+    ] {
         let e = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).unwrap_err();
         assert!(
             matches!(e.kind, ErrorKind::Unsupported { .. }),
@@ -223,6 +226,35 @@ fn an_axis_the_machine_lacks_is_a_typed_error() {
     .unwrap_err();
     assert_eq!(e.line, 3);
     assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
+}
+
+#[test]
+fn work_offsets_move_the_auxiliary_axes_origins() {
+    let m = eight();
+    let text = "G10 L2 P2 A100 U-3\nG55 G1 A10 U1 F3600\nG10 L20 P2 A0\nG1 A5\n\
+                G92 A1\nG1 A2\nG54 G1 A5 U0\nM2\n";
+    let p = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).expect("interpret");
+    let ends: Vec<(usize, f64, f64)> = p
+        .items
+        .iter()
+        .filter_map(|i| match i {
+            Item::Motion(e) => Some((e.line, e.aux.end[0], e.aux.end[3])),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        ends,
+        [
+            // G55's A origin is 100, its U origin -3.
+            (2, 110.0, -2.0),
+            // G10 L20: A reads 0 at 110 in G55.
+            (4, 115.0, -2.0),
+            // G92 A1 at 115: the G92 offset is 115 - 110 - 1 = 4; A2 is 110 + 4 + 2.
+            (6, 116.0, -2.0),
+            // G54 (origin 0) with the G92 offset still in force: A5 is 9; U0 is 0.
+            (7, 9.0, 0.0),
+        ]
+    );
 }
 
 #[test]

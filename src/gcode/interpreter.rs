@@ -283,6 +283,8 @@ struct State {
     aux: AuxPos,
     /// The auxiliary axes' G92/G52 offsets (in force while `g92_on`).
     g92_aux: AuxPos,
+    /// The auxiliary axes' origins in G54 … G59.3 (G10 L2/L20; 0 at the start).
+    work_aux: [AuxPos; 9],
     aux_axes: [bool; 6],
     aux_wrapped: [bool; 6],
     prog_mm: Vector3<f64>,
@@ -395,6 +397,7 @@ impl State {
             pos_mm: setup.start_mm,
             aux: setup.start_aux,
             g92_aux: [0.0; 6],
+            work_aux: [[0.0; 6]; 9],
             aux_axes: setup.aux_axes,
             aux_wrapped: setup.aux_wrapped,
             prog_mm: setup.start_mm - setup.work_offsets_mm[0],
@@ -1061,10 +1064,11 @@ impl State {
                             None => base[i],
                         };
                     }
-                    let base = self.aux_offset();
+                    let base = self.aux_g92();
                     let words = self.aux_words(b)?;
+                    let work = self.work_aux[self.coord];
                     for (i, w) in words.iter().enumerate() {
-                        self.g92_aux[i] = w.map_or(base[i], |v| self.aux[i] - v);
+                        self.g92_aux[i] = w.map_or(base[i], |v| self.aux[i] - work[i] - v);
                     }
                     self.g92_on = true;
                     self.resync();
@@ -1079,7 +1083,7 @@ impl State {
                     for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
                         self.g92_mm[i] = self.take_mm(b, letter).unwrap_or(base[i]);
                     }
-                    let base = self.aux_offset();
+                    let base = self.aux_g92();
                     let words = self.aux_words(b)?;
                     for (i, w) in words.iter().enumerate() {
                         self.g92_aux[i] = w.unwrap_or(base[i]);
@@ -1364,6 +1368,23 @@ impl State {
                 } else {
                     self.g10_l20(b, index);
                 }
+                // The auxiliary axes: L2 sets the origin, L20 moves it so that the current
+                // position reads the word (G92/G52 counted).
+                let words = self.aux_words(b)?;
+                let g92 = self.aux_g92();
+                for (i, w) in words.iter().enumerate() {
+                    if let Some(v) = *w {
+                        let origin = if l.value as u32 == 2 {
+                            v
+                        } else {
+                            self.aux[i] - g92[i] - v
+                        };
+                        if !(origin.is_finite() && origin.abs() <= MAX_POSITION_MM) {
+                            return Err(err_at(code.col, ErrorKind::PositionOutOfRange));
+                        }
+                        self.work_aux[index][i] = origin;
+                    }
+                }
                 if !self.work_offsets_mm[index]
                     .iter()
                     .all(|c| c.abs() <= MAX_POSITION_MM)
@@ -1551,8 +1572,16 @@ impl State {
     }
 
     /// The auxiliary axes' G92/G52 offsets in force.
-    fn aux_offset(&self) -> AuxPos {
+    fn aux_g92(&self) -> AuxPos {
         if self.g92_on { self.g92_aux } else { [0.0; 6] }
+    }
+
+    /// The auxiliary axes' offsets in force: the work system's origin plus G92/G52 (no
+    /// rotation or tool offset applies to them).
+    fn aux_offset(&self) -> AuxPos {
+        let g92 = self.aux_g92();
+        let work = self.work_aux[self.coord];
+        std::array::from_fn(|i| work[i] + g92[i])
     }
 
     /// The values of the line's A B C U V W words (U V W in mm), for G92 and G52; an axis the
@@ -1984,8 +2013,8 @@ impl State {
                     'A' | 'B' | 'C' | 'U' | 'V' | 'W' => ErrorKind::Unsupported {
                         what: format!("axis word '{letter}' here"),
                         reason: "A, B, C, U, V and W are read on G0, G1, G2, G3 and G53 moves and \
-                                 by G92 and G52 only: not on G10 (no work offsets on these axes), \
-                                 G28/G30, canned cycles or splines",
+                                 by G92, G52 and G10 L2/L20 only: not on G28/G30, canned cycles or \
+                                 splines",
                     },
                     '@' | '^' => ErrorKind::Unsupported {
                         what: format!("polar coordinate word '{letter}' here"),
