@@ -758,7 +758,7 @@ pub enum ErrorKind {
     AxisWithoutMotion,
     /// A word of an axis (A B C U V W) the machine does not have.
     #[error(
-        "axis word '{letter}': the machine has no {letter} axis (add an [[axis]] with name = \"{letter}\" to the machine file)"
+        "unsupported: axis word '{letter}': the machine has no {letter} axis (add an [[axis]] with name = \"{letter}\" to the machine file)"
     )]
     AxisNotConfigured {
         /// The axis letter.
