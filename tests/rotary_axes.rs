@@ -695,3 +695,42 @@ fn corpus_programs_with_auxiliary_axes_plan_within_the_limits() {
         assert!(planned.len() >= 5, "{planned:?}");
     }
 }
+
+/// The run plans from where the drives stand, the auxiliary axes included: with A at 45° at
+/// power-on, a program that never moves A leaves it there, and a G91 move of A counts from
+/// there (a plan from 0 would send A to 0 in one cycle, which the step check refuses).
+#[test]
+fn a_run_starts_the_auxiliary_axes_where_the_drives_stand() {
+    let _one = common::one_at_a_time();
+    // A is the file's last axis: its `[axis.sim]` goes at the end.
+    let text = std::fs::read_to_string("dictionaries/machines/demo-xyza.toml").unwrap()
+        + "[axis.sim]\nstart_mm = 45.0\n";
+    let m = Machine::parse(
+        Path::new("dictionaries/machines/demo-xyza.toml"),
+        &text,
+        |rel| {
+            canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
+        },
+    )
+    .expect("machine");
+    assert_eq!(m.axes[3].sim.start_mm, 45.0);
+    for (program, want_a) in [
+        ("G1 X5 F600\nM2\n", 4500),
+        ("G91 G1 X1 A90 F600\nM2\n", 13500),
+    ] {
+        let bus = Bus::InProc(InProcBus::new());
+        let opts = RunOptions {
+            program_name: "t.ngc".into(),
+            program_text: program.into(),
+            simulate: true,
+            ..Default::default()
+        };
+        let s = gateway::run(&m, &bus, &opts).unwrap_or_else(|e| panic!("{program}: {e}"));
+        assert_eq!(s.target_counts[3], want_a, "{program}");
+        assert!(
+            (s.final_counts[3] - want_a).abs() <= 1,
+            "{program}: {:?}",
+            s.final_counts
+        );
+    }
+}
