@@ -404,7 +404,9 @@ pub struct Summary {
     pub cycles: u64,
     /// Axis letters, machine order.
     pub axes: Vec<String>,
-    /// Max |following error| per axis, mm.
+    /// The unit of each axis's positions: `mm`, or `deg` on a rotary axis.
+    pub units: Vec<&'static str>,
+    /// Max |following error| per axis, mm (degrees on a rotary axis).
     pub max_ferr_mm: Vec<f64>,
     /// Final position actual per axis, counts.
     pub final_counts: Vec<i32>,
@@ -538,8 +540,11 @@ impl std::fmt::Display for Summary {
         for (i, a) in self.axes.iter().enumerate() {
             writeln!(
                 f,
-                "axis {a}            max following error {:.4} mm, end {} counts (setpoint {})",
-                self.max_ferr_mm[i], self.final_counts[i], self.target_counts[i]
+                "axis {a}            max following error {:.4} {}, end {} counts (setpoint {})",
+                self.max_ferr_mm[i],
+                self.units.get(i).copied().unwrap_or("mm"),
+                self.final_counts[i],
+                self.target_counts[i]
             )?;
         }
         for w in &self.warnings {
@@ -1132,6 +1137,14 @@ async fn run_async(
         streaming_cycles: master.streaming_cycles,
         cycles: timing.cycles,
         axes: machine.axes.iter().map(|a| a.name.clone()).collect(),
+        units: machine
+            .axes
+            .iter()
+            .map(|a| match a.kind {
+                crate::config::AxisKind::Rotary => "deg",
+                crate::config::AxisKind::Linear => "mm",
+            })
+            .collect(),
         max_ferr_mm: master.max_ferr_mm.clone(),
         final_counts,
         target_counts: master.setpoint_counts(),
