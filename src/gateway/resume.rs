@@ -1153,6 +1153,27 @@ mod tests {
     }
 
     #[test]
+    fn a_program_that_moves_an_auxiliary_axis_is_not_resumed() {
+        let m = Machine::load(std::path::Path::new("dictionaries/machines/demo-xyza.toml"))
+            .expect("demo-xyza");
+        let text = "G1 X10 A90 F600\nG1 X20 F600\nM2\n";
+        let o = opts(text);
+        let mut src = FromStartRecorded {
+            opts: &o,
+            motion: None,
+        };
+        src.plan(&m, Vector3::zeros(), [0.0; 6]).unwrap();
+        let orig = src.motion.unwrap();
+        let (_, plan) = orig.plan.clone().unwrap();
+        let mut stop = stop_at(&plan, plan.segments()[1].start_time_s + 0.1);
+        stop.rest_setpoint_mm = vec![0.0; 4];
+        stop.rest_actual_counts = vec![0; 4];
+        let state = orig.state_after(&m, &o, &failure(stop)).unwrap();
+        let e = prepare(&m, &o, &state).err().unwrap();
+        assert!(e.contains("line 1 moves an A, B, C, U, V or W axis"), "{e}");
+    }
+
+    #[test]
     fn the_state_file_round_trips_and_is_strict() {
         let m = machine();
         let orig = original(Vector3::new(0.1, 0.2, 0.3));
