@@ -6,6 +6,8 @@
 //! counts.
 
 mod common;
+#[path = "common/serve.rs"]
+mod serve_rig;
 
 use std::path::Path;
 use std::process::Command;
@@ -733,4 +735,58 @@ fn a_run_starts_the_auxiliary_axes_where_the_drives_stand() {
             s.final_counts
         );
     }
+}
+
+/// `canmotion serve` on the XYZA machine: MDI lines and a program move A from where its drive
+/// stands (45° at power-on), from one job to the next, and the X/Y/Z-only jobs leave it there.
+#[test]
+fn serve_jobs_chain_the_auxiliary_axes() {
+    let _one = common::one_at_a_time();
+    let text = std::fs::read_to_string("dictionaries/machines/demo-xyza.toml")
+        .unwrap()
+        .replace("require_homing = true", "require_homing = false")
+        + "[axis.sim]\nstart_mm = 45.0\n";
+    let m = Machine::parse(
+        Path::new("dictionaries/machines/demo-xyza.toml"),
+        &text,
+        |rel| {
+            canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
+        },
+    )
+    .expect("machine");
+    let mut svc = serve_rig::Service::start(&m, Vec::new());
+    let mut c = svc.client();
+    c.ok("enable");
+    let settled = |c: &mut serve_rig::Client| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            let s = c.status();
+            let at = |i: usize, k: &str| serve_rig::axis(&s, i)[k].as_f64().unwrap();
+            if s["state"] == "idle"
+                && m.axes.iter().enumerate().all(|(i, a)| {
+                    (at(i, "actual_mm") - at(i, "commanded_mm")).abs() <= 1.0 / a.counts_per_mm
+                })
+            {
+                return s;
+            }
+            assert!(std::time::Instant::now() < deadline, "not settled: {s}");
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    };
+    let a_of = |s: &serde_json::Value| serve_rig::axis(s, 3)["commanded_mm"].as_f64().unwrap();
+    c.ok("mdi G0 X1");
+    let s = settled(&mut c);
+    assert_eq!(a_of(&s), 45.0, "{s}");
+    c.ok("mdi G91 G1 A10 F3600");
+    let s = settled(&mut c);
+    assert!((a_of(&s) - 55.0).abs() < 1e-9, "{s}");
+    // The wrapped A: from 55 to 0 the short way.
+    c.ok("mdi G90 G0 A0");
+    let s = settled(&mut c);
+    assert!(a_of(&s).abs() < 1e-9, "{s}");
+    let prog = svc.file("a.ngc", "G21 G90\nG1 X2 A30 F600\nG1 X3\nM2\n");
+    c.ok(&format!("run {}", prog.display()));
+    let s = settled(&mut c);
+    assert!((a_of(&s) - 30.0).abs() < 1e-9, "{s}");
+    svc.quit().unwrap();
 }
