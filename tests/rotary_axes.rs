@@ -737,8 +737,9 @@ fn a_run_starts_the_auxiliary_axes_where_the_drives_stand() {
     }
 }
 
-/// `canmotion serve` on the XYZA machine: MDI lines and a program move A from where its drive
-/// stands (45° at power-on), from one job to the next, and the X/Y/Z-only jobs leave it there.
+/// `canmotion serve` on the XYZA machine: MDI lines, a program and a jog move A from where its
+/// drive stands (45° at power-on), from one job to the next, and the X/Y/Z-only jobs leave it
+/// there.
 #[test]
 fn serve_jobs_chain_the_auxiliary_axes() {
     let _one = common::one_at_a_time();
@@ -788,5 +789,11 @@ fn serve_jobs_chain_the_auxiliary_axes() {
     c.ok(&format!("run {}", prog.display()));
     let s = settled(&mut c);
     assert!((a_of(&s) - 30.0).abs() < 1e-9, "{s}");
+    // An incremental jog of A, at 90 deg/s, by -15 deg; X stays.
+    let a = c.ok("jog A 90 -15");
+    assert!(a.contains("jog A"), "{a}");
+    let s = settled(&mut c);
+    assert!((a_of(&s) - 15.0).abs() < 1e-9, "{s}");
+    assert!((serve_rig::axis(&s, 0)["commanded_mm"].as_f64().unwrap() - 3.0).abs() < 1e-9);
     svc.quit().unwrap();
 }

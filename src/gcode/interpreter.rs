@@ -1629,7 +1629,7 @@ impl State {
             let v = if i >= 3 { w.value * scale } else { w.value };
             t[i] = if incremental {
                 t[i] + v
-            } else if self.aux_wrapped[i] {
+            } else if self.aux_wrapped[i] && !machine {
                 if v.abs() >= 360.0 {
                     return Err(err_at(
                         w.col,

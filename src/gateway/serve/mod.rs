@@ -817,11 +817,11 @@ impl Controller<'_> {
             return Err(ServeError::Busy { what: "a job" });
         }
         let a = &self.m.axes[axis];
-        let Some(k) = a.xyz() else {
+        if a.xyz().is_none() && a.aux().is_none() {
             return Err(ServeError::NotJoggable {
                 axis: a.name.clone(),
             });
-        };
+        }
         if speed_mm_s == 0.0 || dist_mm == Some(0.0) {
             return Ok(format!("{} stopped", a.name));
         }
@@ -833,13 +833,19 @@ impl Controller<'_> {
         };
         let v = speed_mm_s.abs().min(v_max);
         let here = self.tail_mm(&s);
+        let here_aux = self.tail_aux(&s);
+        // Where the jogged axis stands: an X/Y/Z axis or an auxiliary one.
+        let from = match (a.xyz(), a.aux()) {
+            (Some(k), _) => here[k],
+            (None, Some(k)) => here_aux[k],
+            (None, None) => unreachable!("refused above"),
+        };
         let dir = match dist_mm {
             Some(d) => d.signum(),
             None => speed_mm_s.signum(),
         };
-        let mut target = here;
-        target[k] = match dist_mm {
-            Some(d) => here[k] + d.abs() * dir,
+        let to = match dist_mm {
+            Some(d) => from + d.abs() * dir,
             None if homed => {
                 if dir > 0.0 {
                     a.max_mm
@@ -847,17 +853,17 @@ impl Controller<'_> {
                     a.min_mm
                 }
             }
-            None => here[k] + dir * (a.max_mm - a.min_mm),
+            None => from + dir * (a.max_mm - a.min_mm),
         };
-        if homed && !(a.min_mm..=a.max_mm).contains(&target[k]) {
+        if homed && a.has_travel() && !(a.min_mm..=a.max_mm).contains(&to) {
             return Err(ServeError::JogOutsideTravel {
                 axis: a.name.clone(),
-                target_mm: target[k],
+                target_mm: to,
                 min_mm: a.min_mm,
                 max_mm: a.max_mm,
             });
         }
-        if (target[k] - here[k]).abs() < 0.5 / a.counts_per_mm {
+        if (to - from).abs() < 0.5 / a.counts_per_mm {
             return Err(ServeError::AtTravelLimit {
                 axis: a.name.clone(),
             });
@@ -865,12 +871,15 @@ impl Controller<'_> {
         let text = format!(
             "G21 G90 G94 G64 P0 G53 G1 {}{:.9} F{:.6}\n",
             a.name,
-            target[k],
+            to,
             v * 60.0
         );
-        // The auxiliary axes stay where they are.
+        // The auxiliary axes start where they are (and only the jogged one moves).
         let mut setup = crate::gcode::Setup::new(here);
-        setup.start_aux = self.tail_aux(&s);
+        setup.start_aux = here_aux;
+        if let Some(k) = a.aux() {
+            setup.aux_axes[k] = true;
+        }
         let program = crate::gcode::parse_program_with(&text, "jog", setup)
             .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
         // Jogs are jerk-limited whatever the machine's planner mode: the jerk-limited profile
