@@ -121,8 +121,8 @@ pub struct Setup {
     /// setup's. The position is still [`Setup::start_mm`] (where the machine is). Default
     /// `None`: the defaults above, as at power-on.
     pub carry: Option<Carry>,
-    /// Where the auxiliary axes A B C (degrees) U V W (mm) are, machine coordinates (no work
-    /// offset applies to them). Default 0.
+    /// Where the auxiliary axes A B C (degrees) U V W (mm) are, in machine coordinates.
+    /// Default 0.
     pub start_aux: AuxPos,
     /// Which auxiliary axes the machine has, in the order of [`AUX_LETTERS`]: a program that
     /// moves another one is an error ([`ErrorKind::AxisNotConfigured`]). Default: none.
@@ -278,8 +278,8 @@ struct Saved {
 struct State {
     pos_mm: Vector3<f64>,
     /// The auxiliary axes' current position, machine coordinates. Their program coordinate is
-    /// the machine's less the G92/G52 offset ([`State::aux_offset`]): no work offsets or
-    /// rotation apply to them.
+    /// the machine's less the work system's origin and the G92/G52 offset
+    /// ([`State::aux_offset`]); no rotation or tool offset applies to them.
     aux: AuxPos,
     /// The auxiliary axes' G92/G52 offsets (in force while `g92_on`).
     g92_aux: AuxPos,
