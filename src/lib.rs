@@ -24,8 +24,12 @@
 //!    profile (trapezoid or S-curve) from its start to its end speed, limited by the feed and by
 //!    each axis's limits projected on the move's direction; this single move starts and ends at
 //!    rest, and a junction with a next move would keep the speed its velocity jump allows.
+//!    On a machine with auxiliary axes (a rotary A, or U V W) the element also carries their
+//!    start and end ([`gcode::AuxMove`]), linear in its path, and [`planner::aux_axes`] caps
+//!    the profile so that each of them keeps its own limits too.
 //! 4. [`interpolator::Interpolator::update`] samples the plan once per cycle, Ruckig-style: no
-//!    allocation, no blocking; the last sample is the end point, exactly. An axis with a
+//!    allocation, no blocking; the last sample is the end point, exactly (the auxiliary axes'
+//!    samples come with it: [`interpolator::Interpolator::aux`]). An axis with a
 //!    `filter` in the machine file passes its samples through [`interpolator::filter::AxisFilter`]
 //!    (moving average or first-order lag after interpolation), which ends exactly there too.
 //! 5. [`master::cyclic::CyclicMaster::cycle`], on the cyclic thread ([`rt`]: absolute deadlines,

@@ -149,6 +149,28 @@ struct PathRecord {
     #[serde(skip_serializing_if = "Option::is_none")]
     cw: Option<bool>,
     feed_mm_s: f64,
+    /// The machine's auxiliary axes, `"A": [start, end]` (degrees, modulo 360 on a wrapped
+    /// axis; U V W in mm); none on an X/Y/Z machine.
+    #[serde(flatten)]
+    aux: std::collections::BTreeMap<&'static str, [f64; 2]>,
+}
+
+/// The names of the auxiliary axes in the `--path` output.
+const AUX_NAMES: [&str; 6] = ["A", "B", "C", "U", "V", "W"];
+
+/// The machine's auxiliary axes: their index in [`crate::gcode::AuxPos`] and whether they
+/// wrap.
+fn aux_columns(machine: &Machine) -> Vec<(usize, bool)> {
+    machine
+        .axes
+        .iter()
+        .filter_map(|a| a.aux().map(|i| (i, a.wrap)))
+        .collect()
+}
+
+/// A wrapped rotary axis's position as shown: modulo 360° (LinuxCNC's WRAPPED_ROTARY).
+fn shown(value: f64, wrap: bool) -> f64 {
+    if wrap { value.rem_euclid(360.0) } else { value }
 }
 
 fn xyz(v: &Vector3<f64>) -> [f64; 3] {
@@ -197,6 +219,7 @@ pub fn plan_stream<R: BufRead>(
             }
         })?;
     let mut path_out = opts.path_out.as_deref().map(Out::create).transpose()?;
+    let aux_cols = aux_columns(machine);
     let mut plot = opts
         .plot_out
         .as_deref()
@@ -247,7 +270,7 @@ pub fn plan_stream<R: BufRead>(
                 check_element(machine, name, e)?;
                 summary.add_element(e);
                 if let Some(out) = path_out.as_mut() {
-                    write_path_record(out, e)?;
+                    write_path_record(out, e, &aux_cols)?;
                 }
             }
             Item::Dwell(_) => summary.dwells += 1,
@@ -333,7 +356,11 @@ pub fn plan_file(
     )
 }
 
-fn write_path_record(out: &mut Out, e: &Element) -> Result<(), OfflineError> {
+fn write_path_record(
+    out: &mut Out,
+    e: &Element,
+    aux_cols: &[(usize, bool)],
+) -> Result<(), OfflineError> {
     let (kind, center, normal, cw) = match e.kind {
         ElementKind::Line => ("line", None, None, None),
         ElementKind::Arc {
@@ -354,6 +381,15 @@ fn write_path_record(out: &mut Out, e: &Element) -> Result<(), OfflineError> {
         cw,
         // Rapids have no programmed feed: 0 in the file, the planner uses the machine's.
         feed_mm_s: e.feed_mm_s.unwrap_or(0.0),
+        aux: aux_cols
+            .iter()
+            .map(|&(i, wrap)| {
+                (
+                    AUX_NAMES[i],
+                    [shown(e.aux.start[i], wrap), shown(e.aux.end[i], wrap)],
+                )
+            })
+            .collect(),
     };
     let mut line = serde_json::to_vec(&record).map_err(|e| json_err(out, e))?;
     line.push(b'\n');
@@ -443,6 +479,8 @@ struct Setpoints {
     interp: Interpolator,
     /// For each machine axis, its X/Y/Z index (`None`: held at its start).
     axes: Vec<Option<usize>>,
+    /// For each machine axis, its index among the auxiliary axes.
+    aux: Vec<Option<usize>>,
     held_mm: Vec<f64>,
     filters: Vec<Option<AxisFilter>>,
     period_s: f64,
@@ -472,7 +510,11 @@ impl Setpoints {
         }
         let mut header = String::from("cycle,t_s");
         for a in &machine.axes {
-            header.push_str(&format!(",{}_mm", a.name));
+            let unit = match a.kind {
+                crate::config::AxisKind::Rotary => "deg",
+                crate::config::AxisKind::Linear => "mm",
+            };
+            header.push_str(&format!(",{}_{unit}", a.name));
         }
         header.push('\n');
         if let Some(out) = out.as_mut() {
@@ -503,6 +545,7 @@ impl Setpoints {
             row_mm: vec![0.0; machine.axes.len()],
             interp,
             axes: machine.axes.iter().map(|a| a.xyz()).collect(),
+            aux: machine.axes.iter().map(|a| a.aux()).collect(),
             held_mm: vec![0.0; machine.axes.len()],
             filters,
             period_s,
@@ -541,8 +584,13 @@ impl Setpoints {
     }
 
     fn row(&mut self, p: Vector3<f64>) -> Result<(), OfflineError> {
+        let aux = self.interp.aux();
         for (i, axis) in self.axes.iter().enumerate() {
-            let v = axis.map_or(self.held_mm[i], |k| p[k]);
+            let v = match (axis, self.aux[i], aux) {
+                (Some(k), ..) => p[*k],
+                (None, Some(j), Some(aux)) => aux[j],
+                _ => self.held_mm[i],
+            };
             self.row_mm[i] = self.filters[i].as_mut().map_or(v, |f| f.update(v));
         }
         if let Some(plot) = self.plot.as_mut() {

@@ -110,6 +110,9 @@ pub struct OptimizeReport {
     /// Lines calling subroutine files whose feed moves were left alone (their F words are in
     /// another file).
     pub subroutine_file_lines: Vec<usize>,
+    /// Lines of feed moves of the auxiliary axes (A B C U V W), left alone: the passes know
+    /// the X/Y/Z limits only.
+    pub aux_axis_lines: Vec<usize>,
     /// The largest relative reduction.
     pub largest: Option<Reduction>,
 }
@@ -141,6 +144,12 @@ impl OptimizeReport {
             s += &format!(
                 "inverse time      {} G93 line(s) left alone (first: line {first}): their F is a time, not a feed\n",
                 self.inverse_time_lines.len()
+            );
+        }
+        if let Some(first) = self.aux_axis_lines.first() {
+            s += &format!(
+                "A B C U V W       {} feed move(s) of the auxiliary axes left alone (first: line {first}): the feed optimiser knows the X/Y/Z limits only\n",
+                self.aux_axis_lines.len()
             );
         }
         if let Some(first) = self.subroutine_file_lines.first() {
@@ -531,6 +540,13 @@ pub fn optimize(
             report.blocks_examined += 1;
         }
         match feed {
+            Some(_) if e.aux.moves() => {
+                if report.aux_axis_lines.last() != Some(&e.line) {
+                    report.aux_axis_lines.push(e.line);
+                }
+                rest = true;
+                steps.push(Step::Other(e.line));
+            }
             Some(_) if interp.inverse_time() => {
                 if report.inverse_time_lines.last() != Some(&e.line) {
                     report.inverse_time_lines.push(e.line);

@@ -168,6 +168,7 @@ fn config(profile: ProfileKind) -> PlannerConfig {
         default_tolerance_mm: 0.01,
         lookahead: 1000,
         integer_periods: false,
+        aux: canmotion::planner::AuxLimits::NONE,
     }
 }
 

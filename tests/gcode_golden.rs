@@ -511,7 +511,7 @@ const ERRORS: &[(&str, usize, usize, &str)] = &[
         "G0 X1 A90",
         1,
         7,
-        "unsupported: axis word 'A' (the machine has the X, Y and Z axes only)",
+        "unsupported: axis word 'A': the machine has no A axis (add an [[axis]] with name = \"A\" to the machine file)",
     ),
     (
         "G2 @1 ^30 R1 F60",

@@ -881,7 +881,8 @@ where
         if !finite(&e.start_mm) || !finite(&e.end_mm) {
             return Err(self.geometry_error(e, "a coordinate is not finite"));
         }
-        if e.kind == ElementKind::Line && e.start_mm == e.end_mm {
+        // The auxiliary axes pass through unchanged: a move of them alone is kept.
+        if e.kind == ElementKind::Line && e.start_mm == e.end_mm && !e.aux.moves() {
             return Ok(false);
         }
         self.pos_mm = Some(e.end_mm);

@@ -694,6 +694,7 @@ fn hand_made_degenerate_input_is_an_error_or_passes_never_a_panic() {
         rapid: false,
         start_mm: v(0.0, 0.0, 0.0),
         end_mm: v(10.0, 0.0, 0.0),
+        aux: Default::default(),
         feed_mm_s: Some(1.0),
         blend: crate::gcode::BlendMode::ExactStop,
         comp: CompState::Left {
@@ -828,6 +829,7 @@ mod random {
                 rapid: false,
                 start_mm: pos,
                 end_mm: pos,
+                aux: Default::default(),
                 feed_mm_s: Some(10.0),
                 blend: BlendMode::ExactStop,
                 comp: state,

@@ -163,7 +163,17 @@ struct RawAxis {
     node: u8,
     dictionary: PathBuf,
     mode: AxisMode,
+    #[serde(default)]
+    kind: AxisKind,
+    /// Read as `counts_per_mm` (linear) or `counts_per_deg` (rotary); filled in by
+    /// [`resolve_kind`].
+    #[serde(skip)]
     counts_per_mm: f64,
+    #[serde(rename = "counts_per_mm")]
+    counts_per_mm_key: Option<f64>,
+    counts_per_deg: Option<f64>,
+    #[serde(default)]
+    wrap: bool,
     min_mm: f64,
     max_mm: f64,
     max_vel_mm_s: f64,
@@ -370,6 +380,74 @@ struct RawSdo {
     value: toml::Value,
 }
 
+/// What an axis moves: a slide (mm) or a rotary table or head (degrees).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AxisKind {
+    /// Millimetres: `counts_per_mm`, and the `_mm` keys in mm.
+    #[default]
+    Linear,
+    /// Degrees (A, B, C only): `counts_per_deg`, and the `_mm` keys read in degrees
+    /// (`min_mm`/`max_mm` deg, `max_vel_mm_s` deg/s, `max_acc_mm_s2` deg/s², `max_jerk_mm_s3`
+    /// deg/s³, `following_error_mm` deg).
+    Rotary,
+}
+
+/// Checks `kind`, the counts key that goes with it and `wrap`, and fills in the axis's counts
+/// per unit (mm or degree).
+fn resolve_kind(ctx: &Ctx, table: &str, a: &mut RawAxis) -> Result<(), ConfigError> {
+    let rotary_letter = matches!(a.name.as_str(), "A" | "B" | "C");
+    let counts = match a.kind {
+        AxisKind::Rotary if !rotary_letter => {
+            return Err(ctx.err(
+                table,
+                "kind",
+                format!(
+                    "\"rotary\" is for the A, B and C axes; {} is linear",
+                    a.name
+                ),
+            ));
+        }
+        AxisKind::Rotary => {
+            if a.counts_per_mm_key.is_some() {
+                return Err(ctx.err(
+                    table,
+                    "counts_per_mm",
+                    "a rotary axis gives counts_per_deg (counts per degree), not counts_per_mm",
+                ));
+            }
+            a.counts_per_deg.ok_or_else(|| {
+                ctx.err(
+                    table,
+                    "counts_per_deg",
+                    "a rotary axis needs counts_per_deg",
+                )
+            })?
+        }
+        AxisKind::Linear => {
+            if a.counts_per_deg.is_some() {
+                return Err(ctx.err(
+                    table,
+                    "counts_per_deg",
+                    "a linear axis gives counts_per_mm, not counts_per_deg (set kind = \"rotary\" for a rotary A, B or C axis)",
+                ));
+            }
+            a.counts_per_mm_key.ok_or_else(|| {
+                ctx.err(table, "counts_per_mm", "a linear axis needs counts_per_mm")
+            })?
+        }
+    };
+    if a.wrap && a.kind != AxisKind::Rotary {
+        return Err(ctx.err(
+            table,
+            "wrap",
+            "only a rotary axis (kind = \"rotary\") wraps",
+        ));
+    }
+    a.counts_per_mm = counts;
+    Ok(())
+}
+
 /// The position mode an axis's drive runs in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -476,7 +554,12 @@ pub struct AxisConfig {
     pub dictionary: Arc<DriveDictionary>,
     /// Position mode.
     pub mode: AxisMode,
-    /// Encoder counts per millimetre.
+    /// Linear (mm) or rotary (degrees: every `_mm` field of the axis is then in degrees).
+    pub kind: AxisKind,
+    /// A rotary axis whose position wraps at 360° (LinuxCNC's WRAPPED_ROTARY): G90 moves take
+    /// the shortest way, and its travel limits do not apply.
+    pub wrap: bool,
+    /// Encoder counts per millimetre (per degree for a rotary axis).
     pub counts_per_mm: f64,
     /// Lower travel limit.
     pub min_mm: f64,
@@ -520,6 +603,19 @@ impl AxisConfig {
             "Z" => Some(2),
             _ => None,
         }
+    }
+
+    /// Index of the axis among the auxiliary axes A B C U V W ([`crate::gcode::AUX_LETTERS`]);
+    /// `None` for X, Y and Z.
+    pub fn aux(&self) -> Option<usize> {
+        crate::gcode::AUX_LETTERS
+            .iter()
+            .position(|l| self.name.len() == 1 && self.name.starts_with(*l))
+    }
+
+    /// Whether the travel limits apply (not on a wrapped rotary axis).
+    pub fn has_travel(&self) -> bool {
+        !self.wrap
     }
 
     /// Millimetres to counts (rounded to the nearest count).
@@ -620,6 +716,12 @@ impl Machine {
         setup.g28_mm = self.program.g28_mm;
         setup.g30_mm = self.program.g30_mm;
         setup.work_offsets_mm = self.program.work_offsets_mm;
+        for a in &self.axes {
+            if let Some(i) = a.aux() {
+                setup.aux_axes[i] = true;
+                setup.aux_wrapped[i] = a.wrap;
+            }
+        }
         // G5/G5.1 are sampled within the planner's chord tolerance (0 there: no limit on
         // arcs, and the interpreter's default for splines).
         if self.planner.chord_tol_mm >= crate::gcode::MIN_SPLINE_TOL_MM {
@@ -726,10 +828,16 @@ fn planner_config(
 ) -> Result<crate::planner::PlannerConfig, ConfigError> {
     let mut jerk = nalgebra::Vector3::repeat(f64::INFINITY);
     let mut min_acc = f64::INFINITY;
+    let mut aux = crate::planner::AuxLimits::NONE;
     for a in &machine.axes {
         if let Some(i) = a.xyz() {
             jerk[i] = a.max_jerk_mm_s3;
             min_acc = min_acc.min(a.max_acc_mm_s2);
+        }
+        if let Some(i) = a.aux() {
+            aux.max_vel[i] = a.max_vel_mm_s;
+            aux.max_acc[i] = a.max_acc_mm_s2;
+            aux.max_jerk[i] = a.max_jerk_mm_s3;
         }
     }
     let number = |key: &str, v: Option<f64>, default: f64, ok: &dyn Fn(f64) -> bool, what: &str| {
@@ -790,6 +898,7 @@ fn planner_config(
             }
         },
         integer_periods: raw.integer_periods,
+        aux,
     };
     config
         .validate()
@@ -900,7 +1009,7 @@ impl Machine {
         text: &str,
         mut load_dict: impl FnMut(&Path) -> Result<DriveDictionary, ConfigError>,
     ) -> Result<Machine, ConfigError> {
-        let raw: RawMachine = parse_toml(path, text)?;
+        let mut raw: RawMachine = parse_toml(path, text)?;
         let ctx = Ctx { file: path };
         if raw.bus.cycle_us < 250 || raw.bus.cycle_us > 100_000 {
             return Err(ctx.err(
@@ -991,7 +1100,7 @@ impl Machine {
         let mut nodes = BTreeSet::new();
         let mut axes = Vec::new();
         let mut dicts: Vec<(PathBuf, Arc<DriveDictionary>)> = Vec::new();
-        for a in &raw.axis {
+        for a in &mut raw.axis {
             let table = format!("axis {}", a.name);
             if !AXIS_LETTERS.contains(&a.name.as_str()) {
                 return Err(ctx.err(
@@ -1019,6 +1128,8 @@ impl Machine {
             if !names.insert(a.name.clone()) {
                 return Err(ctx.err(table, "name", "axis defined twice"));
             }
+            resolve_kind(&ctx, &table, a)?;
+            let a = &*a;
             if a.node == 0 || a.node > 127 {
                 return Err(ctx.err(table, "node", format!("{} outside 1..=127", a.node)));
             }
@@ -1249,6 +1360,8 @@ impl Machine {
                 node: a.node,
                 dictionary: dict,
                 mode: a.mode,
+                kind: a.kind,
+                wrap: a.wrap,
                 counts_per_mm: a.counts_per_mm,
                 min_mm: a.min_mm,
                 max_mm: a.max_mm,

@@ -13,7 +13,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 pub use dictionary::{Access, DriveDictionary, ObjectDef, SubDef};
-pub use machine::{AxisConfig, AxisMode, Machine, PdoConfig};
+pub use machine::{AxisConfig, AxisKind, AxisMode, Machine, PdoConfig};
 
 /// A configuration error: which file, which table and key, and what is wrong.
 #[derive(Debug, thiserror::Error)]

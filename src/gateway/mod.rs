@@ -19,6 +19,7 @@ use nalgebra::Vector3;
 use crate::bus::{Bus, BusError, Filter, Frame};
 use crate::canopen::{AbortCode, emcy};
 use crate::config::{ConfigError, Machine};
+use crate::gcode::AuxPos;
 use crate::interpolator::{Interpolator, OverrideRamp};
 use crate::master::alarm::{Alarm, Failure, SharedBusError};
 use crate::master::cyclic::{CycleRecord, CyclicMaster, Phase};
@@ -403,7 +404,9 @@ pub struct Summary {
     pub cycles: u64,
     /// Axis letters, machine order.
     pub axes: Vec<String>,
-    /// Max |following error| per axis, mm.
+    /// The unit of each axis's positions: `mm`, or `deg` on a rotary axis.
+    pub units: Vec<&'static str>,
+    /// Max |following error| per axis, mm (degrees on a rotary axis).
     pub max_ferr_mm: Vec<f64>,
     /// Final position actual per axis, counts.
     pub final_counts: Vec<i32>,
@@ -537,8 +540,11 @@ impl std::fmt::Display for Summary {
         for (i, a) in self.axes.iter().enumerate() {
             writeln!(
                 f,
-                "axis {a}            max following error {:.4} mm, end {} counts (setpoint {})",
-                self.max_ferr_mm[i], self.final_counts[i], self.target_counts[i]
+                "axis {a}            max following error {:.4} {}, end {} counts (setpoint {})",
+                self.max_ferr_mm[i],
+                self.units.get(i).copied().unwrap_or("mm"),
+                self.final_counts[i],
+                self.target_counts[i]
             )?;
         }
         for w in &self.warnings {
@@ -624,8 +630,19 @@ pub fn plan_program(
     text: &str,
     start_mm: Vector3<f64>,
 ) -> Result<Plan, GatewayError> {
+    plan_program_at(machine, name, text, start_mm, [0.0; 6])
+}
+
+/// [`plan_program`] with the auxiliary axes (A B C U V W) at `start_aux`.
+pub fn plan_program_at(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Result<Plan, GatewayError> {
     use crate::gcode::{Error as GcodeError, ErrorKind as GcodeErrorKind, Item};
-    let program = interpret_program(machine, name, text, start_mm)?;
+    let program = interpret_program_at(machine, name, text, start_mm, start_aux)?;
     for item in &program.items {
         match item {
             Item::Motion(e) => check_element(machine, name, e)?,
@@ -662,11 +679,36 @@ pub fn interpret_program(
     text: &str,
     start_mm: Vector3<f64>,
 ) -> Result<crate::gcode::Program, GatewayError> {
-    let program = crate::gcode::parse_program_with(text, name, machine.setup(start_mm))?;
+    interpret_program_at(machine, name, text, start_mm, [0.0; 6])
+}
+
+/// [`interpret_program`] with the auxiliary axes (A B C U V W) at `start_aux`.
+pub fn interpret_program_at(
+    machine: &Machine,
+    name: &str,
+    text: &str,
+    start_mm: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Result<crate::gcode::Program, GatewayError> {
+    let mut setup = machine.setup(start_mm);
+    setup.start_aux = start_aux;
+    let program = crate::gcode::parse_program_with(text, name, setup)?;
     Ok(crate::compensation::compensate_program(
         &program,
         machine.program.compensation,
     )?)
+}
+
+/// The auxiliary axes' positions (A B C U V W, 0 for those the machine lacks) from the drives'
+/// counts, in machine order.
+pub fn aux_of_counts(machine: &Machine, counts: &[i32]) -> AuxPos {
+    let mut aux = [0.0; 6];
+    for (a, c) in machine.axes.iter().zip(counts) {
+        if let Some(k) = a.aux() {
+            aux[k] = a.counts_to_mm(*c);
+        }
+    }
+    aux
 }
 
 /// Checks one element of the tool-centre path against the machine: every axis it moves exists
@@ -715,6 +757,37 @@ pub fn check_element(
             _ => {}
         }
     }
+    // The auxiliary axes move linearly over an element: its ends are their extremes. A
+    // wrapped rotary axis has no travel limits.
+    if element.aux.moves() {
+        for (i, letter) in crate::gcode::AUX_LETTERS.into_iter().enumerate() {
+            if element.aux.start[i] == element.aux.end[i] {
+                continue;
+            }
+            let target_mm = element.aux.end[i];
+            match machine.axes.iter().find(|a| a.aux() == Some(i)) {
+                None => {
+                    return Err(GatewayError::NoSuchAxis {
+                        file: name.to_string(),
+                        line: element.line,
+                        axis: letter,
+                        machine: machine.name.clone(),
+                    });
+                }
+                Some(a) if a.has_travel() && !(a.min_mm..=a.max_mm).contains(&target_mm) => {
+                    return Err(GatewayError::OutOfTravel {
+                        file: name.to_string(),
+                        line: element.line,
+                        axis: a.name.clone(),
+                        target_mm,
+                        min_mm: a.min_mm,
+                        max_mm: a.max_mm,
+                    });
+                }
+                _ => {}
+            }
+        }
+    }
     Ok(())
 }
 
@@ -753,8 +826,14 @@ pub trait MotionSource {
         start_mm: Vector3<f64>,
         start_counts: &[i32],
     ) -> Result<(), GatewayError>;
-    /// The motion from `armed_mm`, where the drives were enabled and armed (position actual).
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError>;
+    /// The motion from `armed_mm`, where the drives were enabled and armed (position actual),
+    /// the auxiliary axes at `armed_aux`.
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError>;
     /// The last program line completed before this motion starts (a resumed program's).
     fn completed_line(&self) -> Option<usize> {
         None
@@ -769,22 +848,29 @@ impl MotionSource for FromStart<'_> {
         &mut self,
         machine: &Machine,
         start_mm: Vector3<f64>,
-        _start_counts: &[i32],
+        start_counts: &[i32],
     ) -> Result<(), GatewayError> {
-        plan_program(
+        plan_program_at(
             machine,
             &self.0.program_name,
             &self.0.program_text,
             start_mm,
+            aux_of_counts(machine, start_counts),
         )
         .map(|_| ())
     }
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
-        plan_program(
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError> {
+        plan_program_at(
             machine,
             &self.0.program_name,
             &self.0.program_text,
             armed_mm,
+            armed_aux,
         )
     }
 }
@@ -922,7 +1008,7 @@ async fn run_async(
     let sup = supervision_from(machine, &io.health());
     let (control, progress) = (opts.control.clone(), opts.progress.clone());
     let (plan_tx, plan_rx) = mpsc::channel::<Interpolator>();
-    let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<Vector3<f64>>();
+    let (armed_tx, armed_rx) = tokio::sync::oneshot::channel::<(Vector3<f64>, AuxPos)>();
     let m = machine.clone();
     // The TPDOs, the nodes' heartbeats (a boot-up freezes its axis in the cycle that reads it)
     // and their EMCYs: the cyclic thread supervises the nodes itself.
@@ -956,8 +1042,8 @@ async fn run_async(
 
     // Plan from the armed position, on this side, and hand the motion to the cyclic thread.
     let plan_result = match armed_rx.await {
-        Ok(armed_mm) => {
-            let r = source.plan(machine, armed_mm).and_then(|plan| {
+        Ok((armed_mm, armed_aux)) => {
+            let r = source.plan(machine, armed_mm, armed_aux).and_then(|plan| {
                 Interpolator::new(plan, machine.cycle_s())
                     .map(|i| match ramp {
                         Ok(r) => i.with_override_ramp(r),
@@ -1051,6 +1137,14 @@ async fn run_async(
         streaming_cycles: master.streaming_cycles,
         cycles: timing.cycles,
         axes: machine.axes.iter().map(|a| a.name.clone()).collect(),
+        units: machine
+            .axes
+            .iter()
+            .map(|a| match a.kind {
+                crate::config::AxisKind::Rotary => "deg",
+                crate::config::AxisKind::Linear => "mm",
+            })
+            .collect(),
         max_ferr_mm: master.max_ferr_mm.clone(),
         final_counts,
         target_counts: master.setpoint_counts(),
@@ -1092,7 +1186,7 @@ struct CyclicLinks {
     /// The motion, once planned from the armed position.
     plan_rx: mpsc::Receiver<Interpolator>,
     /// The armed position (every drive following, setpoints = actual positions).
-    armed_tx: tokio::sync::oneshot::Sender<Vector3<f64>>,
+    armed_tx: tokio::sync::oneshot::Sender<(Vector3<f64>, AuxPos)>,
     /// One record per cycle for `--log`.
     log_tx: Option<mpsc::SyncSender<CycleRecord>>,
     /// The operator's override and hold.
@@ -1182,7 +1276,7 @@ fn cyclic_thread(
         if master.phase() == Phase::Armed
             && let Some(tx) = armed_tx.take()
         {
-            let _ = tx.send(master.armed_mm().expect("armed"));
+            let _ = tx.send((master.armed_mm().expect("armed"), master.armed_aux()));
         }
         if master.phase() == Phase::Armed {
             match plan_rx.try_recv() {

@@ -51,12 +51,12 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    GatewayError, MotionFailure, MotionSource, RunOptions, StopPoint, Summary, interpret_program,
-    limits, plan_program,
+    GatewayError, MotionFailure, MotionSource, RunOptions, StopPoint, Summary, aux_of_counts,
+    interpret_program, interpret_program_at, limits, plan_program_at,
 };
 use crate::bus::Bus;
 use crate::config::{AxisMode, Machine};
-use crate::gcode::{BlendMode, CompState, Element, ElementKind, Item, Plane};
+use crate::gcode::{AuxMove, AuxPos, BlendMode, CompState, Element, ElementKind, Item, Plane};
 use crate::planner::{Limits, Plan, SegmentPath, plan_items, plan_items_with};
 
 /// Version of the resume file's layout.
@@ -482,29 +482,37 @@ impl MotionSource for FromStartRecorded<'_> {
         &mut self,
         machine: &Machine,
         start_mm: Vector3<f64>,
-        _start_counts: &[i32],
+        start_counts: &[i32],
     ) -> Result<(), GatewayError> {
-        plan_program(
+        plan_program_at(
             machine,
             &self.opts.program_name,
             &self.opts.program_text,
             start_mm,
+            aux_of_counts(machine, start_counts),
         )
         .map(|_| ())
     }
 
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
-        let plan = plan_program(
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError> {
+        let plan = plan_program_at(
             machine,
             &self.opts.program_name,
             &self.opts.program_text,
             armed_mm,
+            armed_aux,
         )?;
-        let program = interpret_program(
+        let program = interpret_program_at(
             machine,
             &self.opts.program_name,
             &self.opts.program_text,
             armed_mm,
+            armed_aux,
         )?;
         self.motion = Some(Motion {
             items: program
@@ -745,7 +753,12 @@ impl MotionSource for Resumption<'_> {
         Ok(())
     }
 
-    fn plan(&mut self, machine: &Machine, armed_mm: Vector3<f64>) -> Result<Plan, GatewayError> {
+    fn plan(
+        &mut self,
+        machine: &Machine,
+        armed_mm: Vector3<f64>,
+        armed_aux: AuxPos,
+    ) -> Result<Plan, GatewayError> {
         let confirmed = self.confirmed_mm.unwrap_or(armed_mm);
         for a in &machine.axes {
             if let Some(k) = a.xyz() {
@@ -766,13 +779,31 @@ impl MotionSource for Resumption<'_> {
             rapid: false,
             start_mm: armed_mm,
             end_mm: target,
+            // Programs that move the auxiliary axes are not resumed (`prepare`): they stay
+            // where the drives are.
+            aux: AuxMove::still(armed_aux),
             feed_mm_s: Some(APPROACH_MM_S),
             blend: BlendMode::ExactStop,
             comp: CompState::Off,
             plane: Plane::Xy,
         };
         let mut items = vec![(Item::Motion(approach), Origin::Approach)];
-        items.extend(self.motion.items.iter().cloned());
+        items.extend(
+            self.motion
+                .items
+                .iter()
+                .cloned()
+                .map(|(item, origin)| match item {
+                    Item::Motion(e) => (
+                        Item::Motion(Element {
+                            aux: AuxMove::still(armed_aux),
+                            ..e
+                        }),
+                        origin,
+                    ),
+                    other => (other, origin),
+                }),
+        );
         let planned: Vec<Item> = items.iter().map(|(i, _)| i.clone()).collect();
         let plan = plan_items_with(armed_mm, &planned, &limits(machine), &machine.planner)
             .map_err(|source| GatewayError::Plan {
@@ -809,6 +840,16 @@ fn prepare(machine: &Machine, opts: &RunOptions, state: &ResumeState) -> Result<
     let program = interpret_program(machine, &opts.program_name, &opts.program_text, start)
         .map_err(|e| e.to_string())?;
     let items = program.items;
+    // A resume point records X, Y and Z only.
+    if let Some(e) = items.iter().find_map(|i| match i {
+        Item::Motion(e) if e.aux.moves() => Some(e),
+        _ => None,
+    }) {
+        return Err(format!(
+            "not resuming: {} line {} moves an A, B, C, U, V or W axis, and a resume point does not record them yet: run it from the start",
+            opts.program_name, e.line
+        ));
+    }
     let target = state.stop_point();
     let rest: Vec<(Item, Origin)> = match items.get(state.item) {
         None if state.item == items.len() => Vec::new(),
@@ -933,7 +974,7 @@ mod tests {
             opts: &o,
             motion: None,
         };
-        src.plan(&m, start).unwrap();
+        src.plan(&m, start, [0.0; 6]).unwrap();
         src.motion.unwrap()
     }
 
@@ -1008,7 +1049,7 @@ mod tests {
                 confirm: &mut |_| true,
                 confirmed_mm: Some(armed),
             };
-            let rplan = r.plan(&m, armed).unwrap();
+            let rplan = r.plan(&m, armed, [0.0; 6]).unwrap();
             let rs = rplan.segments();
             // Approach, the rest of the interrupted element, then the original segments.
             assert_eq!(rs[0].start_mm, armed);
@@ -1109,6 +1150,27 @@ mod tests {
             e.contains("is not the one the resume point was recorded on"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_program_that_moves_an_auxiliary_axis_is_not_resumed() {
+        let m = Machine::load(std::path::Path::new("dictionaries/machines/demo-xyza.toml"))
+            .expect("demo-xyza");
+        let text = "G1 X10 A90 F600\nG1 X20 F600\nM2\n";
+        let o = opts(text);
+        let mut src = FromStartRecorded {
+            opts: &o,
+            motion: None,
+        };
+        src.plan(&m, Vector3::zeros(), [0.0; 6]).unwrap();
+        let orig = src.motion.unwrap();
+        let (_, plan) = orig.plan.clone().unwrap();
+        let mut stop = stop_at(&plan, plan.segments()[1].start_time_s + 0.1);
+        stop.rest_setpoint_mm = vec![0.0; 4];
+        stop.rest_actual_counts = vec![0; 4];
+        let state = orig.state_after(&m, &o, &failure(stop)).unwrap();
+        let e = prepare(&m, &o, &state).err().unwrap();
+        assert!(e.contains("line 1 moves an A, B, C, U, V or W axis"), "{e}");
     }
 
     #[test]

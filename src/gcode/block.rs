@@ -163,8 +163,9 @@ fn classify_m(number: u32) -> Known {
 }
 
 /// The letters a block may hold (besides G and M), in a fixed order for the word table.
-const LETTERS: [char; 18] = [
-    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N', '@', '^',
+const LETTERS: [char; 24] = [
+    'X', 'Y', 'Z', 'I', 'J', 'K', 'R', 'P', 'Q', 'F', 'S', 'T', 'D', 'H', 'L', 'N', '@', '^', 'A',
+    'B', 'C', 'U', 'V', 'W',
 ];
 
 /// The index of `letter` in [`LETTERS`] (a `match`, not a search: it runs for every word).
@@ -189,6 +190,12 @@ fn letter_index(letter: char) -> Option<usize> {
         'N' => 15,
         '@' => 16,
         '^' => 17,
+        'A' => 18,
+        'B' => 19,
+        'C' => 20,
+        'U' => 21,
+        'V' => 22,
+        'W' => 23,
         _ => return None,
     };
     debug_assert_eq!(LETTERS.get(k), Some(&letter));
@@ -201,8 +208,8 @@ pub(super) fn letter_bit(letter: char) -> u32 {
     letter_index(letter).map_or(0, |k| 1 << k)
 }
 
-/// The bits ([`letter_bit`]) of X, Y, Z, `@` and `^`: the words that make a move.
-const AXIS_BITS: u32 = 0b11 << 16 | 0b111;
+/// The bits ([`letter_bit`]) of X, Y, Z, `@`, `^` and A B C U V W: the words that make a move.
+const AXIS_BITS: u32 = 0b11_1111 << 18 | 0b11 << 16 | 0b111;
 
 /// The words of one line, checked and sorted into modal groups.
 #[derive(Debug, Default, Clone)]
@@ -408,7 +415,7 @@ impl Block {
             return None;
         }
         let mut first: Option<&Word> = None;
-        for k in [0, 1, 2, 16, 17] {
+        for k in [0, 1, 2, 16, 17, 18, 19, 20, 21, 22, 23] {
             if let Some(Some(w)) = self.words.get(k)
                 && first.is_none_or(|f| w.col < f.col)
             {
@@ -555,7 +562,7 @@ mod tests {
 
     #[test]
     fn the_axis_bits_are_the_axis_letters() {
-        let bits = "XYZ@^".chars().fold(0, |m, c| m | letter_bit(c));
+        let bits = "XYZ@^ABCUVW".chars().fold(0, |m, c| m | letter_bit(c));
         assert_eq!(bits, AXIS_BITS);
         let b = read("G0 X1 Y2").unwrap();
         assert_eq!(b.present(), letter_bit('X') | letter_bit('Y'));

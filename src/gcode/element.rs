@@ -8,6 +8,83 @@ use std::f64::consts::{PI, TAU};
 
 use nalgebra::Vector3;
 
+/// The auxiliary axes in the order of [`AuxPos`]: the rotary axes A, B, C (degrees) and the
+/// secondary linear axes U, V, W (millimetres), as RS274/NGC names them.
+pub const AUX_LETTERS: [char; 6] = ['A', 'B', 'C', 'U', 'V', 'W'];
+
+/// Positions of the auxiliary axes, in the order of [`AUX_LETTERS`]: A, B, C in degrees, U, V,
+/// W in millimetres (machine coordinates).
+pub type AuxPos = [f64; 6];
+
+/// How the auxiliary axes move over an element: linearly in the path parameter, from `start`
+/// to `end` (LinuxCNC's trajectory planner carries them the same way, on arcs too).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AuxMove {
+    /// Where they are at the element's start (the previous element's `end`, bit for bit).
+    pub start: AuxPos,
+    /// Where they are at its end.
+    pub end: AuxPos,
+}
+
+impl AuxMove {
+    /// No motion of the auxiliary axes: they stay at `at`.
+    pub fn still(at: AuxPos) -> AuxMove {
+        AuxMove { start: at, end: at }
+    }
+
+    /// Whether any auxiliary axis moves.
+    pub fn moves(&self) -> bool {
+        self.start != self.end
+    }
+
+    /// `end − start`, per axis.
+    pub fn delta(&self) -> AuxPos {
+        std::array::from_fn(|i| self.end[i] - self.start[i])
+    }
+
+    /// The positions at fraction `f` of the way: exactly `start` at `f <= 0` and exactly `end`
+    /// at `f >= 1`; the second half is measured back from the end (as a line's points), and an
+    /// axis that does not move keeps its value bit for bit.
+    pub fn at(&self, f: f64) -> AuxPos {
+        if f.is_nan() || f <= 0.0 {
+            return self.start;
+        }
+        if f >= 1.0 {
+            return self.end;
+        }
+        std::array::from_fn(|i| {
+            let (a, b) = (self.start[i], self.end[i]);
+            if a == b {
+                a
+            } else if f <= 0.5 {
+                a + (b - a) * f
+            } else {
+                b - (b - a) * (1.0 - f)
+            }
+        })
+    }
+
+    /// The length of the path parameter of a move without X/Y/Z motion (LinuxCNC's canon):
+    /// the Euclidean length of the U/V/W motion if they move, else that of the A/B/C motion
+    /// (degrees). 0 when no auxiliary axis moves.
+    pub fn length(&self) -> f64 {
+        let d = self.delta();
+        let uvw = d[3].hypot(d[4]).hypot(d[5]);
+        if uvw > 0.0 {
+            uvw
+        } else {
+            d[0].hypot(d[1]).hypot(d[2])
+        }
+    }
+
+    /// Whether the move is rotary only (A/B/C move, U/V/W do not): then, without X/Y/Z
+    /// motion, the feed is in degrees per minute.
+    pub fn rotary_only(&self) -> bool {
+        let d = self.delta();
+        d[3] == 0.0 && d[4] == 0.0 && d[5] == 0.0 && (d[0] != 0.0 || d[1] != 0.0 || d[2] != 0.0)
+    }
+}
+
 /// Two arc end points closer than this (in the arc's plane) make a full circle.
 pub const FULL_CIRCLE_EPS_MM: f64 = 1e-7;
 
@@ -125,8 +202,11 @@ pub struct Element {
     pub start_mm: Vector3<f64>,
     /// Where it ends.
     pub end_mm: Vector3<f64>,
-    /// Path feed; `None` for rapids. Under G93 (inverse time) it is the element's length
-    /// divided by the programmed time.
+    /// The auxiliary axes (A B C U V W) over the element, linear in the path parameter.
+    pub aux: AuxMove,
+    /// Path feed, in units of the path parameter ([`Element::length_mm`]) per second: mm/s
+    /// with X/Y/Z motion, else mm/s of U/V/W, else deg/s of A/B/C; `None` for rapids. Under
+    /// G93 (inverse time) it is the element's length divided by the programmed time.
     pub feed_mm_s: Option<f64>,
     /// The blending mode in force.
     pub blend: BlendMode,
@@ -150,11 +230,16 @@ impl Element {
         }
     }
 
-    /// Path length: the straight distance, or the arc (helix) length.
+    /// Path length: the straight distance, or the arc (helix) length. A line without X/Y/Z
+    /// motion takes the length of its auxiliary axes' motion ([`AuxMove::length`]; degrees
+    /// for a rotary-only move), as LinuxCNC's canon does for the feed.
     pub fn length_mm(&self) -> f64 {
         match self.arc() {
             Some(arc) => arc.length_mm,
-            None => (self.end_mm - self.start_mm).norm(),
+            None => {
+                let xyz = (self.end_mm - self.start_mm).norm();
+                if xyz > 0.0 { xyz } else { self.aux.length() }
+            }
         }
     }
 
@@ -397,6 +482,7 @@ mod tests {
             rapid: false,
             start_mm: v(10.0, 0.0, 0.0),
             end_mm: v(-10.0, 0.0, 0.0),
+            aux: AuxMove::default(),
             feed_mm_s: Some(1.0),
             blend: BlendMode::ExactStop,
             comp: CompState::Off,

@@ -33,7 +33,10 @@ use std::rc::Rc;
 use nalgebra::Vector3;
 
 use super::block::{Block, BlockError, Code, as_index, letter_bit};
-use super::element::{BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane};
+use super::element::{
+    AUX_LETTERS, AuxMove, AuxPos, BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM,
+    Plane,
+};
 use super::expr::Params;
 use super::lex::{
     Control, Keyword, Label, LineKind, Scanner, Word, has_m99, peek_control, peek_program_number,
@@ -118,6 +121,16 @@ pub struct Setup {
     /// setup's. The position is still [`Setup::start_mm`] (where the machine is). Default
     /// `None`: the defaults above, as at power-on.
     pub carry: Option<Carry>,
+    /// Where the auxiliary axes A B C (degrees) U V W (mm) are, in machine coordinates.
+    /// Default 0.
+    pub start_aux: AuxPos,
+    /// Which auxiliary axes the machine has, in the order of [`AUX_LETTERS`]: a program that
+    /// moves another one is an error ([`ErrorKind::AxisNotConfigured`]). Default: none.
+    pub aux_axes: [bool; 6],
+    /// Which of them are wrapped rotary axes (LinuxCNC's WRAPPED_ROTARY): a G90 position is
+    /// in `(−360°, 360°)` and taken the shortest way round from where the axis stands (its
+    /// machine coordinate keeps counting whole turns). Default: none.
+    pub aux_wrapped: [bool; 6],
 }
 
 /// The default of [`Setup::spline_tol_mm`]: 1 µm, the planner's default chord tolerance.
@@ -146,6 +159,9 @@ impl Setup {
             m99_restarts: 0,
             spline_tol_mm: DEFAULT_SPLINE_TOL_MM,
             carry: None,
+            start_aux: [0.0; 6],
+            aux_axes: [false; 6],
+            aux_wrapped: [false; 6],
         }
     }
 
@@ -155,7 +171,12 @@ impl Setup {
                 .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
         };
         let bad = |what: &'static str| Err(ErrorKind::InvalidSetup { what });
-        if !point(&self.start_mm) {
+        if !point(&self.start_mm)
+            || !self
+                .start_aux
+                .iter()
+                .all(|c| c.is_finite() && c.abs() <= MAX_POSITION_MM)
+        {
             return Err(ErrorKind::NonFiniteStart);
         }
         if !self.work_offsets_mm.iter().all(point) {
@@ -259,6 +280,16 @@ struct Saved {
 #[derive(Debug, Clone)]
 struct State {
     pos_mm: Vector3<f64>,
+    /// The auxiliary axes' current position, machine coordinates. Their program coordinate is
+    /// the machine's less the work system's origin and the G92/G52 offset
+    /// ([`State::aux_offset`]); no rotation or tool offset applies to them.
+    aux: AuxPos,
+    /// The auxiliary axes' G92/G52 offsets (in force while `g92_on`).
+    g92_aux: AuxPos,
+    /// The auxiliary axes' origins in G54 … G59.3 (G10 L2/L20; 0 at the start).
+    work_aux: [AuxPos; 9],
+    aux_axes: [bool; 6],
+    aux_wrapped: [bool; 6],
     prog_mm: Vector3<f64>,
     motion: Option<Motion>,
     plane: Plane,
@@ -311,11 +342,14 @@ struct State {
 }
 
 /// The letters a line may not hold unused, in the order they are reported.
-const CHECKED: &str = "XYZIJKRPQDHL@^";
+const CHECKED: &str = "XYZIJKRPQDHL@^ABCUVW";
 
 /// The bits ([`letter_bit`]) of [`CHECKED`]: X Y Z I J K R P Q (0 to 8), D H L (12 to 14),
-/// `@` `^` (16, 17).
-const CHECKED_BITS: u32 = 0b11 << 16 | 0b111 << 12 | 0b1_1111_1111;
+/// `@` `^` (16, 17), A B C U V W (18 to 23).
+const CHECKED_BITS: u32 = 0b11_1111 << 18 | 0b11 << 16 | 0b111 << 12 | 0b1_1111_1111;
+
+/// The bits ([`letter_bit`]) of A B C U V W.
+const AUX_BITS: u32 = 0b11_1111 << 18;
 
 fn rotate_xy(v: Vector3<f64>, deg: f64) -> Vector3<f64> {
     if deg == 0.0 {
@@ -364,6 +398,11 @@ impl State {
     fn new(setup: Setup) -> State {
         State {
             pos_mm: setup.start_mm,
+            aux: setup.start_aux,
+            g92_aux: [0.0; 6],
+            work_aux: [[0.0; 6]; 9],
+            aux_axes: setup.aux_axes,
+            aux_wrapped: setup.aux_wrapped,
             prog_mm: setup.start_mm - setup.work_offsets_mm[0],
             motion: None,
             plane: Plane::Xy,
@@ -1030,6 +1069,12 @@ impl State {
                             None => base[i],
                         };
                     }
+                    let base = self.aux_g92();
+                    let words = self.aux_words(b)?;
+                    let work = self.work_aux[self.coord];
+                    for (i, w) in words.iter().enumerate() {
+                        self.g92_aux[i] = w.map_or(base[i], |v| self.aux[i] - work[i] - v);
+                    }
                     self.g92_on = true;
                     self.resync();
                 }
@@ -1043,11 +1088,17 @@ impl State {
                     for (i, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
                         self.g92_mm[i] = self.take_mm(b, letter).unwrap_or(base[i]);
                     }
+                    let base = self.aux_g92();
+                    let words = self.aux_words(b)?;
+                    for (i, w) in words.iter().enumerate() {
+                        self.g92_aux[i] = w.unwrap_or(base[i]);
+                    }
                     self.g92_on = true;
                     self.resync();
                 }
                 921 => {
                     self.g92_mm = Vector3::zeros();
+                    self.g92_aux = [0.0; 6];
                     self.g92_on = false;
                     self.resync();
                 }
@@ -1322,6 +1373,23 @@ impl State {
                 } else {
                     self.g10_l20(b, index);
                 }
+                // The auxiliary axes: L2 sets the origin, L20 moves it so that the current
+                // position reads the word (G92/G52 counted).
+                let words = self.aux_words(b)?;
+                let g92 = self.aux_g92();
+                for (i, w) in words.iter().enumerate() {
+                    if let Some(v) = *w {
+                        let origin = if l.value as u32 == 2 {
+                            v
+                        } else {
+                            self.aux[i] - g92[i] - v
+                        };
+                        if !(origin.is_finite() && origin.abs() <= MAX_POSITION_MM) {
+                            return Err(err_at(code.col, ErrorKind::PositionOutOfRange));
+                        }
+                        self.work_aux[index][i] = origin;
+                    }
+                }
                 if !self.work_offsets_mm[index]
                     .iter()
                     .all(|c| c.abs() <= MAX_POSITION_MM)
@@ -1470,9 +1538,23 @@ impl State {
         feed_mm_s: Option<f64>,
         out: &mut VecDeque<Item>,
     ) {
+        let aux = self.aux;
+        self.push_move(line, col, rapid, (end_mm, aux), feed_mm_s, out);
+    }
+
+    /// [`push_line`](Self::push_line) with the auxiliary axes' end too.
+    fn push_move(
+        &mut self,
+        line: usize,
+        col: usize,
+        rapid: bool,
+        (end_mm, aux_end): (Vector3<f64>, AuxPos),
+        feed_mm_s: Option<f64>,
+        out: &mut VecDeque<Item>,
+    ) {
         // The first straight move after G40 is kept even with no length: it is the exit move
         // that takes the tool from its offset point back to the programmed point.
-        if end_mm != self.pos_mm || self.ended_comp.is_some() {
+        if end_mm != self.pos_mm || aux_end != self.aux || self.ended_comp.is_some() {
             out.push_back(Item::Motion(Element {
                 line,
                 col,
@@ -1480,6 +1562,10 @@ impl State {
                 rapid,
                 start_mm: self.pos_mm,
                 end_mm,
+                aux: AuxMove {
+                    start: self.aux,
+                    end: aux_end,
+                },
                 feed_mm_s,
                 blend: self.blend,
                 comp: self.comp,
@@ -1487,6 +1573,102 @@ impl State {
             }));
         }
         self.pos_mm = end_mm;
+        self.aux = aux_end;
+    }
+
+    /// The auxiliary axes' G92/G52 offsets in force.
+    fn aux_g92(&self) -> AuxPos {
+        if self.g92_on { self.g92_aux } else { [0.0; 6] }
+    }
+
+    /// The auxiliary axes' offsets in force: the work system's origin plus G92/G52 (no
+    /// rotation or tool offset applies to them).
+    fn aux_offset(&self) -> AuxPos {
+        let g92 = self.aux_g92();
+        let work = self.work_aux[self.coord];
+        std::array::from_fn(|i| work[i] + g92[i])
+    }
+
+    /// The values of the line's A B C U V W words (U V W in mm), for G92 and G52; an axis the
+    /// machine lacks is an error.
+    fn aux_words(&mut self, b: &Block) -> Result<[Option<f64>; 6], BlockError> {
+        let mut out = [None; 6];
+        if b.present() & AUX_BITS == 0 {
+            return Ok(out);
+        }
+        let scale = self.scale();
+        for (i, letter) in AUX_LETTERS.into_iter().enumerate() {
+            if let Some(w) = self.take(b, letter) {
+                if !self.aux_axes[i] {
+                    return Err(err_at(w.col, ErrorKind::AxisNotConfigured { letter }));
+                }
+                out[i] = Some(if i >= 3 { w.value * scale } else { w.value });
+            }
+        }
+        Ok(out)
+    }
+
+    /// The auxiliary axes' target of the line's A B C U V W words (G90/G91 applied; U V W in
+    /// the program's units, A B C in degrees; a wrapped axis under G90 the shortest way).
+    fn aux_target(&mut self, b: &Block) -> Result<AuxPos, BlockError> {
+        self.aux_target_in(b, false)
+    }
+
+    /// [`aux_target`](Self::aux_target), in machine coordinates (G53: absolute, no offset)
+    /// when `machine`.
+    fn aux_target_in(&mut self, b: &Block, machine: bool) -> Result<AuxPos, BlockError> {
+        let mut t = self.aux;
+        if b.present() & AUX_BITS == 0 {
+            return Ok(t);
+        }
+        let scale = self.scale();
+        let off = if machine { [0.0; 6] } else { self.aux_offset() };
+        let incremental = self.incremental && !machine;
+        for (i, letter) in AUX_LETTERS.into_iter().enumerate() {
+            let Some(w) = self.take(b, letter) else {
+                continue;
+            };
+            if !self.aux_axes[i] {
+                return Err(err_at(w.col, ErrorKind::AxisNotConfigured { letter }));
+            }
+            let v = if i >= 3 { w.value * scale } else { w.value };
+            t[i] = if incremental {
+                t[i] + v
+            } else if self.aux_wrapped[i] && !machine {
+                if v.abs() >= 360.0 {
+                    return Err(err_at(
+                        w.col,
+                        ErrorKind::WrappedPositionOutOfRange {
+                            letter,
+                            value_deg: v,
+                        },
+                    ));
+                }
+                // The shortest way from where the axis reads (modulo a turn) to `v`; half a
+                // turn goes the positive way.
+                let mut d = (v - (t[i] - off[i])).rem_euclid(360.0);
+                if d > 180.0 {
+                    d -= 360.0;
+                }
+                t[i] + d
+            } else {
+                v + off[i]
+            };
+            if !(t[i].is_finite() && t[i].abs() <= MAX_POSITION_MM) {
+                return Err(err_at(w.col, ErrorKind::PositionOutOfRange));
+            }
+        }
+        if t != self.aux && self.comp != CompState::Off {
+            return Err(err_at(
+                b.first_axis().map_or(0, |w| w.col),
+                ErrorKind::Unsupported {
+                    what: "A, B, C, U, V or W motion under cutter compensation (G41/G42)".into(),
+                    reason: "cutter compensation does not carry the auxiliary axes yet: move them \
+                             before G41/G42 or after G40",
+                },
+            ));
+        }
+        Ok(t)
     }
 
     fn motion(
@@ -1591,8 +1773,10 @@ impl State {
                 }
             }
             self.check_position(col, &m)?;
-            let f = feed(self, &|| (m - self.pos_mm).norm())?;
-            self.push_line(line, col, rapid, m, f, out);
+            let aux = self.aux_target_in(b, true)?;
+            let f = feed(self, &|| line_length(m - self.pos_mm, &self.aux, &aux))?;
+            let f = rotary_feed(self, m, &aux, f);
+            self.push_move(line, col, rapid, (m, aux), f, out);
             self.ended_comp = None;
             self.resync();
             return Ok(());
@@ -1611,8 +1795,10 @@ impl State {
                 let prog = self.prog_target_polar(b)?;
                 let m = self.machine_of(prog);
                 self.check_position(col, &m)?;
-                let f = feed(self, &|| (m - self.pos_mm).norm())?;
-                self.push_line(line, col, rapid, m, f, out);
+                let aux = self.aux_target(b)?;
+                let f = feed(self, &|| line_length(m - self.pos_mm, &self.aux, &aux))?;
+                let f = rotary_feed(self, m, &aux, f);
+                self.push_move(line, col, rapid, (m, aux), f, out);
                 self.prog_mm = prog;
                 self.ended_comp = None;
             }
@@ -1779,6 +1965,7 @@ impl State {
         center[c] = cc;
         let m_end = self.machine_of(end);
         self.check_position(col, &m_end)?;
+        let aux_end = self.aux_target(b)?;
         let center_mm = self.to_machine(center);
         let mut normal = Vector3::zeros();
         normal[n] = if cw { -1.0 } else { 1.0 };
@@ -1797,6 +1984,10 @@ impl State {
             rapid: false,
             start_mm: self.pos_mm,
             end_mm: m_end,
+            aux: AuxMove {
+                start: self.aux,
+                end: aux_end,
+            },
             feed_mm_s: None,
             blend: self.blend,
             comp: self.comp,
@@ -1806,6 +1997,7 @@ impl State {
             return Err(err_at(col, ErrorKind::ArcZeroRadius));
         }
         self.pos_mm = m_end;
+        self.aux = aux_end;
         self.prog_mm = end;
         Ok(element)
     }
@@ -1823,6 +2015,12 @@ impl State {
             if let Some(w) = b.word(letter) {
                 let kind = match letter {
                     'X' | 'Y' | 'Z' => ErrorKind::AxisWithoutMotion,
+                    'A' | 'B' | 'C' | 'U' | 'V' | 'W' => ErrorKind::Unsupported {
+                        what: format!("axis word '{letter}' here"),
+                        reason: "A, B, C, U, V and W are read on G0, G1, G2, G3 and G53 moves and \
+                                 by G92, G52 and G10 L2/L20 only: not on G28/G30, canned cycles or \
+                                 splines",
+                    },
                     '@' | '^' => ErrorKind::Unsupported {
                         what: format!("polar coordinate word '{letter}' here"),
                         reason: "polar coordinates are read on G0 and G1 moves only",
@@ -1846,6 +2044,43 @@ impl State {
             }
         }
         Ok(())
+    }
+}
+
+/// The path length of a straight move by `xyz_mm`, the auxiliary axes going from `from` to
+/// `to`: the X/Y/Z distance, else that of U/V/W, else that of A/B/C (degrees), as
+/// [`Element::length_mm`].
+fn line_length(xyz_mm: Vector3<f64>, from: &AuxPos, to: &AuxPos) -> f64 {
+    let xyz = xyz_mm.norm();
+    if xyz > 0.0 {
+        xyz
+    } else {
+        AuxMove {
+            start: *from,
+            end: *to,
+        }
+        .length()
+    }
+}
+
+/// The feed of a straight move to `end_mm` and `aux`: a rotary-only move (no X/Y/Z, U/V/W
+/// motion) takes F in degrees per minute, whatever G20/G21 (LinuxCNC's canon), so the inch
+/// scaling of the G94 feed is undone there. G93 feeds are times: nothing to undo.
+fn rotary_feed(
+    state: &State,
+    end_mm: Vector3<f64>,
+    aux: &AuxPos,
+    feed_mm_s: Option<f64>,
+) -> Option<f64> {
+    let rotary_only = end_mm == state.pos_mm
+        && AuxMove {
+            start: state.aux,
+            end: *aux,
+        }
+        .rotary_only();
+    match feed_mm_s {
+        Some(f) if rotary_only && !state.inverse_time => Some(f / state.scale()),
+        other => other,
     }
 }
 

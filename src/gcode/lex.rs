@@ -283,7 +283,7 @@ impl Scanner {
                     let letter = c.to_ascii_uppercase();
                     match letter {
                         'G' | 'M' | 'N' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'P' | 'Q'
-                        | 'F' | 'S' | 'T' | 'D' | 'H' | 'L' => {
+                        | 'F' | 'S' | 'T' | 'D' | 'H' | 'L' | 'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
                             i += 1;
                             let value = real_value(chars, &mut i, params, 0, letter).map_err(
                                 |(c, k)| match k {
@@ -320,15 +320,6 @@ impl Scanner {
                                     LineKind::ProgramNumber
                                 }
                             });
-                        }
-                        'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
-                            return Err((
-                                col,
-                                unsupported(
-                                    format!("axis word '{letter}'"),
-                                    "the machine has the X, Y and Z axes only",
-                                ),
-                            ));
                         }
                         'E' => {
                             return Err((

@@ -31,6 +31,10 @@
 //!   Centre-format arcs whose end is off the circle within LinuxCNC's tolerance are spirals.
 //!   G5.1 (quadratic) and G5 (cubic) splines in G17, sampled into lines on the exact curve
 //!   within [`Setup::spline_tol_mm`] (`splines.rs`).
+//! - Auxiliary axes A B C (degrees) and U V W on G0/G1/G2/G3/G53 moves, G92/G52 and G10
+//!   L2/L20, for the axes [`Setup::aux_axes`] names; carried linearly in the path parameter
+//!   ([`AuxMove`]), F as LinuxCNC's canon reads it (X/Y/Z path speed, else U/V/W, else deg/min
+//!   over the A/B/C length), wrapped rotary axes the shortest way ([`Setup::aux_wrapped`]).
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
 //!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D L
 //!   (as LinuxCNC reads them: D0 the tool in the spindle, a negative diameter swaps the side,
@@ -60,7 +64,8 @@
 //!
 //! Everything else is an [`Error`] naming file, line and column, never a silent skip: the
 //! G87/G88 cycles, G33/G76 and other spindle-synchronised motion, G95/G96, G38 probing, NURBS
-//! (G5.2/G5.3), polar words on arcs and splines, A/B/C/U/V/W axes, the other system parameters, spirals beyond the
+//! (G5.2/G5.3), polar words on arcs and splines, A/B/C/U/V/W words anywhere but on G0/G1/G2/G3/G53 moves (and
+//! their motion under cutter compensation), the other system parameters, spirals beyond the
 //! tolerance, computed labels on anything but `call` are [`ErrorKind::Unsupported`]; a
 //! subroutine neither defined nor found as a file is [`ErrorKind::UndefinedSubroutine`].
 //!
@@ -86,7 +91,8 @@ use std::io::BufRead;
 use nalgebra::Vector3;
 
 pub use element::{
-    ArcGeometry, BlendMode, CompState, Element, ElementKind, FULL_CIRCLE_EPS_MM, Plane,
+    AUX_LETTERS, ArcGeometry, AuxMove, AuxPos, BlendMode, CompState, Element, ElementKind,
+    FULL_CIRCLE_EPS_MM, Plane,
 };
 pub use expr::{MAX_NAMED_PARAMETERS, MAX_NESTING, MAX_USER_PARAMETER};
 pub use interpreter::{
@@ -120,6 +126,9 @@ pub fn split_lines_inclusive(text: &[u8]) -> impl Iterator<Item = &[u8]> {
 pub const MM_PER_INCH: f64 = 25.4;
 
 /// One output of the interpreter, in program order.
+// Items pass through the stages one at a time, by value: boxing the element (the large variant
+// since it carries the auxiliary axes) would allocate once per motion line in the front end.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Item {
     /// A line, arc or helix.
@@ -394,6 +403,15 @@ impl Error {
         match &self.kind {
             ErrorKind::Unsupported { what, .. } => Some(what),
             ErrorKind::ArcRadiusMismatch { .. } => Some("spiral arc"),
+            // Valid G-code for a machine with that axis.
+            ErrorKind::AxisNotConfigured { letter } => Some(match letter {
+                'A' => "axis A (not on this machine)",
+                'B' => "axis B (not on this machine)",
+                'C' => "axis C (not on this machine)",
+                'U' => "axis U (not on this machine)",
+                'V' => "axis V (not on this machine)",
+                _ => "axis W (not on this machine)",
+            }),
             _ => None,
         }
     }
@@ -742,6 +760,25 @@ pub enum ErrorKind {
     /// Axis words and no motion mode in force.
     #[error("axis words with no motion mode in force: add G0, G1, G2 or G3")]
     AxisWithoutMotion,
+    /// A word of an axis (A B C U V W) the machine does not have.
+    #[error(
+        "unsupported: axis word '{letter}': the machine has no {letter} axis (add an [[axis]] with name = \"{letter}\" to the machine file)"
+    )]
+    AxisNotConfigured {
+        /// The axis letter.
+        letter: char,
+    },
+    /// An absolute (G90) position of a wrapped rotary axis outside (−360°, 360°), as LinuxCNC
+    /// refuses it.
+    #[error(
+        "{letter}{value_deg}: a wrapped rotary axis takes absolute positions between -360 and 360 degrees (exclusive)"
+    )]
+    WrappedPositionOutOfRange {
+        /// The axis letter.
+        letter: char,
+        /// The position given.
+        value_deg: f64,
+    },
     /// Axis words with G80 on the line.
     #[error("axis words with G80 (motion off)")]
     AxisWithG80,

@@ -105,6 +105,7 @@
 //!
 //! Units in names: `_mm` millimetres, `_s` seconds.
 
+pub mod aux;
 pub mod filter;
 pub mod smooth;
 
@@ -229,16 +230,24 @@ impl OverrideRamp {
         let jerk_limited = config.profile != ProfileKind::Trapezoid;
         let mut d = f64::INFINITY;
         let mut j = f64::INFINITY;
-        for i in 0..3 {
-            let v = limits.max_vel_mm_s[i].min(limits.max_feed_mm_s);
-            let a = limits.max_acc_mm_s2[i];
-            let jerk = config.max_jerk_mm_s3[i];
+        let mut bound = |v: f64, a: f64, jerk: f64| {
             d = d.min(free * a / v);
             if jerk.is_finite() {
                 if jerk_limited {
                     d = d.min(free * jerk / (6.0 * s * a));
                 }
                 j = j.min(free * jerk / (2.0 * v));
+            }
+        };
+        for i in 0..3 {
+            let v = limits.max_vel_mm_s[i].min(limits.max_feed_mm_s);
+            bound(v, limits.max_acc_mm_s2[i], config.max_jerk_mm_s3[i]);
+        }
+        // The auxiliary axes the machine has, likewise (their own speed bounds them).
+        let aux = &config.aux;
+        for i in 0..crate::gcode::AUX_LETTERS.len() {
+            if aux.max_vel[i].is_finite() {
+                bound(aux.max_vel[i], aux.max_acc[i], aux.max_jerk[i]);
             }
         }
         if !j.is_finite() {
@@ -597,6 +606,8 @@ pub struct Interpolator {
     quiets: VecDeque<Quiet>,
     /// A change of the target waits for the quiet ramp in flight to end.
     deferred: bool,
+    /// The auxiliary axes' samples ([`aux`]).
+    aux: aux::AuxSampler,
 }
 
 impl Interpolator {
@@ -607,6 +618,7 @@ impl Interpolator {
             interp = interp.with_smoothing(spec);
         }
         for seg in plan.segments() {
+            interp.aux.note_segment(seg);
             interp.starts_mm.push_back(interp.queued_end_dist_mm);
             interp.queued_end_dist_mm += seg.length_mm;
             interp.queue.push_back(*seg);
@@ -656,6 +668,7 @@ impl Interpolator {
             lows_until_s: 0.0,
             quiets: VecDeque::new(),
             deferred: false,
+            aux: aux::AuxSampler::new(),
         })
     }
 
@@ -664,6 +677,7 @@ impl Interpolator {
     /// first [`update`](Self::update).
     pub fn with_smoothing(mut self, spec: Smoothing) -> Interpolator {
         self.smoother = Some(Smoother::new(spec, self.period_s, self.last_mm));
+        self.aux.with_filters(spec, self.period_s);
         self
     }
 
@@ -760,7 +774,7 @@ impl Interpolator {
     }
 
     fn smoother_settled(&self) -> bool {
-        self.smoother.as_ref().is_none_or(Smoother::is_settled)
+        self.smoother.as_ref().is_none_or(Smoother::is_settled) && self.aux.is_settled()
     }
 
     /// The override ramp, if any.
@@ -972,6 +986,7 @@ impl Interpolator {
         }
         self.queued_end_mm = segment.end_mm;
         self.queued_end_s = segment.end_time_s();
+        self.aux.note_segment(&segment);
         if self.line.is_none() {
             self.line = Some(segment.line);
         }
@@ -1055,6 +1070,7 @@ impl Interpolator {
                     self.smooth(raw_mm)
                 } else {
                     self.line = Some(seg.line);
+                    self.aux.sample(seg, seg.distance_at(local_s));
                     seg.position_at(local_s)
                 };
                 self.trim();
@@ -1089,6 +1105,7 @@ impl Interpolator {
             }
             self.finished = true;
             self.last_mm = self.queued_end_mm;
+            self.aux.finish();
             *out_mm = self.last_mm;
             return Status::Finished;
         }
@@ -1123,13 +1140,19 @@ impl Interpolator {
             Some(seg) => {
                 self.line = Some(seg.line);
                 let start_mm = self.starts_mm[self.geo];
+                self.aux.sample(seg, s_mm - start_mm);
                 if s_mm >= start_mm + seg.length_mm {
                     seg.end_mm
                 } else {
                     seg.point_at_distance(s_mm - start_mm)
                 }
             }
-            None => self.queued_end_mm,
+            None => {
+                if let Some(end) = self.aux.queued_end() {
+                    self.aux.sample_raw(end);
+                }
+                self.queued_end_mm
+            }
         };
         self.behind = self.behind.clamp(self.floor, self.geo);
         self.ahead = self.ahead.max(self.geo);
@@ -1219,6 +1242,12 @@ impl Interpolator {
         self.last_mm
     }
 
+    /// The auxiliary axes (A B C U V W) at the latest sample: `None` until a moving segment
+    /// was queued (it says where they start); see [`aux`].
+    pub fn aux(&self) -> Option<&crate::gcode::AuxPos> {
+        self.aux.last()
+    }
+
     /// Time of the latest sample since the start: `n · period_s` after `n` samples (real
     /// time: a hold or an override below 100 % makes it run ahead of the plan time).
     pub fn elapsed_s(&self) -> f64 {
@@ -1254,6 +1283,11 @@ impl Interpolator {
     /// End point of the queued motion (the whole program's once closed).
     pub fn queued_end_mm(&self) -> Vector3<f64> {
         self.queued_end_mm
+    }
+
+    /// Where the queued motion leaves the auxiliary axes (`None` before a moving segment).
+    pub fn queued_end_aux(&self) -> Option<crate::gcode::AuxPos> {
+        self.aux.queued_end()
     }
 
     /// End time of the queued motion (the whole program's duration once closed).

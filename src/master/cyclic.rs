@@ -50,9 +50,11 @@ pub struct AxisIo {
     pub name: String,
     /// Node id.
     pub node: u8,
-    /// X = 0, Y = 1, Z = 2; `None` for an axis the motion front end does not command yet
-    /// (A, B, C, U, V, W): it holds its position.
+    /// X = 0, Y = 1, Z = 2; `None` for the other axes.
     pub xyz: Option<usize>,
+    /// A = 0 … W = 5 ([`crate::gcode::AUX_LETTERS`]): the interpolator's auxiliary axes
+    /// ([`Interpolator::aux`]); they hold their position until a motion says where they go.
+    pub aux: Option<usize>,
     /// Mode.
     pub mode: AxisMode,
     /// The axis letter, for alarms (a `&'static str`: raising an alarm allocates nothing).
@@ -68,6 +70,8 @@ pub struct AxisIo {
     counts_per_mm: f64,
     min_mm: f64,
     max_mm: f64,
+    /// The travel limits apply (not on a wrapped rotary axis).
+    has_travel: bool,
     max_vel_mm_s: f64,
     max_acc_mm_s2: f64,
     /// `enable_timeout_ms`: to reach Operation enabled, and then to set statusword bit 12.
@@ -86,6 +90,7 @@ impl AxisIo {
             letter: axis_letter(&a.name),
             node: a.node,
             xyz: a.xyz(),
+            aux: a.aux(),
             mode: a.mode,
             rpdo_cob: a.setpoint_pdo.cob_id,
             rpdo_len: a.setpoint_pdo.len_bytes(),
@@ -97,6 +102,7 @@ impl AxisIo {
             counts_per_mm: a.counts_per_mm,
             min_mm: a.min_mm,
             max_mm: a.max_mm,
+            has_travel: a.has_travel(),
             max_vel_mm_s: a.max_vel_mm_s,
             max_acc_mm_s2: a.max_acc_mm_s2,
             enable_timeout_ms: a.enable_timeout_ms,
@@ -253,6 +259,8 @@ pub struct CyclicMaster {
     period_s: f64,
     line: Option<usize>,
     armed_mm: Option<Vector3<f64>>,
+    /// The auxiliary axes' setpoints when armed (0 for the axes the machine lacks).
+    armed_aux: crate::gcode::AuxPos,
     stop_vel: Vec<f64>,
     stop_acc: Vec<f64>,
     frozen: Vec<bool>,
@@ -318,6 +326,7 @@ impl CyclicMaster {
             period_s: machine.cycle_s(),
             line: None,
             armed_mm: None,
+            armed_aux: [0.0; 6],
             stop_vel: vec![0.0; n],
             stop_acc: vec![0.0; n],
             frozen: vec![false; n],
@@ -336,7 +345,8 @@ impl CyclicMaster {
             service: false,
             control: vec![AxisControl::Cyclic; n],
             control_since: vec![0; n],
-            check_travel: vec![true; n],
+            // A wrapped rotary axis has no travel limits: it keeps counting turns.
+            check_travel: machine.axes.iter().map(|a| a.has_travel()).collect(),
             aborting: false,
             axes,
         }
@@ -482,7 +492,7 @@ impl CyclicMaster {
     /// Whether axis `i`'s setpoints are checked against its travel (default on).
     pub fn set_travel_checked(&mut self, i: usize, checked: bool) {
         if let Some(c) = self.check_travel.get_mut(i) {
-            *c = checked;
+            *c = checked && self.axes[i].has_travel;
         }
     }
 
@@ -618,6 +628,11 @@ impl CyclicMaster {
     /// The positions at which the drives were armed (the start of the motion), once armed.
     pub fn armed_mm(&self) -> Option<Vector3<f64>> {
         self.armed_mm
+    }
+    /// The auxiliary axes' positions at which the drives were armed (with
+    /// [`armed_mm`](Self::armed_mm); 0 for the axes the machine lacks).
+    pub fn armed_aux(&self) -> crate::gcode::AuxPos {
+        self.armed_aux
     }
     /// The program line last executed.
     pub fn line(&self) -> Option<usize> {
@@ -874,12 +889,17 @@ impl CyclicMaster {
     /// Armed where the setpoints stand: the next motion starts there.
     fn arm_here(&mut self) {
         let mut p = Vector3::zeros();
+        let mut aux = [0.0; 6];
         for (i, a) in self.axes.iter().enumerate() {
             if let Some(k) = a.xyz {
                 p[k] = self.sp_mm[i][0];
             }
+            if let Some(k) = a.aux {
+                aux[k] = self.sp_mm[i][0];
+            }
         }
         self.armed_mm = Some(p);
+        self.armed_aux = aux;
         self.set_phase(Phase::Armed);
     }
 
@@ -1196,9 +1216,11 @@ impl CyclicMaster {
             }
             for i in 0..n {
                 let a = &self.axes[i];
-                let target = match a.xyz {
-                    Some(k) => p[k],
-                    None => self.sp_mm[i][1],
+                let aux = self.motion.as_ref().and_then(|m| m.aux());
+                let target = match (a.xyz, a.aux, aux) {
+                    (Some(k), ..) => p[k],
+                    (None, Some(k), Some(aux)) => aux[k],
+                    _ => self.sp_mm[i][1],
                 };
                 let target = match &mut self.filters[i] {
                     Some(f) => f.update(target),

@@ -123,6 +123,13 @@
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //!
+//! # Auxiliary axes
+//!
+//! A B C (degrees) and U V W ride along each element linearly in its path parameter; a move
+//! without X/Y/Z motion takes their length (U/V/W, else A/B/C) as its path. Their limits cap
+//! the element's speed, acceleration and jerk, their velocity steps cap the junctions, and
+//! corners where they move stay unblended: [`aux_axes`].
+//!
 //! # Look-ahead
 //!
 //! [`Planner`] keeps a window of up to [`PlannerConfig::lookahead`] elements. When it is full
@@ -144,9 +151,12 @@ use std::collections::VecDeque;
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use crate::gcode::{ArcGeometry, BlendMode, Element, ElementKind, Item, Program};
+use crate::gcode::{ArcGeometry, AuxMove, AuxPos, BlendMode, Element, ElementKind, Item, Program};
+pub mod aux_axes;
 pub mod bounds;
 pub mod profile;
+
+pub use aux_axes::AuxLimits;
 
 use profile::{JerkShape, ProfileLimits, SpeedProfile};
 
@@ -307,6 +317,8 @@ pub struct PlannerConfig {
     /// 000's option: every moving element lasts a whole number of periods, its end point on a
     /// sample, by lowering its cruise speed (never a boundary speed or a limit).
     pub integer_periods: bool,
+    /// Limits of the auxiliary axes A B C U V W ([`aux_axes`]).
+    pub aux: AuxLimits,
 }
 
 impl PlannerConfig {
@@ -324,6 +336,7 @@ impl PlannerConfig {
             default_tolerance_mm: DEFAULT_TOLERANCE_MM,
             lookahead: 1000,
             integer_periods: false,
+            aux: AuxLimits::NONE,
         }
     }
 
@@ -381,7 +394,7 @@ impl PlannerConfig {
                 value: self.lookahead as f64,
             });
         }
-        Ok(())
+        self.aux.validate()
     }
 
     fn jerk_limited(&self) -> bool {
@@ -488,6 +501,9 @@ pub struct Segment {
     pub start_mm: Vector3<f64>,
     /// Where it ends (the element's end, bit for bit).
     pub end_mm: Vector3<f64>,
+    /// The auxiliary axes (A B C U V W), linear in the distance along the path. Dwells and
+    /// stops hold them where the motion before left them (at 0 before any motion).
+    pub aux: AuxMove,
     /// The path followed.
     pub path: SegmentPath,
     /// Path length along `path` (> 0 for lines and arcs, 0 for dwells and stops).
@@ -582,6 +598,27 @@ impl Segment {
             }
             SegmentPath::Arc(arc) => arc.point_at(d / self.length_mm),
             SegmentPath::Dwell | SegmentPath::Stop { .. } => self.start_mm,
+        }
+    }
+
+    /// The auxiliary axes' positions at `t_s` after the segment start: exactly `aux.start` at
+    /// `t_s <= 0` and exactly `aux.end` at the end.
+    pub fn aux_at(&self, t_s: f64) -> AuxPos {
+        if t_s.is_nan() || t_s <= 0.0 {
+            return self.aux.start;
+        }
+        if t_s >= self.duration_s() {
+            return self.aux.end;
+        }
+        self.aux_at_distance(self.distance_at(t_s))
+    }
+
+    /// The auxiliary axes' positions at `d_mm` along the path (see [`AuxMove::at`]).
+    pub fn aux_at_distance(&self, d_mm: f64) -> AuxPos {
+        if self.length_mm > 0.0 {
+            self.aux.at(d_mm / self.length_mm)
+        } else {
+            self.aux.end
         }
     }
 
@@ -822,6 +859,8 @@ struct Pending {
     /// Curvature vector `N/r` at the start and at the end (zero on lines).
     curvature_start: Vector3<f64>,
     curvature_end: Vector3<f64>,
+    /// The auxiliary axes' rates `Δᵢ/L` ([`aux_axes`]).
+    aux_rate: AuxPos,
     /// Largest acceleration and jerk of each axis the profile may use.
     acc_used_mm_s2: Vector3<f64>,
     jerk_used_mm_s3: Vector3<f64>,
@@ -873,6 +912,10 @@ pub struct Planner {
     config: PlannerConfig,
     /// Where everything pushed ends.
     position_mm: Vector3<f64>,
+    /// Where the auxiliary axes are at the end of everything pushed (`None` before the first
+    /// element), and at the end of everything settled.
+    aux_pushed: Option<AuxPos>,
+    aux_settled: Option<AuxPos>,
     /// End time of everything settled.
     time_s: f64,
     window: VecDeque<Pending>,
@@ -955,6 +998,8 @@ impl Planner {
             limits: *limits,
             config: *config,
             position_mm: start_mm,
+            aux_pushed: None,
+            aux_settled: None,
             time_s: 0.0,
             window: VecDeque::with_capacity(config.lookahead.min(1 << 16) + 1),
             v_settled_mm_s: 0.0,
@@ -1023,6 +1068,8 @@ impl Planner {
                         cap_out,
                     }) => {
                         let prev = self.window.back_mut().expect("a blend follows an element");
+                        // No auxiliary axis moves on either side of a blended corner.
+                        arc.seg.aux = AuxMove::still(prev.seg.aux.end);
                         prev.seg.end_mm = arc.seg.start_mm;
                         prev.seg.length_mm -= tangent_mm;
                         (arc.cap_start_mm_s, arc.cap_start_limit_mm_s) = cap_in;
@@ -1043,6 +1090,7 @@ impl Planner {
                     }
                 }
                 self.position_mm = p.seg.end_mm;
+                self.aux_pushed = Some(p.seg.aux.end);
                 p.seq = self.next_seq;
                 self.next_seq += 1;
                 if p.provisional.is_some() {
@@ -1186,7 +1234,9 @@ impl Planner {
         self.window.len()
     }
 
-    fn push_still(&mut self, segment: Segment) -> Result<(), PlanError> {
+    fn push_still(&mut self, mut segment: Segment) -> Result<(), PlanError> {
+        // A still holds the auxiliary axes where the settled motion left them.
+        segment.aux = AuxMove::still(self.aux_settled.or(self.aux_pushed).unwrap_or_default());
         let end_s = segment.end_time_s();
         if !end_s.is_finite() {
             return Err(PlanError::Overflow { line: segment.line });
@@ -1513,6 +1563,7 @@ impl Planner {
             return Err(PlanError::Overflow { line });
         }
         self.time_s = end_s;
+        self.aux_settled = Some(seg.aux.end);
         self.ready.push_back(seg);
         if alone.is_some() {
             let duration_s = profile.duration_s();
@@ -1695,6 +1746,7 @@ impl Planner {
                 }
             }
         }
+        v = v.min(aux_axes::junction_cap(cfg, a, b, t, cfg.jerk_limited()));
         v.max(0.0)
     }
 
@@ -1823,6 +1875,7 @@ impl Planner {
                 v = v.min((tk * jerk_budget / k).sqrt());
             }
         }
+        v = v.min(aux_axes::junction_cap(cfg, a, b, tk, true));
         v.max(0.0)
     }
 
@@ -1883,6 +1936,9 @@ impl Planner {
         let BlendMode::Blend { .. } = a.blend else {
             return Ok(None);
         };
+        if aux_axes::keeps_corner(a, b) {
+            return Ok(None);
+        }
         let tol_mm = self.blend_tolerance_mm(a.blend);
         let (SegmentPath::Line { direction: u1 }, SegmentPath::Line { direction: u2 }) =
             (a.seg.path, b.seg.path)
@@ -1932,7 +1988,15 @@ impl Planner {
             let Some(geometry) = ArcGeometry::new(p1, p2, center, normal, 0) else {
                 return Ok(None);
             };
-            let arc = self.arc_pending(line, rapid, (p1, p2), geometry, feed_mm_s, a.blend)?;
+            let arc = self.arc_pending(
+                line,
+                rapid,
+                (p1, p2),
+                geometry,
+                feed_mm_s,
+                a.blend,
+                &AuxMove::default(),
+            )?;
             Ok(Some((arc, tangent_mm)))
         };
         let Some((mut arc, mut tangent_mm)) = arc_at(r_max)? else {
@@ -1975,6 +2039,7 @@ impl Planner {
     }
 
     /// The pending element of an arc (or a corner's blend arc) from `ends.0` to `ends.1`.
+    #[allow(clippy::too_many_arguments)]
     fn arc_pending(
         &self,
         line: usize,
@@ -1983,13 +2048,20 @@ impl Planner {
         arc: ArcGeometry,
         feed_mm_s: f64,
         blend: BlendMode,
+        aux: &AuxMove,
     ) -> Result<Pending, PlanError> {
         let cfg = &self.config;
         let length_mm = arc.length_mm;
         if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
             return Err(PlanError::Overflow { line });
         }
-        let a = arc_limits(&arc, feed_mm_s, &self.limits, cfg);
+        let mut a = arc_limits(&arc, feed_mm_s, &self.limits, cfg);
+        // The auxiliary axes follow the arc linearly in its length: no centripetal part.
+        let aux_caps = aux_axes::caps(cfg, aux, length_mm);
+        a.v_limit_mm_s = a.v_limit_mm_s.min(aux_caps.v_mm_s);
+        a.v_max_mm_s = a.v_max_mm_s.min(aux_caps.v_mm_s);
+        a.acc_mm_s2 = a.acc_mm_s2.min(aux_caps.acc_mm_s2);
+        a.jerk_mm_s3 = a.jerk_mm_s3.min(aux_caps.jerk_mm_s3);
         let curvature = |s: f64| {
             let at = arc.point_at(s);
             let rel = at - arc.center_mm;
@@ -2025,6 +2097,7 @@ impl Planner {
             tangent_end: arc.tangent_at(1.0),
             curvature_start: curvature(0.0),
             curvature_end: curvature(1.0),
+            aux_rate: aux_caps.rate,
             acc_used_mm_s2: a.axis_acc_mm_s2,
             jerk_used_mm_s3: if cfg.jerk_limited() {
                 a.axis_jerk_mm_s3
@@ -2048,14 +2121,22 @@ impl Planner {
         if !e.end_mm.iter().all(|c| c.is_finite()) {
             return Err(PlanError::NonFiniteTarget { line });
         }
-        if e.start_mm != self.position_mm {
+        if e.start_mm != self.position_mm || self.aux_pushed.is_some_and(|a| a != e.aux.start) {
             return Err(PlanError::Discontinuity { line });
         }
-        let feed_mm_s = if e.rapid {
+        // A move of the auxiliary axes alone: its path parameter is theirs (degrees for a
+        // rotary-only move), so the X/Y/Z max feed means nothing there; their limits cap it.
+        let aux_only = e.kind == ElementKind::Line && e.end_mm == e.start_mm;
+        let max_feed = if aux_only {
+            f64::INFINITY
+        } else {
             limits.max_feed_mm_s
+        };
+        let feed_mm_s = if e.rapid {
+            max_feed
         } else {
             match e.feed_mm_s {
-                Some(f) if f > 0.0 && f.is_finite() => f.min(limits.max_feed_mm_s),
+                Some(f) if f > 0.0 && f.is_finite() => f.min(max_feed),
                 other => {
                     return Err(PlanError::InvalidFeed {
                         line,
@@ -2077,22 +2158,27 @@ impl Planner {
                 let delta_mm = e.end_mm - self.position_mm;
                 // Scaled norm: neither overflows for huge nor underflows for tiny moves.
                 let scale_mm = delta_mm.amax();
-                if scale_mm == 0.0 {
-                    return Ok(None);
-                }
-                if !scale_mm.is_finite() {
-                    return Err(PlanError::Overflow { line });
-                }
-                let unit_scaled = delta_mm / scale_mm;
-                let norm_scaled = unit_scaled.norm();
-                let length_mm = scale_mm * norm_scaled;
-                if length_mm.is_nan() || length_mm > profile::MAX_LENGTH_MM {
-                    return Err(PlanError::Overflow { line });
-                }
-                let direction = unit_scaled / norm_scaled;
-                let mut v_limit_mm_s = limits.max_feed_mm_s;
-                let mut acc_mm_s2 = cfg.path_acc_mm_s2;
-                let mut jerk_mm_s3 = f64::INFINITY;
+                let (length_mm, direction) = if scale_mm == 0.0 {
+                    match aux_axes::aux_only_length(&e.aux, line)? {
+                        Some(length) => (length, aux_axes::NO_DIRECTION),
+                        None => return Ok(None),
+                    }
+                } else {
+                    if !scale_mm.is_finite() {
+                        return Err(PlanError::Overflow { line });
+                    }
+                    let unit_scaled = delta_mm / scale_mm;
+                    let norm_scaled = unit_scaled.norm();
+                    let length_mm = scale_mm * norm_scaled;
+                    if length_mm.is_nan() || length_mm > profile::MAX_LENGTH_MM {
+                        return Err(PlanError::Overflow { line });
+                    }
+                    (length_mm, unit_scaled / norm_scaled)
+                };
+                let aux = aux_axes::caps(cfg, &e.aux, length_mm);
+                let mut v_limit_mm_s = max_feed.min(aux.v_mm_s);
+                let mut acc_mm_s2 = cfg.path_acc_mm_s2.min(aux.acc_mm_s2);
+                let mut jerk_mm_s3 = aux.jerk_mm_s3;
                 for i in 0..3 {
                     let u = direction[i].abs();
                     if u > 0.0 {
@@ -2129,6 +2215,7 @@ impl Planner {
                     tangent_end: direction,
                     curvature_start: Vector3::zeros(),
                     curvature_end: Vector3::zeros(),
+                    aux_rate: aux.rate,
                     acc_used_mm_s2: abs * acc_mm_s2,
                     jerk_used_mm_s3: if cfg.jerk_limited() {
                         abs * jerk_mm_s3
@@ -2153,10 +2240,12 @@ impl Planner {
                     arc,
                     feed_mm_s,
                     e.blend,
+                    &e.aux,
                 )?
             }
         };
         p.seg.end_mm = e.end_mm;
+        p.seg.aux = e.aux;
         Ok(Some(p))
     }
 }
@@ -2471,6 +2560,7 @@ fn moving(
         rapid,
         start_mm,
         end_mm,
+        aux: AuxMove::default(),
         path,
         length_mm,
         v_start_mm_s: 0.0,
@@ -2498,6 +2588,7 @@ fn still(
         rapid: false,
         start_mm: at_mm,
         end_mm: at_mm,
+        aux: AuxMove::default(),
         path,
         length_mm: 0.0,
         v_start_mm_s: 0.0,
@@ -2675,6 +2766,7 @@ pub(crate) mod tests {
                     rapid: m.rapid,
                     start_mm: from,
                     end_mm: m.target_mm,
+                    aux: Default::default(),
                     feed_mm_s: m.feed_mm_s,
                     blend: BlendMode::ExactStop,
                     comp: CompState::Off,
@@ -3061,6 +3153,7 @@ pub(crate) mod tests {
             rapid: true,
             start_mm: v(1.0, 0.0, 0.0),
             end_mm: v(2.0, 0.0, 0.0),
+            aux: Default::default(),
             feed_mm_s: None,
             blend: BlendMode::ExactStop,
             comp: CompState::Off,

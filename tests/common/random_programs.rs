@@ -29,6 +29,7 @@ pub fn config(profile: ProfileKind) -> PlannerConfig {
         default_tolerance_mm: 0.01,
         lookahead: 64,
         integer_periods: false,
+        aux: canmotion::planner::AuxLimits::NONE,
     }
 }
 

@@ -32,7 +32,7 @@ use super::io::NodeIo;
 use super::{GatewayError, startup};
 use crate::bus::Bus;
 use crate::config::Machine;
-use crate::gcode::{Item, Program};
+use crate::gcode::{AuxMove, AuxPos, Item, Program};
 use crate::interpolator::{Interpolator, OverrideRamp};
 use crate::master::cyclic::Phase;
 use crate::rt;
@@ -84,6 +84,8 @@ pub struct Current {
     seq: u64,
     /// Where it ends (the next job's start).
     end_mm: Vector3<f64>,
+    /// Where it leaves the auxiliary axes (`None`: where they were).
+    end_aux: Option<AuxPos>,
 }
 
 /// A jog under way.
@@ -397,6 +399,7 @@ impl Controller<'_> {
         {
             let seq = s.motions_started + 1;
             let end_mm = job.interp.queued_end_mm();
+            let end_aux = job.interp.queued_end_aux();
             match self.ask(Request::Start(Box::new(job.interp))).await {
                 Ok(()) => {
                     if job.kind != JobKind::Jog {
@@ -407,6 +410,7 @@ impl Controller<'_> {
                         name: job.name,
                         seq,
                         end_mm,
+                        end_aux,
                     });
                 }
                 Err(e) => {
@@ -479,6 +483,26 @@ impl Controller<'_> {
             }
         }
         p
+    }
+
+    /// Where the next job starts on the auxiliary axes (A B C U V W; 0 for those the machine
+    /// lacks), as [`tail_mm`](Self::tail_mm).
+    fn tail_aux(&self, s: &Snapshot) -> AuxPos {
+        let queued = match (self.queue.back(), &self.current) {
+            (Some(j), _) => j.interp.queued_end_aux(),
+            (None, Some(c)) => c.end_aux,
+            (None, None) => None,
+        };
+        if let Some(aux) = queued {
+            return aux;
+        }
+        let mut aux = [0.0; 6];
+        for (i, a) in self.m.axes.iter().enumerate() {
+            if let Some(k) = a.aux() {
+                aux[k] = s.axes[i].commanded_mm;
+            }
+        }
+        aux
     }
 
     fn busy(&self) -> bool {
@@ -664,7 +688,9 @@ impl Controller<'_> {
         s: &Snapshot,
     ) -> Result<String, ServeError> {
         let start = self.tail_mm(s);
+        let start_aux = self.tail_aux(s);
         let mut setup = self.m.setup(start);
+        setup.start_aux = start_aux;
         setup.carry = self.carry.clone();
         let program = if kind == JobKind::Mdi {
             crate::gcode::parse_mdi(text, setup)
@@ -676,7 +702,8 @@ impl Controller<'_> {
             crate::compensation::compensate_program(&program, self.m.program.compensation)
                 .map_err(|e| ServeError::Program(Box::new(GatewayError::from(e))))?;
         if let Some(line) = from_line {
-            from_line_on(&mut program, line, start).ok_or(ServeError::NoMotionFrom { line })?;
+            from_line_on(&mut program, line, start, start_aux)
+                .ok_or(ServeError::NoMotionFrom { line })?;
         }
         for item in &program.items {
             match item {
@@ -762,8 +789,11 @@ impl Controller<'_> {
         }
         let (lo, hi) = e.bounds_mm();
         for (i, a) in self.m.axes.iter().enumerate() {
-            let Some(k) = a.xyz() else { continue };
-            let moves = e.end_mm[k] != e.start_mm[k] || hi[k] > lo[k];
+            let moves = match (a.xyz(), a.aux()) {
+                (Some(k), _) => e.end_mm[k] != e.start_mm[k] || hi[k] > lo[k],
+                (None, Some(k)) => e.aux.start[k] != e.aux.end[k],
+                (None, None) => false,
+            };
             if moves && !self.homed[i] {
                 return Err(ServeError::NotHomed {
                     file: name.to_string(),
@@ -787,11 +817,11 @@ impl Controller<'_> {
             return Err(ServeError::Busy { what: "a job" });
         }
         let a = &self.m.axes[axis];
-        let Some(k) = a.xyz() else {
+        if a.xyz().is_none() && a.aux().is_none() {
             return Err(ServeError::NotJoggable {
                 axis: a.name.clone(),
             });
-        };
+        }
         if speed_mm_s == 0.0 || dist_mm == Some(0.0) {
             return Ok(format!("{} stopped", a.name));
         }
@@ -803,13 +833,19 @@ impl Controller<'_> {
         };
         let v = speed_mm_s.abs().min(v_max);
         let here = self.tail_mm(&s);
+        let here_aux = self.tail_aux(&s);
+        // Where the jogged axis stands: an X/Y/Z axis or an auxiliary one.
+        let from = match (a.xyz(), a.aux()) {
+            (Some(k), _) => here[k],
+            (None, Some(k)) => here_aux[k],
+            (None, None) => unreachable!("refused above"),
+        };
         let dir = match dist_mm {
             Some(d) => d.signum(),
             None => speed_mm_s.signum(),
         };
-        let mut target = here;
-        target[k] = match dist_mm {
-            Some(d) => here[k] + d.abs() * dir,
+        let to = match dist_mm {
+            Some(d) => from + d.abs() * dir,
             None if homed => {
                 if dir > 0.0 {
                     a.max_mm
@@ -817,17 +853,17 @@ impl Controller<'_> {
                     a.min_mm
                 }
             }
-            None => here[k] + dir * (a.max_mm - a.min_mm),
+            None => from + dir * (a.max_mm - a.min_mm),
         };
-        if homed && !(a.min_mm..=a.max_mm).contains(&target[k]) {
+        if homed && a.has_travel() && !(a.min_mm..=a.max_mm).contains(&to) {
             return Err(ServeError::JogOutsideTravel {
                 axis: a.name.clone(),
-                target_mm: target[k],
+                target_mm: to,
                 min_mm: a.min_mm,
                 max_mm: a.max_mm,
             });
         }
-        if (target[k] - here[k]).abs() < 0.5 / a.counts_per_mm {
+        if (to - from).abs() < 0.5 / a.counts_per_mm {
             return Err(ServeError::AtTravelLimit {
                 axis: a.name.clone(),
             });
@@ -835,10 +871,16 @@ impl Controller<'_> {
         let text = format!(
             "G21 G90 G94 G64 P0 G53 G1 {}{:.9} F{:.6}\n",
             a.name,
-            target[k],
+            to,
             v * 60.0
         );
-        let program = crate::gcode::parse_program(&text, "jog", here)
+        // The auxiliary axes start where they are (and only the jogged one moves).
+        let mut setup = crate::gcode::Setup::new(here);
+        setup.start_aux = here_aux;
+        if let Some(k) = a.aux() {
+            setup.aux_axes[k] = true;
+        }
+        let program = crate::gcode::parse_program_with(&text, "jog", setup)
             .map_err(|e| ServeError::Program(Box::new(GatewayError::Program(e))))?;
         // Jogs are jerk-limited whatever the machine's planner mode: the jerk-limited profile
         // with the axes' max_jerk_mm_s3 (a single straight move: time-optimal for the limits).
@@ -865,12 +907,14 @@ impl Controller<'_> {
         };
         let seq = s.motions_started + 1;
         let end_mm = interp.queued_end_mm();
+        let end_aux = interp.queued_end_aux();
         self.ask(Request::Start(Box::new(interp))).await?;
         self.current = Some(Current {
             kind: JobKind::Jog,
             name: a.name.clone(),
             seq,
             end_mm,
+            end_aux,
         });
         self.jog = Some(Jog {
             axis,
@@ -1022,7 +1066,12 @@ impl Controller<'_> {
 /// modal state and position established by the lines before), preceded by a straight rapid
 /// move from `start` to where that element starts, which ends at rest (exact stop). `None`
 /// without motion from there.
-fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Option<()> {
+fn from_line_on(
+    program: &mut Program,
+    line: usize,
+    start: Vector3<f64>,
+    start_aux: AuxPos,
+) -> Option<()> {
     let first = program
         .items
         .iter()
@@ -1038,8 +1087,12 @@ fn from_line_on(program: &mut Program, line: usize, start: Vector3<f64>) -> Opti
     lead_in.blend = crate::gcode::BlendMode::ExactStop;
     lead_in.start_mm = start;
     lead_in.end_mm = e.start_mm;
+    lead_in.aux = AuxMove {
+        start: start_aux,
+        end: e.aux.start,
+    };
     program.items.drain(..first);
-    if lead_in.start_mm != lead_in.end_mm {
+    if lead_in.start_mm != lead_in.end_mm || lead_in.aux.moves() {
         program.items.insert(0, Item::Motion(lead_in));
     }
     program.start_mm = start;

@@ -288,7 +288,7 @@ pub enum ServeError {
         line: usize,
     },
     /// An axis the motion front end does not command.
-    #[error("axis {axis} cannot be jogged (only X, Y and Z are commanded)")]
+    #[error("axis {axis} cannot be jogged (not an axis the motion front end commands)")]
     NotJoggable {
         /// The axis.
         axis: String,
