@@ -219,15 +219,6 @@ fn an_axis_the_machine_lacks_is_a_typed_error() {
             "{text}: {e}"
         );
     }
-    // Under cutter compensation the auxiliary axes may not move (not carried yet).
-    let e = parse_program_with(
-        "G0 X0 Y0\nG41 D1\nG1 X10 A5 F100\n",
-        "t.ngc",
-        m.setup(Vector3::zeros()),
-    )
-    .unwrap_err();
-    assert_eq!(e.line, 3);
-    assert!(matches!(e.kind, ErrorKind::Unsupported { .. }), "{e}");
 }
 
 #[test]
@@ -618,6 +609,61 @@ fn plan_path_prints_the_auxiliary_axes_at_hand_computed_points() {
         "tests/programs/square.ngc",
     );
     assert!(r.iter().all(|rec| rec.get("A").is_none()));
+}
+
+/// Cutter compensation moves X/Y to the tool centre and leaves A as programmed, as LinuxCNC's
+/// does: each offset side turns A by its programmed 30°, and each outside corner's tool-radius
+/// arc (about the programmed corner, radius 2) holds A where the move before it left it; a
+/// move of A alone runs at the offset end point, as a move along the tool axis does.
+/// By hand: the entry (LinuxCNC's `convert_straight_comp1`) ends on the left side's offset
+/// x = 18 at y = 18 + 2√2 (the inside corner with the diagonal); the sides run 2 mm outside the
+/// square; G40's move runs from the last offset end (20, 18) back to (10, 10).
+#[test]
+fn cutter_compensation_carries_the_auxiliary_axes() {
+    let r = path_records(
+        "dictionaries/machines/demo-xyza.toml",
+        "tests/programs/rotary_comp.ngc",
+    );
+    let meet = 18.0 + 2.0 * std::f64::consts::SQRT_2;
+    // (line, end x/y, A [start, end], arc centre)
+    type Record = (u64, [f64; 2], [f64; 2], Option<[f64; 2]>);
+    let want: [Record; 11] = [
+        (4, [10.0, 10.0], [0.0, 0.0], None),
+        (5, [18.0, meet], [0.0, 10.0], None),
+        (6, [18.0, 40.0], [10.0, 40.0], None),
+        (7, [20.0, 42.0], [40.0, 40.0], Some([20.0, 40.0])),
+        (7, [40.0, 42.0], [40.0, 70.0], None),
+        // A alone: held until the next move in the plane, then run at the offset end.
+        (8, [40.0, 42.0], [70.0, 80.0], None),
+        (9, [42.0, 40.0], [80.0, 80.0], Some([40.0, 40.0])),
+        (9, [42.0, 20.0], [80.0, 100.0], None),
+        (10, [40.0, 18.0], [100.0, 100.0], Some([40.0, 20.0])),
+        (10, [20.0, 18.0], [100.0, 130.0], None),
+        (11, [10.0, 10.0], [130.0, 140.0], None),
+    ];
+    assert_eq!(r.len(), want.len(), "{r:?}");
+    for (rec, (line, end, a, centre)) in r.iter().zip(want) {
+        assert_eq!(rec["line"], line, "{rec}");
+        assert!(close(&rec["end"], &[end[0], end[1], 0.0]), "{rec}");
+        assert!(close(&rec["A"], &a), "{rec}");
+        match centre {
+            Some(c) => assert!(close(&rec["center"], &[c[0], c[1], 0.0]), "{rec}"),
+            None => assert_eq!(rec["kind"], "line", "{rec}"),
+        }
+    }
+    // And it plans within every axis's limits (A's included) in both profiles.
+    let m = xyza();
+    let text = program("rotary_comp.ngc");
+    let prog = gateway::interpret_program(&m, "rotary_comp.ngc", &text, Vector3::zeros())
+        .expect("interprets and compensates");
+    for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
+        let cfg = PlannerConfig {
+            profile,
+            ..m.planner
+        };
+        let plan = plan_with(&prog, &limits(&m), &cfg).expect("plans");
+        limits_hold(plan, &m, &cfg).unwrap_or_else(|e| panic!("{profile:?}: {e}"));
+    }
 }
 
 #[test]

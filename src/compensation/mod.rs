@@ -107,6 +107,10 @@
 //!   what LinuxCNC does); under G93 the feed is the one the interpreter computed from the
 //!   programmed length. Connectors take the feed, rapid flag, blend, comp state, line and
 //!   column of the element after the corner (the corner is where that element begins).
+//! - The auxiliary axes (A, B, C, U, V, W) are not offset, as in LinuxCNC: an element keeps
+//!   its programmed auxiliary move, connectors hold them where the element before the corner
+//!   left them, and a move of them alone is held and run at the offset point like a move along
+//!   the tool axis.
 //! - Axial motion (the plane's normal axis: Z under G17) belongs to the elements: a trimmed or
 //!   extended line or helix still runs its whole programmed rise, from the height where it
 //!   begins to the height where it ends; connectors are level, at the height where the element
@@ -132,8 +136,8 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 use crate::gcode::{
-    ArcGeometry, CompState, Element, ElementKind, Error, ErrorKind, Item, MIN_ARC_RADIUS_MM, Plane,
-    Program,
+    ArcGeometry, AuxMove, CompState, Element, ElementKind, Error, ErrorKind, Item,
+    MIN_ARC_RADIUS_MM, Plane, Program,
 };
 use geometry::{Conn, Curve, End, Join, V2, left};
 pub use geometry::{NEAR_MISS_MM, TANGENT_GAP_MM};
@@ -807,10 +811,13 @@ where
                     (kind, end_mm)
                 }
             };
+            // The auxiliary axes (A, B, C, U, V, W) stand at the corner: the element after it
+            // moves them (LinuxCNC's inserted arcs carry no rotary motion either).
             self.push(Element {
                 kind,
                 start_mm,
                 end_mm,
+                aux: AuxMove::still(e.aux.start),
                 ..*e
             })?;
         }

@@ -1658,16 +1658,6 @@ impl State {
                 return Err(err_at(w.col, ErrorKind::PositionOutOfRange));
             }
         }
-        if t != self.aux && self.comp != CompState::Off {
-            return Err(err_at(
-                b.first_axis().map_or(0, |w| w.col),
-                ErrorKind::Unsupported {
-                    what: "A, B, C, U, V or W motion under cutter compensation (G41/G42)".into(),
-                    reason: "cutter compensation does not carry the auxiliary axes yet: move them \
-                             before G41/G42 or after G40",
-                },
-            ));
-        }
         Ok(t)
     }
 
