@@ -25,6 +25,13 @@ fn xyza() -> Machine {
     Machine::load(Path::new("dictionaries/machines/demo-xyza.toml")).expect("demo-xyza")
 }
 
+/// demo-xyza with `wrap = "shortest"` on A.
+fn xyza_shortest() -> Machine {
+    let text = std::fs::read_to_string("dictionaries/machines/demo-xyza.toml").unwrap();
+    assert!(text.contains("wrap = true"));
+    parse_machine(&text.replace("wrap = true", "wrap = \"shortest\"")).expect("shortest A")
+}
+
 fn eight() -> Machine {
     Machine::load(Path::new("tests/programs/aux_axes.toml")).expect("aux_axes.toml")
 }
@@ -135,32 +142,46 @@ fn inverse_time_feed_takes_one_over_f_minutes() {
 }
 
 #[test]
-fn a_wrapped_axis_takes_the_shortest_way() {
-    let m = xyza();
-    let p = parse_program_with(
-        &program("rotary_wrap.ngc"),
-        "rotary_wrap.ngc",
-        m.setup(Vector3::zeros()),
-    )
-    .expect("interpret");
-    let ends: Vec<(usize, f64)> = p
-        .items
-        .iter()
-        .filter_map(|i| match i {
-            Item::Motion(e) => Some((e.line, e.aux.end[0])),
-            _ => None,
-        })
-        .collect();
+fn a_wrapped_axis_turns_as_linuxcnc_or_the_shortest_way() {
+    let ends = |m: &Machine| -> Vec<(usize, f64)> {
+        let p = parse_program_with(
+            &program("rotary_wrap.ngc"),
+            "rotary_wrap.ngc",
+            m.setup(Vector3::zeros()),
+        )
+        .expect("interpret");
+        p.items
+            .iter()
+            .filter_map(|i| match i {
+                Item::Motion(e) => Some((e.line, e.aux.end[0])),
+                _ => None,
+            })
+            .collect()
+    };
+    // `wrap = true`, LinuxCNC's `unwrap_rotary`: the word's magnitude is the position in the
+    // turn, its sign the direction (the program's comments work each line out).
     assert_eq!(
-        ends,
+        ends(&xyza()),
         [
-            (4, -10.0),
-            (6, 10.0),
-            (8, -90.0),
-            (10, -810.0),
-            (12, -900.0)
+            (6, 350.0),
+            (8, 370.0),
+            (10, 90.0),
+            (12, -630.0),
+            (14, -540.0)
         ]
     );
+    // `wrap = "shortest"`: -90 is 270, each move the short way round.
+    assert_eq!(
+        ends(&xyza_shortest()),
+        [
+            (6, -10.0),
+            (8, 10.0),
+            (10, -90.0),
+            (12, -810.0),
+            (14, -900.0)
+        ]
+    );
+    let m = xyza();
     // 360 and beyond is no absolute position of a wrapped axis (LinuxCNC refuses it too).
     let e = parse_program_with("G0 A400\n", "t.ngc", m.setup(Vector3::zeros())).unwrap_err();
     assert_eq!((e.line, e.col), (1, 4));
@@ -281,20 +302,23 @@ fn g92_and_g52_offset_the_auxiliary_axes() {
             (13, 5.0, 3.5),
         ]
     );
-    // On a wrapped axis the shortest way counts from the offset reading.
-    let m = xyza();
+    // On a wrapped axis the turn counts from the offset reading: A reads 0 at machine 100, so
+    // A350 is +350 (LinuxCNC's rule: a positive word turns the positive way), machine 450, or
+    // -10 the shortest way, machine 90.
     let text = "G0 A100\nG92 A0\nG0 A350\nM2\n";
-    let p = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).expect("interpret");
-    let last = p
-        .items
-        .iter()
-        .rev()
-        .find_map(|i| match i {
-            Item::Motion(e) => Some(e.aux.end[0]),
-            _ => None,
-        })
-        .unwrap();
-    assert_eq!(last, 90.0, "A reads 0 at 100: 350 is -10 away");
+    for (m, want) in [(xyza(), 450.0), (xyza_shortest(), 90.0)] {
+        let p = parse_program_with(text, "t.ngc", m.setup(Vector3::zeros())).expect("interpret");
+        let last = p
+            .items
+            .iter()
+            .rev()
+            .find_map(|i| match i {
+                Item::Motion(e) => Some(e.aux.end[0]),
+                _ => None,
+            })
+            .unwrap();
+        assert_eq!(last, want);
+    }
 }
 
 fn parse_machine(text: &str) -> Result<Machine, ConfigError> {
@@ -334,6 +358,8 @@ fn the_machine_file_names_the_wrong_key_for_the_kind() {
         .replace("kind = \"rotary\"", "")
         .replace("counts_per_deg = 100.0", "counts_per_mm = 100.0");
     assert_eq!(key_of(linear_a), ("axis A".into(), "wrap".into()));
+    let sideways = text.replace("wrap = true", "wrap = \"sideways\"");
+    assert_eq!(key_of(sideways), ("axis A".into(), "wrap".into()));
 }
 
 /// Samples `plan` as the cyclic loop streams it and checks every axis, the auxiliary ones
@@ -589,9 +615,9 @@ fn plan_path_prints_the_auxiliary_axes_at_hand_computed_points() {
     let shown: Vec<[f64; 2]> = vec![
         [0.0, 350.0],
         [350.0, 10.0],
-        [10.0, 270.0],
-        [270.0, 270.0],
-        [270.0, 180.0],
+        [10.0, 90.0],
+        [90.0, 90.0],
+        [90.0, 180.0],
     ];
     for (rec, a) in r.iter().zip(&shown) {
         assert!(close(&rec["A"], a), "{rec}");
@@ -827,8 +853,9 @@ fn serve_jobs_chain_the_auxiliary_axes() {
     c.ok("mdi G91 G1 A10 F3600");
     let s = settled(&mut c);
     assert!((a_of(&s) - 55.0).abs() < 1e-9, "{s}");
-    // The wrapped A: from 55 to 0 the short way.
-    c.ok("mdi G90 G0 A0");
+    // The wrapped A: `A-0` is 0 the negative way round (LinuxCNC: the sign gives the
+    // direction), from 55 back to 0.
+    c.ok("mdi G90 G0 A-0");
     let s = settled(&mut c);
     assert!(a_of(&s).abs() < 1e-9, "{s}");
     let prog = svc.file("a.ngc", "G21 G90\nG1 X2 A30 F600\nG1 X3\nM2\n");

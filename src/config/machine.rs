@@ -173,7 +173,12 @@ struct RawAxis {
     counts_per_mm_key: Option<f64>,
     counts_per_deg: Option<f64>,
     #[serde(default)]
-    wrap: bool,
+    wrap: RawWrap,
+    /// Read from `wrap` by [`resolve_kind`].
+    #[serde(skip)]
+    wrapped: bool,
+    #[serde(skip)]
+    wrap_shortest: bool,
     min_mm: f64,
     max_mm: f64,
     max_vel_mm_s: f64,
@@ -393,6 +398,18 @@ pub enum AxisKind {
     Rotary,
 }
 
+/// `wrap`: `false` (the default), `true` (LinuxCNC's WRAPPED_ROTARY: a G90 word's sign gives
+/// the direction) or `"shortest"` (a G90 position the shortest way round).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(untagged)]
+enum RawWrap {
+    #[default]
+    #[serde(skip)]
+    Unset,
+    Flag(bool),
+    Rule(String),
+}
+
 /// Checks `kind`, the counts key that goes with it and `wrap`, and fills in the axis's counts
 /// per unit (mm or degree).
 fn resolve_kind(ctx: &Ctx, table: &str, a: &mut RawAxis) -> Result<(), ConfigError> {
@@ -437,7 +454,21 @@ fn resolve_kind(ctx: &Ctx, table: &str, a: &mut RawAxis) -> Result<(), ConfigErr
             })?
         }
     };
-    if a.wrap && a.kind != AxisKind::Rotary {
+    (a.wrapped, a.wrap_shortest) = match &a.wrap {
+        RawWrap::Unset | RawWrap::Flag(false) => (false, false),
+        RawWrap::Flag(true) => (true, false),
+        RawWrap::Rule(r) if r == "shortest" => (true, true),
+        RawWrap::Rule(r) => {
+            return Err(ctx.err(
+                table,
+                "wrap",
+                format!(
+                    "{r:?} is no wrap rule: true (LinuxCNC's: the sign of a G90 word gives the direction), \"shortest\" or false"
+                ),
+            ));
+        }
+    };
+    if a.wrapped && a.kind != AxisKind::Rotary {
         return Err(ctx.err(
             table,
             "wrap",
@@ -556,9 +587,12 @@ pub struct AxisConfig {
     pub mode: AxisMode,
     /// Linear (mm) or rotary (degrees: every `_mm` field of the axis is then in degrees).
     pub kind: AxisKind,
-    /// A rotary axis whose position wraps at 360° (LinuxCNC's WRAPPED_ROTARY): G90 moves take
-    /// the shortest way, and its travel limits do not apply.
+    /// A rotary axis whose position wraps at 360° (LinuxCNC's WRAPPED_ROTARY): a G90 word's
+    /// magnitude is the position modulo a turn and its sign the direction (LinuxCNC's
+    /// `unwrap_rotary`), and its travel limits do not apply.
     pub wrap: bool,
+    /// A wrapped axis whose G90 moves take the shortest way instead (`wrap = "shortest"`).
+    pub wrap_shortest: bool,
     /// Encoder counts per millimetre (per degree for a rotary axis).
     pub counts_per_mm: f64,
     /// Lower travel limit.
@@ -720,6 +754,7 @@ impl Machine {
             if let Some(i) = a.aux() {
                 setup.aux_axes[i] = true;
                 setup.aux_wrapped[i] = a.wrap;
+                setup.aux_shortest[i] = a.wrap_shortest;
             }
         }
         // G5/G5.1 are sampled within the planner's chord tolerance (0 there: no limit on
@@ -1361,7 +1396,8 @@ impl Machine {
                 dictionary: dict,
                 mode: a.mode,
                 kind: a.kind,
-                wrap: a.wrap,
+                wrap: a.wrapped,
+                wrap_shortest: a.wrap_shortest,
                 counts_per_mm: a.counts_per_mm,
                 min_mm: a.min_mm,
                 max_mm: a.max_mm,

@@ -128,9 +128,14 @@ pub struct Setup {
     /// moves another one is an error ([`ErrorKind::AxisNotConfigured`]). Default: none.
     pub aux_axes: [bool; 6],
     /// Which of them are wrapped rotary axes (LinuxCNC's WRAPPED_ROTARY): a G90 position is
-    /// in `(−360°, 360°)` and taken the shortest way round from where the axis stands (its
-    /// machine coordinate keeps counting whole turns). Default: none.
+    /// in `(−360°, 360°)`; as LinuxCNC's `unwrap_rotary` reads it, its magnitude is the
+    /// position modulo a turn and its sign the direction of the move (`A-90`: the negative
+    /// way round to 90°), unless [`Setup::aux_shortest`] says otherwise. The machine
+    /// coordinate keeps counting whole turns. Default: none.
     pub aux_wrapped: [bool; 6],
+    /// Which wrapped axes take a G90 position (then read modulo a turn, `A-90` = 270°) the
+    /// shortest way round instead of LinuxCNC's signed direction. Default: none.
+    pub aux_shortest: [bool; 6],
 }
 
 /// The default of [`Setup::spline_tol_mm`]: 1 µm, the planner's default chord tolerance.
@@ -162,6 +167,7 @@ impl Setup {
             start_aux: [0.0; 6],
             aux_axes: [false; 6],
             aux_wrapped: [false; 6],
+            aux_shortest: [false; 6],
         }
     }
 
@@ -290,6 +296,7 @@ struct State {
     work_aux: [AuxPos; 9],
     aux_axes: [bool; 6],
     aux_wrapped: [bool; 6],
+    aux_shortest: [bool; 6],
     prog_mm: Vector3<f64>,
     motion: Option<Motion>,
     plane: Plane,
@@ -403,6 +410,7 @@ impl State {
             work_aux: [[0.0; 6]; 9],
             aux_axes: setup.aux_axes,
             aux_wrapped: setup.aux_wrapped,
+            aux_shortest: setup.aux_shortest,
             prog_mm: setup.start_mm - setup.work_offsets_mm[0],
             motion: None,
             plane: Plane::Xy,
@@ -1609,7 +1617,8 @@ impl State {
     }
 
     /// The auxiliary axes' target of the line's A B C U V W words (G90/G91 applied; U V W in
-    /// the program's units, A B C in degrees; a wrapped axis under G90 the shortest way).
+    /// the program's units, A B C in degrees; a wrapped axis under G90 as
+    /// [`Setup::aux_wrapped`] says).
     fn aux_target(&mut self, b: &Block) -> Result<AuxPos, BlockError> {
         self.aux_target_in(b, false)
     }
@@ -1644,13 +1653,28 @@ impl State {
                         },
                     ));
                 }
-                // The shortest way from where the axis reads (modulo a turn) to `v`; half a
-                // turn goes the positive way.
-                let mut d = (v - (t[i] - off[i])).rem_euclid(360.0);
-                if d > 180.0 {
-                    d -= 360.0;
+                let current = t[i] - off[i];
+                if self.aux_shortest[i] {
+                    // The shortest way from where the axis reads (modulo a turn) to `v`;
+                    // half a turn goes the positive way.
+                    let mut d = (v - current).rem_euclid(360.0);
+                    if d > 180.0 {
+                        d -= 360.0;
+                    }
+                    t[i] + d
+                } else {
+                    // LinuxCNC's `unwrap_rotary`: `|v|` in the turn where the axis reads, then
+                    // on round in the direction of `v`'s sign (−0 is negative) if behind it.
+                    let mut r = v.abs() + (current / 360.0).floor() * 360.0;
+                    if v.is_sign_negative() {
+                        if r > current {
+                            r -= 360.0;
+                        }
+                    } else if r < current {
+                        r += 360.0;
+                    }
+                    r + off[i]
                 }
-                t[i] + d
             } else {
                 v + off[i]
             };

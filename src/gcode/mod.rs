@@ -34,7 +34,7 @@
 //! - Auxiliary axes A B C (degrees) and U V W on G0/G1/G2/G3/G53 moves, G92/G52 and G10
 //!   L2/L20, for the axes [`Setup::aux_axes`] names; carried linearly in the path parameter
 //!   ([`AuxMove`]), F as LinuxCNC's canon reads it (X/Y/Z path speed, else U/V/W, else deg/min
-//!   over the A/B/C length), wrapped rotary axes the shortest way ([`Setup::aux_wrapped`]).
+//!   over the A/B/C length), wrapped rotary axes as LinuxCNC turns them, or the shortest way ([`Setup::aux_wrapped`]).
 //! - Modes: G17/G18/G19, G20/G21, G90/G91, G90.1/G91.1, G93/G94 (inverse time: F on every feed
 //!   line; changing the mode clears the feed), G61/G61.1/G64 P Q, G40/G41/G42 D /G41.1/G42.1 D L
 //!   (as LinuxCNC reads them: D0 the tool in the spindle, a negative diameter swaps the side,
