@@ -1602,8 +1602,10 @@ impl Planner {
                 tol_mm: self.filter_tolerance_mm(self.window[i].blend),
             });
             self.axes_unsettled = None;
-            let hold = self
-                .partial_hold_periods(i, smoothing)
+            // Only where the axis filters' state is known (`behind`): a move too short for it
+            // stands its full settling time, the axis filters' too.
+            let hold = behind
+                .and_then(|_| self.partial_hold_periods(i, smoothing))
                 .filter(|&h| h < full);
             let periods = hold.unwrap_or(full);
             if periods > 0 {
