@@ -17,7 +17,8 @@
 //! through the interpolator: a program's time is its number of cycles times the period, what
 //! a run would take.
 //!
-//! One line per program on stdout, then the geometric mean of the ratio, the ten worst
+//! One line per program on stdout, then the geometric mean of the ratio (and of `T_ref` over
+//! the trapezoid time, and of the jerk-limited time over `T_ref`), the ten worst
 //! programs and those above 1.5× whose jerk-limited time is not within 1.1× of `T_ref`.
 //! Progress and the programs that do not plan go to stderr.
 
@@ -181,6 +182,17 @@ fn summary(rows: &[Row], programs: usize) {
         rows.len(),
         log_mean.exp(),
         max
+    );
+    // What the physics of the jerk limit alone costs: `T_ref ≥ trap_s` (a start from rest
+    // costs `A/J` more with a jerk limit), so a planner that took exactly `T_ref` on every
+    // program would show the first mean; the second is how far the plans are from it.
+    let geo = |f: &dyn Fn(&Row) -> f64| {
+        (rows.iter().map(|r| f(r).ln()).sum::<f64>() / rows.len() as f64).exp()
+    };
+    println!(
+        "reference: T_ref / trapezoid time geometric mean {:.3} (the ratio a plan taking exactly T_ref everywhere would show); jerk-limited / T_ref geometric mean {:.3}",
+        geo(&|r| r.t_ref_s / r.trapezoid_s),
+        geo(&|r| r.jerk_s / r.t_ref_s)
     );
     let mut worst: Vec<&Row> = rows.iter().collect();
     worst.sort_by(|a, b| b.ratio().total_cmp(&a.ratio()));

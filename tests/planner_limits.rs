@@ -529,10 +529,12 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
     );
     let prog = parse_program(&text, "tangent.ngc", Vector3::zeros()).unwrap();
     let plan = plan_with(&prog, &l, &cfg).unwrap();
+    // The line's last segment (the part within the time-law filter's reach of the arc may be
+    // split off).
     let line = plan
         .segments()
         .iter()
-        .find(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
+        .rfind(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
         .unwrap();
     // The filters of `Smoothing::for_machine`: T_k = 8 ms in whole periods, T_f the smallest
     // A/J (37.5 ms) in whole periods.
@@ -684,6 +686,58 @@ fn a_stop_between_filtered_moves_stands_only_until_the_corner_is_within_its_cap(
         "stood {still_periods} periods at the corner (the time-law filter settles in {})",
         n_f - 1.0
     );
+    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}
+
+/// Issue 11: under the time-law filter, elements joined at speed planned with the lower of
+/// their two accelerations, since the filter's window spans the junction. A long line into a
+/// small arc then crawled all its length at the arc's tangential acceleration. Only the part of
+/// the line within the filter's reach of the junction needs it: here 30 mm lines before and
+/// after a tangent half circle of 2 mm radius (its tangential acceleration 40 % of theirs)
+/// reach the speed their own acceleration allows over (nearly) their length (63 % before
+/// the change), and every axis keeps its limits, the path its tolerance.
+#[test]
+fn a_long_line_keeps_its_acceleration_beyond_the_filter_s_reach_of_a_small_arc() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let text = "G21 G90 G17 G64 P0.01\nG1 X30 F12000\nG3 X30 Y4 I0 J2\nG1 X0 Y4\nM2\n";
+    let prog = parse_program(text, "small_arc.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    // The lines' own tangential acceleration under the time-law filter: `J·T_f/2`, with T_f
+    // the smallest A/J (37.5 ms) in whole periods.
+    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
+    let arc_acc = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 3)
+        .map(|s| s.profile.unwrap().limits().a_max_mm_s2())
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        arc_acc < 0.8 * acc,
+        "the arc's acceleration {arc_acc} mm/s²"
+    );
+    for line in [2, 4] {
+        let peak = plan
+            .segments()
+            .iter()
+            .filter(|s| s.line == line)
+            .map(|s| s.v_peak_mm_s)
+            .fold(0.0, f64::max);
+        // From (nearly) rest to (nearly) rest over 30 mm: √(a·L) at the line's own
+        // acceleration, less what the part within reach costs.
+        let own = (acc * 30.0).sqrt();
+        assert!(
+            peak > 0.95 * own,
+            "line {line} peaks at {peak} mm/s; its own acceleration reaches {own} mm/s \
+             (the arc's {} mm/s)",
+            (arc_acc * 30.0).sqrt()
+        );
+    }
     setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
     path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
         .unwrap()

@@ -75,7 +75,9 @@
 //!   trapezoid whose tangential acceleration stays within `J_t·T_f/2` comes out with its
 //!   tangential jerk within `J_t` (`J_t`: the element's jerk budget, as the S-curves had),
 //!   even where it brakes right after accelerating. Elements joined at speed plan with the
-//!   lower of their two accelerations, since the filter's window spans the junction.
+//!   lower of their two accelerations, since the filter's window spans the junction; but only
+//!   within the filter's reach of it: a line with the higher acceleration and long enough is
+//!   split where the reach ends and keeps its own beyond (`Planner::share_at_junction`).
 //! - **Dips.** The filtered speed rounds every dip of the plan: through a V-shaped dip to `c`
 //!   with the acceleration `A` on both sides it passes the dip's position at `c + A·T_f/4`. So a
 //!   junction whose cap is below either neighbour's speed is planned `A·T_f/4` lower, and one
@@ -885,6 +887,11 @@ struct Pending {
     /// The junction at its start's cap under the feeds before the time-law filter's dip
     /// ([`Planner::dip_caps`]); 0 where none is known (after a blend arc, at the start).
     raw_cap_start_mm_s: f64,
+    /// Its tangential acceleration as its own limits and [`share_acceleration`] with its
+    /// neighbours leave it, before a vertex's normal-jerk cap
+    /// ([`Planner::curve_acc_mm_s2`]), which holds for the elements at that vertex only and
+    /// is not passed on through further junctions.
+    shared_acc_mm_s2: f64,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -1028,6 +1035,9 @@ impl Planner {
                     Some(prev) => self.blend_arc(prev, &p)?,
                     None => None,
                 };
+                // What is left of `p` beyond the time-law filter's reach of its start, where
+                // `p` was split there ([`Planner::share_at_junction`]).
+                let mut rest = None;
                 match blend {
                     None => {
                         let raw = self.window.back().map(|prev| {
@@ -1055,10 +1065,10 @@ impl Planner {
                                 });
                             } else if p.cap_start_mm_s > 0.0 {
                                 p.kink_in = discrete_curvature(prev, &p);
-                                if self.smoothing.is_some() {
-                                    share_acceleration(prev, &mut p);
-                                }
                             }
+                        }
+                        if !provisional && p.cap_start_mm_s > 0.0 {
+                            rest = self.share_at_junction(&mut p, (fed_mm_s, limit_mm_s));
                         }
                     }
                     Some(Blend {
@@ -1089,14 +1099,20 @@ impl Planner {
                         self.window.push_back(arc);
                     }
                 }
-                self.position_mm = p.seg.end_mm;
-                self.aux_pushed = Some(p.seg.aux.end);
+                let last = rest.as_ref().unwrap_or(&p);
+                self.position_mm = last.seg.end_mm;
+                self.aux_pushed = Some(last.seg.aux.end);
                 p.seq = self.next_seq;
                 self.next_seq += 1;
                 if p.provisional.is_some() {
                     self.provisional.push_back(p.seq);
                 }
                 self.window.push_back(p);
+                if let Some(mut rest) = rest {
+                    rest.seq = self.next_seq;
+                    self.next_seq += 1;
+                    self.window.push_back(rest);
+                }
                 self.finalize_junctions(false);
                 if self.window.len() >= self.config.lookahead {
                     self.replan(false)?;
@@ -1299,7 +1315,10 @@ impl Planner {
                 profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0)
             };
             let v1 = fwd.min(back);
-            let last = i + 1 == n;
+            // The next push may still lower the acceleration of the window's last element
+            // (`Planner::share_at_junction`), and with it the speed the element before can
+            // end at: neither settles until more come.
+            let last = i + 2 >= n;
             // More elements can only raise the backward bound from the window's end; one that
             // comes from a junction's own cap stays.
             let fixed = all
@@ -1489,6 +1508,9 @@ impl Planner {
             // Joined at speed: the filter's window spans the junction.
             b.kink_in = raw.kink;
             share_acceleration(&mut a, &mut b);
+            let acc = self.curve_acc_mm_s2(&a, &b, b.cap_start_mm_s);
+            lower_acceleration(&mut a, acc);
+            lower_acceleration(&mut b, acc);
         }
         self.window[idx - 1] = a;
         self.window[idx] = b;
@@ -1654,6 +1676,106 @@ impl Planner {
     }
 
     /// Highest speed through the junction from `a` into `b` (see the module documentation).
+    /// Joins `p` at speed to the window's last element under the time-law filter. The
+    /// filter's window spans the junction, so its output near it mixes both elements'
+    /// accelerations: within its reach both plan with the lower of the two
+    /// ([`share_acceleration`]). Beyond it a line keeps its own: a line whose acceleration is
+    /// the higher and which is long enough is split where the reach ends, only the part
+    /// within reach taking the lower acceleration (the window's last element keeps its head,
+    /// `p` its tail; a split `p` returns the rest, to follow it in the window).
+    ///
+    /// The reach: through the junction at most at `c` (`limit_mm_s`, its cap by the machine
+    /// alone, which also bounds a feed override) and with the lower acceleration `a` on the
+    /// part within reach, the plan runs at most at `v_r = √(c² + 2·a·L)` on the `L` nearest
+    /// the junction, so it takes at least `L/v_r` to cross them. With `L = v_r·T_f` (solved:
+    /// `L = T_f·(a·T_f + √((a·T_f)² + c²))`) the filter's window, `T_f` long, never holds both
+    /// the other element and the part beyond `L`: while the filtered time law is on the
+    /// element with the lower acceleration, every acceleration it averages is within it. The
+    /// two parts of the split line meet without a turn; the step of the plan's acceleration
+    /// between them is within `2·J·T_f/2`, which the filter turns into a jerk within `J`, as
+    /// anywhere else.
+    fn share_at_junction(
+        &mut self,
+        p: &mut Pending,
+        (fed_mm_s, limit_mm_s): (f64, f64),
+    ) -> Option<Pending> {
+        let smoothing = self.smoothing?;
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let curve_acc = self.curve_acc_mm_s2(self.window.back()?, p, fed_mm_s);
+        let prev = self.window.back_mut()?;
+        // The lower of the two accelerations passes on through further junctions; the
+        // vertex's own cap holds here only.
+        let shared = prev.shared_acc_mm_s2.min(p.shared_acc_mm_s2);
+        let acc = shared.min(curve_acc);
+        let reach_mm = t_f * (acc * t_f + ((acc * t_f).powi(2) + limit_mm_s * limit_mm_s).sqrt());
+        // Only where it pays: a clearly higher acceleration over most of the line.
+        let splits = |q: &Pending| {
+            q.limits.a_max_mm_s2() > SPLIT_ACC_GAIN * acc
+                && reach_mm.is_finite()
+                && reach_mm <= 0.5 * q.seg.length_mm
+                && matches!(q.seg.path, SegmentPath::Line { .. })
+                && !q.seg.aux.moves()
+        };
+        let (split_prev, split_p) = (splits(prev), splits(p));
+        match split_prev
+            .then(|| split_line(prev, prev.seg.length_mm - reach_mm))
+            .flatten()
+        {
+            Some((head, mut tail)) => {
+                tail.cap_start_mm_s = head.limits.v_max_mm_s();
+                tail.cap_start_limit_mm_s = head.v_limit_mm_s;
+                tail.raw_cap_start_mm_s = tail.cap_start_mm_s;
+                *prev = head;
+                tail.shared_acc_mm_s2 = shared;
+                lower_acceleration(&mut tail, acc);
+                tail.seq = self.next_seq;
+                self.next_seq += 1;
+                self.window.push_back(tail);
+            }
+            None => {
+                prev.shared_acc_mm_s2 = shared;
+                lower_acceleration(prev, acc);
+            }
+        }
+        let rest = match split_p.then(|| split_line(p, reach_mm)).flatten() {
+            Some((head, mut rest)) => {
+                rest.cap_start_mm_s = rest.limits.v_max_mm_s();
+                rest.cap_start_limit_mm_s = rest.v_limit_mm_s;
+                rest.raw_cap_start_mm_s = rest.cap_start_mm_s;
+                *p = head;
+                Some(rest)
+            }
+            None => None,
+        };
+        p.shared_acc_mm_s2 = shared;
+        lower_acceleration(p, acc);
+        rest
+    }
+
+    /// The tangential acceleration the elements either side of the vertex from `a` into `b`,
+    /// passed at speed (at most `v_mm_s`), may use in the jerk-limited mode. Along the curve
+    /// the vertices approximate (their discrete curvature `κ̄`, averaged over this vertex and
+    /// the one before, as [`Planner::smoothed_junction_limit_mm_s`] takes it), the normal jerk
+    /// has a part `3·v·κ̄·a_t`, as on an arc ([`arc_limits`]): each axis's `3·v·|κ̄ᵢ|·a_t`
+    /// is held within the jerk budget the elements leave it, shared in halves like the
+    /// junction's other rules. Unbounded where the path does not turn.
+    fn curve_acc_mm_s2(&self, a: &Pending, b: &Pending, v_mm_s: f64) -> f64 {
+        let du = b.tangent_start - a.tangent_end;
+        let kink_mean = 0.5 * (discrete_curvature(a, b) + a.kink_in);
+        let l_mm = a.seg.length_mm.min(b.seg.length_mm);
+        let mut acc = f64::INFINITY;
+        for i in 0..3 {
+            let k = kink_mean[i].abs().min(du[i].abs() / l_mm);
+            if k > 0.0 && v_mm_s > 0.0 {
+                let budget = (self.config.max_jerk_mm_s3[i]
+                    - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
+                .max(0.0);
+                acc = acc.min(budget / (3.0 * v_mm_s * k));
+            }
+        }
+        acc
+    }
+
     fn junction_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
         self.junction_caps(a, b).0
     }
@@ -2113,6 +2235,11 @@ impl Planner {
             low_cap: false,
             is_blend_arc: false,
             raw_cap_start_mm_s: 0.0,
+            shared_acc_mm_s2: 0.0,
+        })
+        .map(|mut p| {
+            p.shared_acc_mm_s2 = p.limits.a_max_mm_s2();
+            p
         })
     }
 
@@ -2231,6 +2358,7 @@ impl Planner {
                     low_cap: false,
                     is_blend_arc: false,
                     raw_cap_start_mm_s: 0.0,
+                    shared_acc_mm_s2: 0.0,
                 }
             }
             ElementKind::Arc { .. } => {
@@ -2248,6 +2376,7 @@ impl Planner {
         };
         p.seg.end_mm = e.end_mm;
         p.seg.aux = e.aux;
+        p.shared_acc_mm_s2 = p.limits.a_max_mm_s2();
         Ok(Some(p))
     }
 }
@@ -2408,14 +2537,48 @@ fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
 /// junction taken at speed (the filter's window spans it), so both plan with the lower of
 /// their tangential accelerations.
 fn share_acceleration(a: &mut Pending, b: &mut Pending) {
-    let acc = a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2());
+    let acc = a.shared_acc_mm_s2.min(b.shared_acc_mm_s2);
     for p in [a, b] {
-        if p.limits.a_max_mm_s2() > acc
-            && let Some(lower) = ProfileLimits::trapezoid(p.limits.v_max_mm_s(), acc)
-        {
-            p.limits = lower;
-        }
+        p.shared_acc_mm_s2 = acc;
+        lower_acceleration(p, acc);
     }
+}
+
+/// Lowers `p`'s tangential acceleration to `acc_mm_s2` where it is higher.
+fn lower_acceleration(p: &mut Pending, acc_mm_s2: f64) {
+    if p.limits.a_max_mm_s2() > acc_mm_s2
+        && let Some(lower) = ProfileLimits::trapezoid(p.limits.v_max_mm_s(), acc_mm_s2)
+    {
+        p.limits = lower;
+    }
+}
+
+/// [`Planner::share_at_junction`] splits a line only where its own acceleration is above
+/// this many times the lower one.
+const SPLIT_ACC_GAIN: f64 = 1.2;
+
+/// Line `p` split `at_mm` from its start, into two lines that meet without a turn: the first
+/// keeps `p`'s start and its junction, the second ends where `p` ends, bit for bit. Both keep
+/// `p`'s limits and programmed length; the second starts with no kink and no junction cap yet.
+/// `None` for an arc or outside the line.
+fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
+    let SegmentPath::Line { direction } = p.seg.path else {
+        return None;
+    };
+    if !(at_mm > 0.0 && at_mm < p.seg.length_mm) {
+        return None;
+    }
+    let at = p.seg.end_mm - direction * (p.seg.length_mm - at_mm);
+    let (mut head, mut tail) = (*p, *p);
+    head.seg.end_mm = at;
+    head.seg.length_mm = at_mm;
+    tail.seg.start_mm = at;
+    tail.seg.length_mm = p.seg.length_mm - at_mm;
+    tail.kink_in = Vector3::zeros();
+    tail.provisional = None;
+    tail.low_cap = false;
+    tail.alone = p.alone;
+    Some((head, tail))
 }
 
 /// Caps an element of a plateau ([`Planner::finalize_junction`]) at `fed_mm_s` (and its
