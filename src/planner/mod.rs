@@ -1053,20 +1053,18 @@ impl Planner {
                             }
                         }
                     }
-                    Some(Blend {
-                        mut arc,
-                        tangent_mm,
-                        cap_in,
-                        cap_out,
-                    }) => {
+                    Some(blend) => {
                         let prev = self.window.back_mut().expect("a blend follows an element");
+                        blend.trim(prev, &mut p);
+                        let Blend {
+                            mut arc,
+                            cap_in,
+                            cap_out,
+                            ..
+                        } = blend;
                         // No auxiliary axis moves on either side of a blended corner.
                         arc.seg.aux = AuxMove::still(prev.seg.aux.end);
-                        prev.seg.end_mm = arc.seg.start_mm;
-                        prev.seg.length_mm -= tangent_mm;
                         (arc.cap_start_mm_s, arc.cap_start_limit_mm_s) = cap_in;
-                        p.seg.start_mm = arc.seg.end_mm;
-                        p.seg.length_mm -= tangent_mm;
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) = cap_out;
                         if self.smoothing.is_some() {
                             if arc.cap_start_mm_s > 0.0 {
@@ -1873,14 +1871,16 @@ impl Planner {
         v.max(0.0)
     }
 
-    /// The shortest `a` and `b`, either side of a junction, may still become: a line gives a
-    /// corner's blend arc up to half of its programmed length, at `a`'s end and `b`'s start
+    /// The shortest `a` and `b`, either side of a junction, may still become: a line or an arc
+    /// gives a corner's blend arc up to half of its programmed length, at `a`'s end and `b`'s start
     /// where the other is that arc (the junction's caps are computed before the line is
     /// shortened), and at `b`'s end where its tolerance may blend it.
     fn shortest_mm(&self, a: &Pending, b: &Pending) -> (f64, f64) {
-        let line = |p: &Pending| matches!(p.seg.path, SegmentPath::Line { .. });
+        let trimmable = |p: &Pending| {
+            !p.is_blend_arc && matches!(p.seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
+        };
         let half = |p: &Pending, ends: usize| {
-            if line(p) {
+            if trimmable(p) {
                 p.seg.length_mm - ends as f64 * 0.5 * p.full_length_mm
             } else {
                 p.seg.length_mm
