@@ -21,6 +21,8 @@
 //! whose trimming crosses a turn (checked), and arcs whose auxiliary axes move
 //! (`aux_axes::keeps_corner`), as lines.
 
+#[cfg(test)]
+use std::f64::consts::PI;
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 use super::*;
@@ -170,17 +172,11 @@ impl Planner {
         let v_blend = arc.limits.v_max_mm_s().min(cap_in.0).min(cap_out.0);
         // Round the corner only where it is faster: the arc is run at a constant speed, which
         // the chord tolerance and the centripetal limit may keep low, so a small arc can take
-        // longer than slowing down for the sharp corner (see `corner_cost_s`).
-        let (acc, jerk) = (
-            a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
-            a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
-        );
-        let room = a.full_length_mm.min(b.full_length_mm);
-        let v_cruise = feed_mm_s.min((v_sharp * v_sharp + acc * room).sqrt());
-        let arc_len = arc.seg.length_mm;
-        let blended = corner_cost_s(v_cruise, v_blend, acc, jerk) + arc_len / v_blend
-            - 2.0 * tangent_mm / v_cruise;
-        if !(v_blend > v_sharp && blended < corner_cost_s(v_cruise, v_sharp, acc, jerk)) {
+        // longer than slowing down for the sharp corner (see `CornerCost`).
+        let cost = CornerCost::new(self, a, b, v_sharp);
+        if !(v_blend > v_sharp
+            && cost.blended_s(&arc, v_blend, (tangent_mm, tangent_mm)) < cost.sharp_s)
+        {
             return Ok(None);
         }
         let (mut a_after, mut b_after) = (*a, *b);
@@ -224,50 +220,56 @@ impl Planner {
         if v_sharp >= feed_mm_s {
             return None;
         }
-        let widest = corner.largest_within(tol_mm)?;
-        let (mut circle, (mut arc, mut a_after, mut b_after)) =
-            (widest, self.blend_pieces(a, b, &widest, feed_mm_s)?);
-        let v_arc = arc.limits.v_max_mm_s();
-        if v_arc > feed_mm_s {
-            // The smallest radius that still reaches the feed (as between two lines).
-            let rho = widest.radius_mm * (feed_mm_s / v_arc).powf(1.5);
-            if let Some(smaller) = corner
+        let (widest, widest_k) = corner.largest_within(tol_mm)?;
+        let cost = CornerCost::new(self, a, b, v_sharp);
+        // The radius: the largest within the tolerance, or a smaller one where the estimate
+        // says it is faster (the arc's speed comes from its radius, but it runs at the slower
+        // side's feed and takes more of both sides as it grows). The smaller candidates are
+        // a grid that does not depend on the tolerance, so a larger tolerance only adds
+        // candidates.
+        let top = widest_k.max(0);
+        let grid = (0..=top)
+            .rev()
+            .map(|k| corner.grid_start_mm() * GRID_RATIO.powi(k));
+        let candidates = std::iter::once(widest.radius_mm).chain(grid);
+        let mut best: Option<(f64, Blend)> = None;
+        for rho in candidates {
+            let Some(circle) = corner
                 .tangent_circle(rho)
                 .filter(|t| t.deviation_mm <= tol_mm)
-                && let Some(pieces) = self.blend_pieces(a, b, &smaller, feed_mm_s)
-            {
-                circle = smaller;
-                (arc, a_after, b_after) = pieces;
+            else {
+                continue;
+            };
+            let Some((arc, a_after, b_after)) = self.blend_pieces(a, b, &circle, feed_mm_s) else {
+                continue;
+            };
+            // The junction caps as between two lines: a line with its programmed length (its
+            // caps are computed before it is shortened, `Planner::shortest_mm`), an arc as
+            // trimmed (its tangent at the new end differs).
+            let line = |p: &Pending| matches!(p.seg.path, SegmentPath::Line { .. });
+            let cap_a = if line(a) { *a } else { a_after };
+            let cap_b = if line(b) { *b } else { b_after };
+            let cap_in = self.junction_caps(&cap_a, &arc);
+            let cap_out = self.junction_caps(&arc, &cap_b);
+            let v_blend = arc.limits.v_max_mm_s().min(cap_in.0).min(cap_out.0);
+            if !(v_blend > v_sharp) {
+                continue;
+            }
+            let cost_s = cost.blended_s(&arc, v_blend, (circle.taken_a_mm, circle.taken_b_mm));
+            if best.as_ref().is_none_or(|(c, _)| cost_s < *c) {
+                let blend = Blend {
+                    arc,
+                    a: a_after,
+                    b: b_after,
+                    cap_in,
+                    cap_out,
+                };
+                best = Some((cost_s, blend));
             }
         }
-        // The junction caps as between two lines: a line with its programmed length (its caps
-        // are computed before it is shortened, `Planner::shortest_mm`), an arc as trimmed (its
-        // tangent at the new end differs).
-        let line = |p: &Pending| matches!(p.seg.path, SegmentPath::Line { .. });
-        let cap_a = if line(a) { *a } else { a_after };
-        let cap_b = if line(b) { *b } else { b_after };
-        let cap_in = self.junction_caps(&cap_a, &arc);
-        let cap_out = self.junction_caps(&arc, &cap_b);
-        let v_blend = arc.limits.v_max_mm_s().min(cap_in.0).min(cap_out.0);
         // Only where faster than the sharp corner (`blend_lines`).
-        let (acc, jerk) = (
-            a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
-            a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
-        );
-        let room = a.full_length_mm.min(b.full_length_mm);
-        let v_cruise = feed_mm_s.min((v_sharp * v_sharp + acc * room).sqrt());
-        let blended = corner_cost_s(v_cruise, v_blend, acc, jerk) + arc.seg.length_mm / v_blend
-            - (circle.taken_a_mm + circle.taken_b_mm) / v_cruise;
-        if !(v_blend > v_sharp && blended < corner_cost_s(v_cruise, v_sharp, acc, jerk)) {
-            return None;
-        }
-        Some(Blend {
-            arc,
-            a: a_after,
-            b: b_after,
-            cap_in,
-            cap_out,
-        })
+        best.filter(|(cost_s, _)| *cost_s < cost.sharp_s)
+            .map(|(_, blend)| blend)
     }
 
     /// The blend arc along `circle`, and `a` and `b` as it leaves them.
@@ -280,7 +282,13 @@ impl Planner {
     ) -> Option<(Pending, Pending, Pending)> {
         let (p1, p2) = (circle.p1_mm, circle.p2_mm);
         let geometry = ArcGeometry::new(p1, p2, circle.center_mm, circle.normal, 0)?;
-        if (geometry.sweep_rad - circle.sweep_rad).abs() > 1e-6 {
+        // Its sweep as the chord says (well conditioned), and never shorter than the chord.
+        let chord_mm = (p2 - p1).norm();
+        let arc_chord_mm = 2.0 * circle.radius_mm * (0.5 * geometry.sweep_rad).sin();
+        if (geometry.sweep_rad - circle.sweep_rad).abs() > 1e-6
+            || (arc_chord_mm - chord_mm).abs() > 1e-9 * (1.0 + chord_mm)
+            || chord_mm > geometry.length_mm
+        {
             return None;
         }
         let rapid = a.seg.rapid && b.seg.rapid;
@@ -416,6 +424,100 @@ fn trimmed_arc(
     None
 }
 
+/// An estimate of the time a corner costs, sharp or blended, for choosing between them (the
+/// profiles are planned exactly afterwards).
+struct CornerCost {
+    /// The speeds the elements reach near the corner, either side.
+    pub(super) v_a: f64,
+    pub(super) v_b: f64,
+    /// Their acceleration (the lower) and jerk; the acceleration where the sharp corner
+    /// stops in the jerk-limited mode (the moves run alone there, as exact S-curves).
+    acc: f64,
+    sharp_acc: f64,
+    jerk: f64,
+    /// What joining the two through the time-law filter costs (jerk-limited mode).
+    joined_s: f64,
+    /// The sharp corner's cost.
+    sharp_s: f64,
+    smoothing: bool,
+}
+
+impl CornerCost {
+    /// The sharp corner from `a` into `b` at `v_sharp`: each side loses against cruising at
+    /// the speed it reaches near the corner the time of one way of `corner_cost_s`.
+    fn new(planner: &Planner, a: &Pending, b: &Pending, v_sharp: f64) -> CornerCost {
+        let (acc, jerk) = (
+            a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
+            a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
+        );
+        let reach = |p: &Pending| {
+            p.limits
+                .v_max_mm_s()
+                .min((v_sharp * v_sharp + acc * p.full_length_mm).sqrt())
+        };
+        // In the jerk-limited mode a corner that stops lets the moves either side run alone,
+        // as exact S-curves without the time-law filter and with their higher acceleration;
+        // joined by a blend they pass through it, which costs its settling time where the
+        // motion stops next. Beyond that the filtered plan's dips and shared accelerations
+        // make the estimate rougher there: a blend must save at least that settling time.
+        let period_s = planner.config.period_s;
+        let (joined_s, sharp_acc) = match planner.smoothing {
+            Some(smoothing) if v_sharp == 0.0 => {
+                let alone = match (a.alone, b.alone) {
+                    (Some(x), Some(y)) => acc.max(x.a_max_mm_s2().min(y.a_max_mm_s2())),
+                    _ => acc,
+                };
+                (2.0 * smoothing.time_law_s(period_s), alone)
+            }
+            Some(smoothing) => (smoothing.time_law_s(period_s), acc),
+            None => (0.0, acc),
+        };
+        let mut cost = CornerCost {
+            v_a: reach(a),
+            v_b: reach(b),
+            acc,
+            sharp_acc,
+            jerk,
+            joined_s,
+            sharp_s: 0.0,
+            smoothing: planner.smoothing.is_some(),
+        };
+        cost.sharp_s = cost.corner_s(v_sharp, sharp_acc);
+        cost
+    }
+
+    fn corner_s(&self, v: f64, acc: f64) -> f64 {
+        0.5 * (corner_cost_s(self.v_a, v, acc, self.jerk)
+            + corner_cost_s(self.v_b, v, acc, self.jerk))
+    }
+
+    /// The blended corner: `arc` run at `v_blend` instead of `taken_mm` of each element.
+    fn blended_s(&self, arc: &Pending, v_blend: f64, (taken_a_mm, taken_b_mm): (f64, f64)) -> f64 {
+        // Under the time-law filter, elements joined at speed share the lower of their
+        // accelerations (`share_acceleration`): a tight arc slows its neighbours' ramps, at
+        // the corner and at their other ends, `v/2·(1/a' − 1/a)` each against cruising.
+        let (acc, ramps_s) = if self.smoothing {
+            let acc = self.acc.min(arc.limits.a_max_mm_s2());
+            let ramps_s = 0.5 * (self.v_a + self.v_b) * (1.0 / acc - 1.0 / self.sharp_acc);
+            (acc, ramps_s)
+        } else {
+            (self.acc, 0.0)
+        };
+        self.joined_s + ramps_s + self.corner_s(v_blend, acc) + arc.seg.length_mm / v_blend
+            - taken_a_mm / self.v_a
+            - taken_b_mm / self.v_b
+    }
+}
+
+/// The ratio of consecutive radii on the grid of candidate blends (`Planner::blend_curves`).
+const GRID_RATIO: f64 = std::f64::consts::SQRT_2;
+
+/// The grid's first radius, per millimetre of the path the blend may take (both rooms).
+const GRID_START: f64 = 1e-4;
+
+/// The grid's last radius: `GRID_START·√2^GRID_MAX_STEPS` is `MAX_RADIUS_PER_ROOM`.
+const GRID_MAX_STEPS: i32 = 47;
+
 /// An element's path near a corner, as the blend sees it: a line, or the circle of a plane arc.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Curve {
@@ -519,9 +621,16 @@ pub(super) struct Corner {
     /// The unit normal of the plane about which the path turns counter-clockwise at the
     /// corner (so the corner's inside is on the left of the direction of travel).
     turn_normal: Vector3<f64>,
-    /// Half the turn of the tangent at the corner.
-    half_turn_rad: f64,
+    /// The largest blend radius: [`MAX_RADIUS_PER_ROOM`] times the rooms' path lengths.
+    max_radius_mm: f64,
 }
+
+/// The largest blend radius, per millimetre of the path the blend may take (both rooms).
+/// Where both elements curve away from the blend (outside their circles), ever larger
+/// circles touch them with a vanishing sweep and a deviation that tends to the distance of
+/// their common tangent: a bound keeps the arc's geometry well conditioned (its sweep at
+/// least about a thousandth of a radian).
+const MAX_RADIUS_PER_ROOM: f64 = 1e3;
 
 /// A circle tangent to both elements of a [`Corner`], on its inside.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -587,14 +696,19 @@ impl Corner {
         }
         let side = cross.dot(&plane);
         let turn_normal = if side >= 0.0 { plane } else { -plane };
+        let room_mm = |c: Curve, room: f64| match c {
+            Curve::Line { .. } => room,
+            Curve::Circle { radius_mm, .. } => room * radius_mm,
+        };
+        let max_radius_mm = MAX_RADIUS_PER_ROOM * (room_mm(a, room_a) + room_mm(b, room_b));
         Some(Corner {
+            max_radius_mm,
             corner_mm,
             a,
             room_a,
             b,
             room_b,
             turn_normal,
-            half_turn_rad,
         })
     }
 
@@ -606,7 +720,7 @@ impl Corner {
     /// two offset circles; of the solutions, the nearest the corner whose tangent points lie
     /// on the elements near the corner, with the direction of travel.
     pub(super) fn tangent_circle(&self, rho: f64) -> Option<TangentCircle> {
-        if !(rho > 0.0 && rho.is_finite()) {
+        if !(rho > 0.0 && rho <= self.max_radius_mm) {
             return None;
         }
         let m = self.turn_normal;
@@ -727,9 +841,21 @@ impl Corner {
         })
     }
 
-    /// The largest tangent circle within `tol_mm` of the corner and the rooms (found by
-    /// bisection on the radius: the deviation and the lengths taken grow with it), or `None`.
-    pub(super) fn largest_within(&self, tol_mm: f64) -> Option<TangentCircle> {
+    /// The first radius of the grid of candidate blends: `GRID_START` of the rooms' path
+    /// lengths (independent of the tolerance).
+    pub(super) fn grid_start_mm(&self) -> f64 {
+        GRID_START * self.max_radius_mm / MAX_RADIUS_PER_ROOM
+    }
+
+    /// The largest tangent circle within `tol_mm` of the corner and the rooms, and the index
+    /// `k` of the largest radius of the grid `grid_start_mm·√2^k` within them too, or `None`.
+    ///
+    /// The radii that fit need not be one interval: where an element curves away from the
+    /// blend, much larger circles may touch both elements again within the tolerance (with a
+    /// vanishing sweep). The blend keeps to the interval from 0, where the deviation and the
+    /// lengths taken grow with the radius: the grid is climbed from its start until a radius
+    /// no longer fits, then bisected.
+    pub(super) fn largest_within(&self, tol_mm: f64) -> Option<(TangentCircle, i32)> {
         if !(tol_mm > 0.0 && tol_mm.is_finite()) {
             return None;
         }
@@ -737,17 +863,12 @@ impl Corner {
             self.tangent_circle(rho)
                 .filter(|t| t.deviation_mm <= tol_mm)
         };
-        // Between two lines the radius `tol·cos(θ/2)/(1 − cos(θ/2))` deviates by exactly
-        // the tolerance: a first guess.
-        let cos_h = self.half_turn_rad.cos();
-        let guess = (tol_mm * cos_h / (1.0 - cos_h)).max(tol_mm);
-        let (mut lo, mut hi) = (0.0, guess);
-        for _ in 0..64 {
-            if fits(hi).is_none() {
-                break;
-            }
+        let start = self.grid_start_mm();
+        let (mut lo, mut hi, mut k) = (0.0, start, -1);
+        while k < GRID_MAX_STEPS && fits(hi).is_some() {
             lo = hi;
-            hi *= 2.0;
+            hi *= GRID_RATIO;
+            k += 1;
         }
         for _ in 0..64 {
             let mid = 0.5 * (lo + hi);
@@ -760,6 +881,215 @@ impl Corner {
                 hi = mid;
             }
         }
-        fits(lo)
+        fits(lo).map(|t| (t, k))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(x: f64, y: f64) -> Vector3<f64> {
+        Vector3::new(x, y, 0.0)
+    }
+
+    const Z: Vector3<f64> = Vector3::new(0.0, 0.0, 1.0);
+
+    /// Distance from `q` to the line through `p` along `dir`, and to a circle.
+    fn to_line(q: Vector3<f64>, p: Vector3<f64>, dir: Vector3<f64>) -> f64 {
+        let w = q - p;
+        (w - dir * w.dot(&dir)).norm()
+    }
+
+    /// Checks what `tangent_circle` promises: tangency (the centre at ρ from a line, at
+    /// `R ∓ ρ` from a circle's centre), the tangent points on the elements before and after
+    /// the corner, and the blend's direction of travel equal to theirs there.
+    fn check_tangency(c: &Corner, t: &TangentCircle) {
+        let rho = t.radius_mm;
+        for (curve, p, before) in [(c.a, t.p1_mm, true), (c.b, t.p2_mm, false)] {
+            match curve {
+                Curve::Line { dir } => {
+                    assert!((to_line(t.center_mm, c.corner_mm, dir) - rho).abs() < 1e-9);
+                    assert!(to_line(p, c.corner_mm, dir) < 1e-9, "on the line");
+                    let along = (p - c.corner_mm).dot(&dir);
+                    assert!(if before { along < 0.0 } else { along > 0.0 });
+                }
+                Curve::Circle {
+                    center_mm,
+                    radius_mm,
+                    normal,
+                } => {
+                    let inside = normal.dot(&t.normal) > 0.0;
+                    let want = if inside {
+                        radius_mm - rho
+                    } else {
+                        radius_mm + rho
+                    };
+                    assert!(((t.center_mm - center_mm).norm() - want).abs() < 1e-9);
+                    assert!(
+                        ((p - center_mm).norm() - radius_mm).abs() < 1e-9,
+                        "on the circle"
+                    );
+                    let (ahead, _) = if before {
+                        curve.ahead(p, c.corner_mm)
+                    } else {
+                        curve.ahead(c.corner_mm, p)
+                    };
+                    assert!(ahead > 0.0);
+                }
+            }
+            assert!(
+                ((p - t.center_mm).norm() - rho).abs() < 1e-9,
+                "on the blend"
+            );
+            let blend_dir = t.normal.cross(&(p - t.center_mm)).normalize();
+            assert!((blend_dir - curve.tangent(p)).norm() < 1e-9, "tangent");
+        }
+        let nearest = (c.corner_mm - t.center_mm).norm() - rho;
+        assert!(t.deviation_mm >= nearest - 1e-12);
+    }
+
+    /// Every kind of corner with an arc, the blend inside and outside the arc's circle.
+    fn corners() -> Vec<Corner> {
+        let line_x = Curve::Line { dir: v(1.0, 0.0) };
+        let line_y = Curve::Line { dir: v(0.0, 1.0) };
+        let circle = |cx: f64, cy: f64, r: f64, n: f64| Curve::Circle {
+            center_mm: v(cx, cy),
+            radius_mm: r,
+            normal: Z * n,
+        };
+        let at = |a: Curve, b: Curve| Corner::new(Vector3::zeros(), (a, 1.0), (b, 1.0)).unwrap();
+        vec![
+            // Along +X, then a counter-clockwise arc leaving upwards-left (concave: inside).
+            at(line_x, circle(-3.0, 0.0, 3.0, 1.0)),
+            // The same arc clockwise: leaving downwards... convex side.
+            at(line_x, circle(-3.0, 0.0, 3.0, -1.0)),
+            // Arc into a line: counter-clockwise arc about (0, −2) arriving at the origin going
+            // −X, then the line up +Y.
+            at(circle(0.0, -2.0, 2.0, 1.0), line_y),
+            // Clockwise arc about (0, 2) arriving going −X... then up.
+            at(circle(0.0, 2.0, 2.0, -1.0), line_y),
+            // Arc into arc, both ways round.
+            at(circle(0.0, -2.0, 2.0, 1.0), circle(-1.5, 0.0, 1.5, -1.0)),
+            at(circle(0.0, -2.0, 2.0, 1.0), circle(1.0, 0.0, 1.0, 1.0)),
+            at(circle(0.0, 2.0, 2.0, -1.0), circle(3.0, 0.0, 3.0, 1.0)),
+        ]
+    }
+
+    #[test]
+    fn the_blend_circle_touches_both_elements_on_the_inside() {
+        for (k, c) in corners().iter().enumerate() {
+            for rho in [1e-3, 0.01, 0.1] {
+                let t = c
+                    .tangent_circle(rho)
+                    .unwrap_or_else(|| panic!("corner {k}: no circle of {rho}"));
+                check_tangency(c, &t);
+            }
+        }
+    }
+
+    #[test]
+    fn the_largest_blend_keeps_to_the_tolerance() {
+        for (k, c) in corners().iter().enumerate() {
+            for tol in [1e-3, 0.01, 0.05] {
+                let t = c.largest_within(tol).unwrap().0;
+                check_tangency(c, &t);
+                assert!(t.deviation_mm <= tol, "corner {k}: {}", t.deviation_mm);
+                // The largest: a little more deviates too much (the rooms are ample).
+                let wider = c.tangent_circle(t.radius_mm * 1.001).unwrap();
+                assert!(wider.deviation_mm > tol, "corner {k}, tol {tol}");
+                // The deviation is where the blend passes the corner, for these arcs.
+                let nearest = (c.corner_mm - t.center_mm).norm() - t.radius_mm;
+                assert!((t.deviation_mm - nearest).abs() < 1e-3 * tol, "corner {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn between_two_lines_it_is_seed_001s_arc() {
+        // The closed form of `blend_lines`: r = δ·cos(θ/2)/(1 − cos(θ/2)) for a turn θ.
+        let theta = 1.0f64;
+        let c = Corner::new(
+            Vector3::zeros(),
+            (Curve::Line { dir: v(1.0, 0.0) }, 10.0),
+            (
+                Curve::Line {
+                    dir: v(theta.cos(), theta.sin()),
+                },
+                10.0,
+            ),
+        )
+        .unwrap();
+        let tol = 0.01;
+        let t = c.largest_within(tol).unwrap().0;
+        let h = (0.5 * theta).cos();
+        assert!((t.radius_mm / (tol * h / (1.0 - h)) - 1.0).abs() < 1e-9);
+        check_tangency(&c, &t);
+    }
+
+    #[test]
+    fn the_room_bounds_what_a_blend_takes() {
+        let c = Corner::new(
+            Vector3::zeros(),
+            (Curve::Line { dir: v(1.0, 0.0) }, 0.05),
+            (
+                Curve::Circle {
+                    center_mm: v(-3.0, 0.0),
+                    radius_mm: 3.0,
+                    normal: Z,
+                },
+                0.02,
+            ),
+        )
+        .unwrap();
+        let t = c.largest_within(1.0).unwrap().0;
+        assert!(t.taken_a <= 0.05 && t.taken_b <= 0.02);
+        assert!(t.deviation_mm < 1.0);
+        assert!(c.tangent_circle(t.radius_mm * 1.01).is_none());
+    }
+
+    #[test]
+    fn elements_not_in_one_plane_and_tangent_joins_are_not_blended() {
+        let arc = Curve::Circle {
+            center_mm: v(-3.0, 0.0),
+            radius_mm: 3.0,
+            normal: Z,
+        };
+        let rising = Curve::Line {
+            dir: Vector3::new(1.0, 0.0, 1.0).normalize(),
+        };
+        assert!(Corner::new(Vector3::zeros(), (rising, 1.0), (arc, 1.0)).is_none());
+        let tilted = Curve::Circle {
+            center_mm: v(-3.0, 0.0),
+            radius_mm: 3.0,
+            normal: Vector3::new(0.0, 0.1, 1.0).normalize(),
+        };
+        assert!(
+            Corner::new(
+                Vector3::zeros(),
+                (Curve::Line { dir: v(0.0, 1.0) }, 1.0),
+                (tilted, 1.0)
+            )
+            .is_none()
+        );
+        // Tangent: the line along +Y into a counter-clockwise arc about (−3, 0).
+        assert!(
+            Corner::new(
+                Vector3::zeros(),
+                (Curve::Line { dir: v(0.0, 1.0) }, 1.0),
+                (arc, 1.0)
+            )
+            .is_none()
+        );
+    }
+
+    #[test]
+    fn a_trimmed_arc_keeps_its_circle() {
+        let g = ArcGeometry::new(v(1.0, 0.0), v(-1.0, 0.0), Vector3::zeros(), Z, 1).unwrap();
+        let end = v(0.0, 1.0);
+        let t = trimmed_arc((g.point_at(0.0), end), &g, g.sweep_rad - 0.5 * PI).unwrap();
+        assert!((t.sweep_rad - 2.5 * PI).abs() < 1e-12);
+        assert_eq!((t.center_mm, t.normal), (g.center_mm, g.normal));
+        assert!(trimmed_arc((g.point_at(0.0), end), &g, 1.0).is_none());
     }
 }
