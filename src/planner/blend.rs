@@ -252,7 +252,7 @@ impl Planner {
             let cap_in = self.junction_caps(&cap_a, &arc);
             let cap_out = self.junction_caps(&arc, &cap_b);
             let v_blend = arc.limits.v_max_mm_s().min(cap_in.0).min(cap_out.0);
-            if !(v_blend > v_sharp) {
+            if v_blend.is_nan() || v_blend <= v_sharp {
                 continue;
             }
             let cost_s = cost.blended_s(&arc, v_blend, (circle.taken_a_mm, circle.taken_b_mm));
