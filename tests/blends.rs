@@ -15,6 +15,7 @@ use proptest::prelude::*;
 mod setpoints;
 
 #[path = "common/random_programs.rs"]
+#[allow(dead_code)] // its limits and configuration only
 mod random_programs;
 
 #[path = "common/path_deviation.rs"]
