@@ -70,14 +70,53 @@ impl Planner {
         if aux_axes::keeps_corner(a, b) || a.is_blend_arc || b.is_blend_arc {
             return Ok(None);
         }
-        match (a.seg.path, b.seg.path) {
-            (SegmentPath::Line { .. }, SegmentPath::Line { .. }) => self.blend_lines(a, b),
+        let blend = match (a.seg.path, b.seg.path) {
+            (SegmentPath::Line { .. }, SegmentPath::Line { .. }) => self.blend_lines(a, b)?,
             (
                 SegmentPath::Line { .. } | SegmentPath::Arc(_),
                 SegmentPath::Line { .. } | SegmentPath::Arc(_),
-            ) => Ok(self.blend_curves(a, b)),
-            _ => Ok(None),
+            ) => self.blend_curves(a, b),
+            _ => None,
+        };
+        Ok(blend.filter(|blend| self.still_reachable(blend)))
+    }
+
+    /// Whether the plan can still follow `blend` from where it stands. The window's first
+    /// element starts at the settled speed, which the plan chose so that the window could
+    /// stop at its end; the blend shortens `a` (the window's last element), so the backward
+    /// bound is walked again from `b`'s end, through the arc and `a` shortened (with the
+    /// accelerations they will share in the jerk-limited mode, as `Planner::push` shares
+    /// them), back to the first element, or to a junction whose own cap binds (the bound there
+    /// cannot have dropped, so nothing before it changes).
+    fn still_reachable(&self, blend: &Blend) -> bool {
+        let n = self.window.len();
+        let (mut a, mut arc, mut b) = (blend.a, blend.arc, blend.b);
+        if self.smoothing.is_some() {
+            if blend.cap_in.0 > 0.0 {
+                share_acceleration(&mut a, &mut arc);
+            }
+            if blend.cap_out.0 > 0.0 {
+                share_acceleration(&mut arc, &mut b);
+            }
         }
+        let v_settled = self.v_settled_mm_s;
+        let cap = |j: usize, p: &Pending| {
+            if j == 0 { v_settled } else { p.cap_start_mm_s }
+        };
+        let v_b = start_reach_mm_s(b.seg.length_mm, 0.0, blend.cap_out.0, &b.limits);
+        let mut v = start_reach_mm_s(arc.seg.length_mm, v_b, blend.cap_in.0, &arc.limits);
+        for j in (0..n).rev() {
+            let p = if j + 1 == n { &a } else { &self.window[j] };
+            let cap_j = cap(j, p);
+            v = start_reach_mm_s(p.seg.length_mm, v, cap_j, &p.limits);
+            if j == 0 {
+                return v >= v_settled;
+            }
+            if v >= cap_j {
+                return true;
+            }
+        }
+        true
     }
 
     /// The tangent arc that replaces the corner from line `a` into line `b` under G64 P
