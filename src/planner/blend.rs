@@ -11,9 +11,12 @@
 //! lie on the elements near the corner, with the direction of travel. Its deviation is the
 //! largest distance of the blend from the pieces of the path it replaces (at least
 //! `|corner − c_b| − ρ`, where it passes nearest the corner); `ρ` is the largest within the
-//! tolerance and the room (bisection: both grow with `ρ`), then the smallest that still
-//! reaches the neighbours' speed, as between two lines. The arcs are trimmed to the tangent
-//! points: the same centre, normal and direction, rebuilt with `Planner::arc_pending`.
+//! tolerance and the room (the radii from 0 up, where both grow with `ρ`), or a smaller one of
+//! a grid where the estimate of the corner's time ([`CornerCost`]) says it is faster. The
+//! arcs are trimmed to the tangent points: the same centre, normal and direction, rebuilt with
+//! `Planner::arc_pending` (their limits depend on the radius, not on the sweep, so they stay).
+//! A blend is taken only where the plan can still follow it from its settled speeds
+//! (`Planner::still_reachable`).
 //!
 //! Helices (an arc whose end rises along its normal) and elements not in one plane keep their
 //! corners sharp: a planar blend would leave the helix by its rise over the blend's span, and

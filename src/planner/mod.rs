@@ -55,8 +55,8 @@
 //!
 //! Under G64 P (a tolerance), a corner between two lines, a line and a plane arc or two arcs
 //! of one plane may instead be rounded by a tangent arc within the tolerance (`shared/seeds`
-//! 001, `src/planner/blend.rs`), where that is faster than the sharp corner; helices and elements not in
-//! one plane keep their corners. G64 without P, or P0, keeps the corner exact.
+//! 001, `src/planner/blend.rs`), where that is faster than the sharp corner; helices and
+//! elements not in one plane keep their corners. G64 without P, or P0, keeps the corner exact.
 //!
 //! # The jerk-limited mode (`profile = "s-curve"`)
 //!
