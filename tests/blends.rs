@@ -7,8 +7,10 @@
 //! chooses the blends (`SLACK_EXACT`, `SLACK_SMALLER_P`), and every setpoint keeps every
 //! axis's limits and stays within P of the programmed path.
 
-use canmotion::gcode::parse_program;
-use canmotion::planner::{Plan, PlannerConfig, ProfileKind, SegmentPath, plan_with};
+use canmotion::gcode::{Interpreter, Item, Setup, Tool, parse_program};
+use canmotion::planner::{
+    Plan, PlannerConfig, ProfileKind, SegmentPath, plan_items_with, plan_with,
+};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -218,5 +220,40 @@ fn helices_and_corners_out_of_the_plane_stay_sharp() {
         assert_eq!(blend_count(&plan, 1), 0, "{profile:?}: helix");
         let plan = plan_and_check(out_of_plane, 0.5, profile).unwrap();
         assert_eq!(blend_count(&plan, 1), 0, "{profile:?}: out of the plane");
+    }
+}
+
+/// A blend shortens the element before it; where the element before that had already settled
+/// its end speed (the start of the shortened one), the shortened element must still be able to
+/// slow from it. LinuxCNC's `performance/Pasta.ngc` and `LHchips4.ngc` on the demo machine at
+/// a 1 ms cycle (`tools/corpus-times.sh`) failed with `NoProfile` before the plan checked it.
+#[test]
+fn a_blend_leaves_the_settled_speeds_reachable() {
+    let corpus =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/corpus/linuxcnc-tp");
+    if !corpus.is_dir() {
+        println!("corpus {} is absent: skipping", corpus.display());
+        return;
+    }
+    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("dictionaries/machines/demo-xyz.toml");
+    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
+    machine.planner.period_s = 0.001;
+    let limits = canmotion::gateway::limits(&machine);
+    for name in ["performance/Pasta.ngc", "performance/LHchips4.ngc"] {
+        // The corpus test's tools (`tests/gcode_corpus.rs`).
+        let mut setup = Setup::new(Vector3::zeros());
+        for n in 1..=20u32 {
+            let tool = Tool {
+                radius_mm: 1.0,
+                length_mm: 20.0 + f64::from(n),
+            };
+            setup.tools.insert(n, tool);
+        }
+        let file = std::fs::File::open(corpus.join(name)).unwrap();
+        let interpreter = Interpreter::new(std::io::BufReader::new(file), name, setup);
+        let items: Vec<Item> = interpreter.map(|item| item.unwrap()).collect();
+        let plan = plan_items_with(Vector3::zeros(), &items, &limits, &machine.planner);
+        assert!(plan.is_ok(), "{name}: {:?}", plan.err());
     }
 }
