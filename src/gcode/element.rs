@@ -131,7 +131,8 @@ pub enum BlendMode {
     /// G64: blending allowed, within the tolerances.
     Blend {
         /// P: largest deviation from the programmed corner, where the planner may round a
-        /// corner between two lines with a tangent arc; 0 keeps every corner exact. A G64
+        /// corner (between lines and plane arcs) with a tangent arc; 0 keeps every corner
+        /// exact. A G64
         /// without P gives infinity, LinuxCNC's "no limit", which the planner caps at the
         /// machine's `default_tolerance_mm` (jerk-limited mode) or keeps exact (trapezoids).
         p_mm: f64,
