@@ -355,36 +355,47 @@ impl Planner {
             )
             .ok()?;
         arc.is_blend_arc = true;
-        let mut a_after = *a;
-        match a.seg.path {
-            SegmentPath::Line { .. } => a_after.seg.length_mm -= circle.taken_a_mm,
-            SegmentPath::Arc(g) => {
-                let trimmed = trimmed_arc((a.seg.start_mm, p1), &g, g.sweep_rad - circle.taken_a)?;
-                let rebuilt = self.rebuilt_arc(a, (a.seg.start_mm, p1), trimmed)?;
-                a_after.seg.path = rebuilt.seg.path;
-                a_after.seg.length_mm = rebuilt.seg.length_mm;
-                a_after.tangent_end = rebuilt.tangent_end;
-                a_after.curvature_end = rebuilt.curvature_end;
-            }
-            _ => return None,
-        }
-        a_after.seg.end_mm = p1;
-        let mut b_after = *b;
-        match b.seg.path {
-            SegmentPath::Line { .. } => b_after.seg.length_mm -= circle.taken_b_mm,
-            SegmentPath::Arc(g) => {
-                let trimmed = trimmed_arc((p2, b.seg.end_mm), &g, g.sweep_rad - circle.taken_b)?;
-                let rebuilt = self.rebuilt_arc(b, (p2, b.seg.end_mm), trimmed)?;
-                b_after.seg.path = rebuilt.seg.path;
-                b_after.seg.length_mm = rebuilt.seg.length_mm;
-                b_after.tangent_start = rebuilt.tangent_start;
-                b_after.curvature_start = rebuilt.curvature_start;
-            }
-            _ => return None,
-        }
-        b_after.seg.start_mm = p2;
+        let a_after = self.trimmed(a, p1, circle.taken_a_mm, circle.taken_a, true)?;
+        let b_after = self.trimmed(b, p2, circle.taken_b_mm, circle.taken_b, false)?;
         let keeps_length = |p: &Pending| p.seg.length_mm > 1e-9 * p.full_length_mm;
         (keeps_length(&a_after) && keeps_length(&b_after)).then_some((arc, a_after, b_after))
+    }
+
+    /// `p` as a blend leaves it: trimmed at its end (`at_end`) or at its start to `at_mm`, a
+    /// line by `taken_mm`, an arc by `taken_rad` of its sweep.
+    fn trimmed(
+        &self,
+        p: &Pending,
+        at_mm: Vector3<f64>,
+        taken_mm: f64,
+        taken_rad: f64,
+        at_end: bool,
+    ) -> Option<Pending> {
+        let mut after = *p;
+        let ends = if at_end {
+            (p.seg.start_mm, at_mm)
+        } else {
+            (at_mm, p.seg.end_mm)
+        };
+        match p.seg.path {
+            SegmentPath::Line { .. } => after.seg.length_mm -= taken_mm,
+            SegmentPath::Arc(g) => {
+                let trimmed = trimmed_arc(ends, &g, g.sweep_rad - taken_rad)?;
+                let rebuilt = self.rebuilt_arc(p, ends, trimmed)?;
+                after.seg.path = rebuilt.seg.path;
+                after.seg.length_mm = rebuilt.seg.length_mm;
+                if at_end {
+                    after.tangent_end = rebuilt.tangent_end;
+                    after.curvature_end = rebuilt.curvature_end;
+                } else {
+                    after.tangent_start = rebuilt.tangent_start;
+                    after.curvature_start = rebuilt.curvature_start;
+                }
+            }
+            _ => return None,
+        }
+        (after.seg.start_mm, after.seg.end_mm) = ends;
+        Some(after)
     }
 
     /// `p`'s arc rebuilt on the trimmed geometry (`Planner::arc_pending`, so every arc limit
