@@ -1758,9 +1758,10 @@ impl Planner {
         for i in 0..3 {
             let k = kink_mean[i].abs().min(du[i].abs() / l_mm);
             if k > 0.0 && v_mm_s > 0.0 {
-                let budget = (self.config.max_jerk_mm_s3[i]
-                    - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
-                .max(0.0);
+                let budget = 0.5
+                    * (self.config.max_jerk_mm_s3[i]
+                        - a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
+                    .max(0.0);
                 acc = acc.min(budget / (3.0 * v_mm_s * k));
             }
         }
