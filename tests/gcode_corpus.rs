@@ -172,10 +172,9 @@ fn config(profile: ProfileKind) -> PlannerConfig {
     }
 }
 
-/// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
-/// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
-#[test]
-fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
+/// Checks every corpus program's setpoints under each labelled configuration
+/// (`common::setpoints`): the limits of every axis, within 1 %, and the exact end.
+fn corpus_limits_hold(configs: &[(String, PlannerConfig)]) {
     let Some((_, files)) = corpus() else {
         return;
     };
@@ -185,20 +184,32 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
         let Ok(items) = interpret(path, name) else {
             continue;
         };
-        for profile in [ProfileKind::Trapezoid, ProfileKind::SCurve] {
-            let config = config(profile);
-            let result = plan_items_with(Vector3::zeros(), &items, &limits(), &config)
+        for (label, config) in configs {
+            let result = plan_items_with(Vector3::zeros(), &items, &limits(), config)
                 .map_err(|e| e.to_string())
-                .and_then(|plan| setpoints::limits_hold(plan, &limits(), &config));
+                .and_then(|plan| setpoints::limits_hold(plan, &limits(), config));
             match result {
                 Ok(()) => checked += 1,
-                Err(e) => broken.push(format!("{name} ({profile:?}): {e}")),
+                Err(e) => broken.push(format!("{name} ({label}): {e}")),
             }
         }
     }
     println!("{checked} plans checked");
     assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
-    assert!(checked >= 2 * MIN_PLANNED, "only {checked} plans checked");
+    assert!(
+        checked >= configs.len() * MIN_PLANNED,
+        "only {checked} plans checked"
+    );
+}
+
+/// Issue 4's acceptance: over every corpus program that plans, the look-ahead's setpoints keep
+/// every axis within its velocity and acceleration limits (and its jerk limit with S-curves).
+#[test]
+fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
+    corpus_limits_hold(
+        &[ProfileKind::Trapezoid, ProfileKind::SCurve]
+            .map(|profile| (format!("{profile:?}"), config(profile))),
+    );
 }
 
 /// The jerk-limited mode's limits again at other servo periods: the setpoints sample the plan
@@ -208,32 +219,15 @@ fn corpus_setpoints_stay_within_the_limits_with_look_ahead() {
 /// (`Planner::curve_acc_mm_s2`) given the whole budget rather than half.
 #[test]
 fn corpus_setpoints_stay_within_the_jerk_limits_at_other_periods() {
-    let Some((_, files)) = corpus() else {
-        return;
-    };
-    let mut checked = 0;
-    let mut broken = Vec::new();
-    for (path, name) in &files {
-        let Ok(items) = interpret(path, name) else {
-            continue;
-        };
-        for period_s in [0.003, 0.005] {
-            let config = PlannerConfig {
+    corpus_limits_hold(&[0.003, 0.005].map(|period_s| {
+        (
+            format!("SCurve, {} ms", period_s * 1e3),
+            PlannerConfig {
                 period_s,
                 ..config(ProfileKind::SCurve)
-            };
-            let result = plan_items_with(Vector3::zeros(), &items, &limits(), &config)
-                .map_err(|e| e.to_string())
-                .and_then(|plan| setpoints::limits_hold(plan, &limits(), &config));
-            match result {
-                Ok(()) => checked += 1,
-                Err(e) => broken.push(format!("{name} ({} ms): {e}", period_s * 1e3)),
-            }
-        }
-    }
-    println!("{checked} plans checked");
-    assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
-    assert!(checked >= 2 * MIN_PLANNED, "only {checked} plans checked");
+            },
+        )
+    }));
 }
 
 /// Issue 11's contour acceptance in the jerk-limited mode: over every corpus program that
