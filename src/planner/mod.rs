@@ -1666,14 +1666,14 @@ impl Planner {
         periods.is_finite().then_some(periods as usize)
     }
 
-    /// Highest speed through the junction from `a` into `b` (see the module documentation).
     /// Joins `p` at speed to the window's last element under the time-law filter. The
     /// filter's window spans the junction, so its output near it mixes both elements'
     /// accelerations: within its reach both plan with the lower of the two
     /// ([`share_acceleration`]). Beyond it a line keeps its own: a line whose acceleration is
     /// the higher and which is long enough is split where the reach ends, only the part
-    /// within reach taking the lower acceleration (the window's last element keeps its head,
-    /// `p` its tail; a split `p` returns the rest, to follow it in the window).
+    /// within reach taking the lower acceleration (the window's last element gets its tail
+    /// within reach pushed after it; a split `p` keeps its head within reach and returns the
+    /// rest, to follow it in the window).
     ///
     /// The reach: through the junction at most at `c` (`limit_mm_s`, its cap by the machine
     /// alone, which also bounds a feed override) and with the lower acceleration `a` on the
@@ -1768,6 +1768,7 @@ impl Planner {
         acc
     }
 
+    /// Highest speed through the junction from `a` into `b` (see the module documentation).
     fn junction_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
         self.junction_caps(a, b).0
     }
