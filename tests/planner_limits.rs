@@ -4,9 +4,9 @@
 //! computed by finite differences as a drive sees them; nothing is NaN; the end is exact.
 //! Seeded random programs (proptest), trapezoid and S-curve modes.
 
-use canmotion::gcode::parse_program;
+use canmotion::gcode::{Program, parse_program};
 use canmotion::interpolator::Interpolator;
-use canmotion::planner::{PlannerConfig, ProfileKind, SegmentPath, plan_with};
+use canmotion::planner::{Limits, Plan, PlannerConfig, ProfileKind, SegmentPath, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;
 
@@ -20,6 +20,26 @@ mod random_programs;
 mod path_deviation;
 
 use random_programs::{T, a_move, config, limits, program};
+
+/// The setpoints of `plan` (of `prog`) keep every axis's limits (`common::setpoints`) and
+/// stay within the tolerance of the programmed path (`common::path_deviation`).
+fn limits_and_path_hold(prog: &Program, plan: Plan, l: &Limits, cfg: &PlannerConfig) {
+    setpoints::limits_hold(plan.clone(), l, cfg).unwrap();
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, cfg)
+        .unwrap()
+        .check()
+        .unwrap();
+}
+
+/// The filters of `Smoothing::for_machine` on the test machine: the axis filters' `T_k`
+/// (8 ms in whole periods, at least 2) and the time-law filter's `T_f` (the smallest A/J,
+/// 37.5 ms, in whole periods).
+fn filter_times_s() -> (f64, f64) {
+    (
+        (0.008 / T).ceil().max(2.0) * T,
+        (0.0375f64 / T - 1e-9).ceil() * T,
+    )
+}
 
 /// Plans `text` and checks its setpoints (see `common::setpoints`).
 fn check(text: &str, profile: ProfileKind) -> Result<(), TestCaseError> {
@@ -502,11 +522,7 @@ fn dense_low_caps_are_a_plateau_not_stops() {
         "{stops} stops on the arc ({} s)",
         plan.duration_s()
     );
-    setpoints::limits_hold(plan.clone(), &limits(), &cfg).unwrap();
-    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-        .unwrap()
-        .check()
-        .unwrap();
+    limits_and_path_hold(&prog, plan, &limits(), &cfg);
 }
 
 /// Issue 11: where a line meets an arc tangentially, the acceleration steps by `v²/r` towards
@@ -536,10 +552,7 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         .iter()
         .rfind(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
         .unwrap();
-    // The filters of `Smoothing::for_machine`: T_k = 8 ms in whole periods, T_f the smallest
-    // A/J (37.5 ms) in whole periods.
-    let t_k = (0.008 / T).ceil().max(2.0) * T;
-    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    let (t_k, t_f) = filter_times_s();
     // The arc takes the share of Y's jerk that its own motion may use; the line none of Y's.
     let share = cfg.path_acc_share;
     let arc_jerk = share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y);
@@ -554,11 +567,7 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         "junction {} mm/s, expected {now} (before: {before})",
         line.v_end_mm_s
     );
-    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
-    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-        .unwrap()
-        .check()
-        .unwrap();
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
 /// Issue 11: where a move planned through the time-law filter stops (a sharp corner), the plan
@@ -602,11 +611,7 @@ fn a_filtered_stop_waits_for_the_axis_filters_only_where_the_corner_needs_it() {
             "P{p}: stood still {} periods at the corner, expected {expected}",
             still_s / T
         );
-        setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
-        path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-            .unwrap()
-            .check()
-            .unwrap();
+        limits_and_path_hold(&prog, plan, &l, &cfg);
     }
 }
 
@@ -631,8 +636,7 @@ fn a_turn_alone_takes_the_whole_jerk_budget() {
     let jerk_t = (cfg.path_acc_share * cfg.max_jerk_mm_s3.x / u2.x.abs())
         .min(cfg.path_acc_share * cfg.max_jerk_mm_s3.y / u2.y.abs());
     let left = cfg.max_jerk_mm_s3.y - du_y * jerk_t;
-    let t_k = (0.008 / T).ceil().max(2.0) * T;
-    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    let (t_k, t_f) = filter_times_s();
     let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
     let dip = 0.25 * acc * t_f;
     let cap = |budget: f64| t_k * t_k * budget / du_y;
@@ -642,11 +646,7 @@ fn a_turn_alone_takes_the_whole_jerk_budget() {
         "junction {} mm/s, expected {now} (before: {before})",
         first.v_end_mm_s
     );
-    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
-    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-        .unwrap()
-        .check()
-        .unwrap();
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
 /// Issue 11: a junction whose own cap `c` the time-law filter's dip (`A·T_f/4`) leaves
@@ -686,11 +686,7 @@ fn a_stop_between_filtered_moves_stands_only_until_the_corner_is_within_its_cap(
         "stood {still_periods} periods at the corner (the time-law filter settles in {})",
         n_f - 1.0
     );
-    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
-    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-        .unwrap()
-        .check()
-        .unwrap();
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
 /// Issue 11: under the time-law filter, elements joined at speed planned with the lower of
@@ -707,9 +703,8 @@ fn a_long_line_keeps_its_acceleration_beyond_the_filter_s_reach_of_a_small_arc()
     let text = "G21 G90 G17 G64 P0.01\nG1 X30 F12000\nG3 X30 Y4 I0 J2\nG1 X0 Y4\nM2\n";
     let prog = parse_program(text, "small_arc.ngc", Vector3::zeros()).unwrap();
     let plan = plan_with(&prog, &l, &cfg).unwrap();
-    // The lines' own tangential acceleration under the time-law filter: `J·T_f/2`, with T_f
-    // the smallest A/J (37.5 ms) in whole periods.
-    let t_f = (0.0375f64 / T - 1e-9).ceil() * T;
+    // The lines' own tangential acceleration under the time-law filter: `J·T_f/2`.
+    let (_, t_f) = filter_times_s();
     let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
     let arc_acc = plan
         .segments()
@@ -738,9 +733,5 @@ fn a_long_line_keeps_its_acceleration_beyond_the_filter_s_reach_of_a_small_arc()
             (arc_acc * 30.0).sqrt()
         );
     }
-    setpoints::limits_hold(plan.clone(), &l, &cfg).unwrap();
-    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
-        .unwrap()
-        .check()
-        .unwrap();
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }

@@ -321,6 +321,18 @@ fn g92_and_g52_offset_the_auxiliary_axes() {
     }
 }
 
+/// `demo-xyza.toml` as edited into `text`, loaded from its place (its dictionaries beside it).
+fn xyza_from(text: &str) -> Machine {
+    Machine::parse(
+        Path::new("dictionaries/machines/demo-xyza.toml"),
+        text,
+        |rel| {
+            canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
+        },
+    )
+    .expect("machine")
+}
+
 fn parse_machine(text: &str) -> Result<Machine, ConfigError> {
     Machine::parse(Path::new("m.toml"), text, |rel| {
         canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
@@ -779,14 +791,7 @@ fn a_run_starts_the_auxiliary_axes_where_the_drives_stand() {
     // A is the file's last axis: its `[axis.sim]` goes at the end.
     let text = std::fs::read_to_string("dictionaries/machines/demo-xyza.toml").unwrap()
         + "[axis.sim]\nstart_mm = 45.0\n";
-    let m = Machine::parse(
-        Path::new("dictionaries/machines/demo-xyza.toml"),
-        &text,
-        |rel| {
-            canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
-        },
-    )
-    .expect("machine");
+    let m = xyza_from(&text);
     assert_eq!(m.axes[3].sim.start_mm, 45.0);
     for (program, want_a) in [
         ("G1 X5 F600\nM2\n", 4500),
@@ -819,14 +824,7 @@ fn serve_jobs_chain_the_auxiliary_axes() {
         .unwrap()
         .replace("require_homing = true", "require_homing = false")
         + "[axis.sim]\nstart_mm = 45.0\n";
-    let m = Machine::parse(
-        Path::new("dictionaries/machines/demo-xyza.toml"),
-        &text,
-        |rel| {
-            canmotion::config::DriveDictionary::load(&Path::new("dictionaries/machines").join(rel))
-        },
-    )
-    .expect("machine");
+    let m = xyza_from(&text);
     let mut svc = serve_rig::Service::start(&m, Vec::new());
     let mut c = svc.client();
     c.ok("enable");
