@@ -1970,13 +1970,18 @@ impl Planner {
                     };
                     v = v.min(tk * tk * budget / d);
                 }
-                // The jerk of following that curve, `v³·κ̄ᵢ·|κ̄| ≤ budget` (at most `|Δu|/L`
-                // each, the vertex's own turn over the shorter element).
-                let k_i = kink_mean[i].abs().min(d / l_mm);
-                let k_n = kink_mean_norm.min(du_norm / l_mm);
-                if k_i > 0.0 && k_n > 0.0 {
-                    v = v.min((jerk_budget / (k_i * k_n)).cbrt());
-                }
+            }
+            // The jerk of following that curve, `v³·κ̄²·T`, lies along the tangent `T` (a
+            // circle's axis `x = r·cos(v·t/r)` has `x''' = −(v/r)²·x'`): each axis takes
+            // `v³·|κ̄|²·|Tᵢ| ≤ budget`, `|κ̄|` at most `|Δu|/L` (the vertex's own turn over the
+            // shorter element), even where its own `Δuᵢ` is 0; and never less than
+            // `v³·|κ̄ᵢ|·|κ̄|`, the part along the normal where the speed changes
+            // ([`Planner::curve_acc_mm_s2`] bounds the rest).
+            let k_n = kink_mean_norm.min(du_norm / l_mm);
+            let t_i = a.tangent_end[i].abs().max(b.tangent_start[i].abs());
+            let k_i = (k_n * t_i).max(kink_mean[i].abs().min(d / l_mm));
+            if k_i > 0.0 && k_n > 0.0 {
+                v = v.min((jerk_budget / (k_i * k_n)).cbrt());
             }
             let k = dk[i].abs();
             if k > 0.0 {

@@ -93,6 +93,16 @@ impl ChordedCurve {
         out
     }
 
+    /// The same curve in the XZ plane (G18): the program of [`program`](Self::program) with
+    /// Z for Y. Z is the demo machine's slower axis (half X's acceleration, 40 % of its jerk),
+    /// so the rules that share the axes' budgets must tell them apart.
+    #[allow(dead_code)] // not every test binary runs the XZ curves
+    pub fn program_xz(&self, decimals: Option<usize>) -> String {
+        self.program(decimals)
+            .replacen("G17", "G18", 1)
+            .replace(" Y", " Z")
+    }
+
     /// The set the acceptance runs: circles of radius 0.5, 2, 10 and 50 mm and two ellipses,
     /// with chords of 10 to 50 µm, at 200 mm/s (above the curvature caps of the small ones on
     /// the demo machine) under `G64 P0.01`; each curve about 3 s of motion at its bound.
