@@ -230,7 +230,10 @@ fn chorded_curves_in_the_xz_plane_keep_every_axis_within_its_limits() {
             let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
             assert_eq!(plan.end_mm(), start, "{} ends where it began", curve.name());
             if let Err(e) = setpoints::limits_hold(plan, &limits, &config) {
-                broken.push(format!("{} in XZ, decimals {decimals:?}: {e}", curve.name()));
+                broken.push(format!(
+                    "{} in XZ, decimals {decimals:?}: {e}",
+                    curve.name()
+                ));
             }
         }
     }
