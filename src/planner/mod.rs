@@ -125,6 +125,12 @@
 //!   junction, meets no other and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
+//! - **Chord runs as curves.** Where a run of lines is dense (two chords at least within the
+//!   axis filters' reach) and turns little at each vertex, its lines take the curve from
+//!   their own budget as an arc does, with the run's curvature estimated over a window of
+//!   chords that averages the rounding's noise away; the vertices are then charged only what
+//!   they turn beyond the curve, and each line's cap holds over the time-law filter's reach
+//!   on either side instead of a dip at every vertex ([`curve`]).
 //!
 //! # Auxiliary axes
 //!
@@ -158,6 +164,7 @@ use crate::gcode::{ArcGeometry, AuxMove, AuxPos, BlendMode, Element, ElementKind
 pub mod aux_axes;
 mod blend;
 pub mod bounds;
+mod curve;
 pub mod profile;
 
 pub use aux_axes::AuxLimits;
@@ -885,6 +892,13 @@ struct Pending {
     /// ([`Planner::curve_acc_mm_s2`]), which holds for the elements at that vertex only and
     /// is not passed on through further junctions.
     shared_acc_mm_s2: f64,
+    /// As a line of a chord run taken as a curve (`curve::take_curve_vertex`): the curve its
+    /// limits were made for, which the junction at its end then leaves to it, and which sets
+    /// its use of the axes at a speed.
+    curve_fit: Option<curve::CurveFit>,
+    /// How far before its start every element's ceiling (`v_limit_mm_s`) is within its own:
+    /// the erosion of curve caps stops walking back there (`curve::erode_back`).
+    floor_reach_mm: f64,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -944,6 +958,8 @@ pub struct Planner {
     next_seq: u64,
     /// The elements of the window whose start junction is provisional, in order.
     provisional: VecDeque<u64>,
+    /// The run of chords being taken as a curve (jerk-limited mode, [`curve`]).
+    curve: curve::CurveState,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -1013,6 +1029,7 @@ impl Planner {
             time_law_unsettled: None,
             next_seq: 0,
             provisional: VecDeque::new(),
+            curve: curve::CurveState::default(),
         })
     }
 
@@ -1031,12 +1048,12 @@ impl Planner {
                 // What is left of `p` beyond the time-law filter's reach of its start, where
                 // `p` was split there ([`Planner::share_at_junction`]).
                 let mut rest = None;
+                let blended = blend.is_some();
                 match blend {
                     None => {
-                        let raw = self.window.back().map(|prev| {
-                            let raw = self.raw_junction_caps(prev, &p);
-                            (raw, self.dip_caps(prev, &p, raw))
-                        });
+                        // A vertex of a chord run: its curve taken by the elements, the caps
+                        // of those before it within reach held ahead ([`curve`]).
+                        let raw = self.start_caps(&mut p);
                         (p.cap_start_mm_s, p.cap_start_limit_mm_s) =
                             raw.map_or((0.0, 0.0), |(_, dipped)| dipped);
                         let ((fed_mm_s, limit_mm_s), _) = raw.unwrap_or_default();
@@ -1065,8 +1082,11 @@ impl Planner {
                         }
                     }
                     Some(blend) => {
+                        self.curve.end_run();
                         let prev = self.window.back_mut().expect("a blend follows an element");
+                        let before_mm = prev.seg.length_mm;
                         blend.trim(prev, &mut p);
+                        self.curve.pushed_mm -= before_mm - prev.seg.length_mm;
                         let Blend {
                             mut arc,
                             cap_in,
@@ -1085,11 +1105,30 @@ impl Planner {
                                 share_acceleration(&mut arc, &mut p);
                             }
                         }
+                        // The caps held ahead of a chord run before the corner.
+                        let at_mm = self.curve.pushed_mm;
+                        let prev = self.window.back().expect("a blend follows an element");
+                        let prev_acc = prev.limits.a_max_mm_s2();
+                        curve::link_floor(prev, &mut arc);
+                        let ahead = self.curve.cap_at(at_mm);
+                        self.erode_ahead_blend(&mut arc, ahead, prev_acc);
+                        let ahead = self.curve.cap_at(at_mm + arc.seg.length_mm);
+                        self.erode_ahead_blend(&mut p, ahead, arc.limits.a_max_mm_s2());
+                        curve::link_floor(&arc, &mut p);
+                        self.curve.pushed_mm += arc.seg.length_mm;
                         arc.seq = self.next_seq;
                         self.next_seq += 1;
                         self.window.push_back(arc);
                     }
                 }
+                if !blended && let Some(prev) = self.window.back() {
+                    curve::link_floor(prev, &mut p);
+                }
+                if let Some(rest) = rest.as_mut() {
+                    curve::link_floor(&p, rest);
+                }
+                self.curve.pushed_mm +=
+                    p.seg.length_mm + rest.as_ref().map_or(0.0, |r| r.seg.length_mm);
                 let last = rest.as_ref().unwrap_or(&p);
                 self.position_mm = last.seg.end_mm;
                 self.aux_pushed = Some(last.seg.aux.end);
@@ -1121,6 +1160,7 @@ impl Planner {
                     return Ok(());
                 }
                 self.replan(true)?;
+                self.curve.reset();
                 self.settle_axes()?;
                 self.push_still(still(
                     d.line,
@@ -1132,6 +1172,7 @@ impl Planner {
             }
             Item::Stop(s) => {
                 self.replan(true)?;
+                self.curve.reset();
                 self.settle_axes()?;
                 self.push_still(still(
                     s.line,
@@ -1151,6 +1192,7 @@ impl Planner {
     pub fn finish(&mut self) -> Result<(), PlanError> {
         self.finished = true;
         self.replan(true)?;
+        self.curve.reset();
         self.settle_axes()
     }
 
@@ -1693,11 +1735,23 @@ impl Planner {
         let smoothing = self.smoothing?;
         let t_f = smoothing.time_law_s(self.config.period_s);
         let curve_acc = self.curve_acc_mm_s2(self.window.back()?, p, fed_mm_s);
-        let prev = self.window.back_mut()?;
+        let last = self.window.back()?;
         // The lower of the two accelerations passes on through further junctions; the
         // vertex's own cap holds here only.
-        let shared = prev.shared_acc_mm_s2.min(p.shared_acc_mm_s2);
+        let shared = last.shared_acc_mm_s2.min(p.shared_acc_mm_s2);
         let acc = shared.min(curve_acc);
+        if last.limits.a_max_mm_s2() > acc && !self.can_lower_last(acc) {
+            // The plan could no longer stop at the window's end from the speed it has
+            // settled with the last element's acceleration lowered: `p` starts from rest
+            // instead, which the plan can always reach, and the filters settle there.
+            p.cap_start_mm_s = 0.0;
+            p.cap_start_limit_mm_s = 0.0;
+            p.raw_cap_start_mm_s = 0.0;
+            p.kink_in = Vector3::zeros();
+            p.low_cap = true;
+            return None;
+        }
+        let prev = self.window.back_mut()?;
         let reach_mm = t_f * (acc * t_f + ((acc * t_f).powi(2) + limit_mm_s * limit_mm_s).sqrt());
         // Only where it pays: a clearly higher acceleration over most of the line.
         let splits = |q: &Pending| {
@@ -1751,6 +1805,10 @@ impl Planner {
     /// is held within the jerk budget the elements leave it, shared in halves like the
     /// junction's other rules. Unbounded where the path does not turn.
     fn curve_acc_mm_s2(&self, a: &Pending, b: &Pending, v_mm_s: f64) -> f64 {
+        if a.curve_fit.is_some() {
+            // A chord run's curve: the elements' own limits hold it ([`curve`]).
+            return f64::INFINITY;
+        }
         let du = b.tangent_start - a.tangent_end;
         let kink_mean = 0.5 * (discrete_curvature(a, b) + a.kink_in);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
@@ -1908,11 +1966,21 @@ impl Planner {
         let mut v = f64::INFINITY;
         let du = b.tangent_start - a.tangent_end;
         let du_norm = du.norm();
+        // On a chord run taken as a curve ([`curve`]) the elements' limits hold the curve's
+        // centripetal acceleration and jerk: the vertex adds what it turns beyond the curve.
+        let covered = a.curve_fit.is_some();
+        let curve_turn = match a.curve_fit {
+            Some(fit) => fit.curvature() * 0.5 * (a.seg.length_mm + b.seg.length_mm),
+            None => Vector3::zeros(),
+        };
+        // Where it does, the axis filters' pull towards the curve's centre is pre-compensated
+        // (`crate::interpolator::smooth`): the vertex cuts its corner by what it turns beyond.
+        let cut_norm = (du - curve_turn).norm();
         if du_norm > 0.0 {
             v = v.min(tk * cfg.corner_acc_mm_s2 / du_norm);
             let tol_mm = self.filter_tolerance_mm(a.blend);
             if tol_mm > 0.0 {
-                v = v.min(4.0 * tol_mm / (du_norm * tk));
+                v = v.min(4.0 * tol_mm / (cut_norm * tk));
             }
         }
         let dk = b.curvature_start - a.curvature_end;
@@ -1954,13 +2022,18 @@ impl Planner {
             // `8ε/(T·T_k²)` of jerk from it (a third difference of two moving averages of a
             // deviation within ε), so a vertex within that bound charges nothing more.
             let noise_mm_s3 = |k: f64| k * mean_mm * mean_mm / (cfg.period_s * tk * tk);
-            let d = du[i].abs();
+            // On a chord run taken as a curve, the step the vertex adds to the curve's own.
+            let d = (du[i] - curve_turn[i]).abs();
             if d > 0.0 {
                 // The vertex's own velocity step and the centripetal acceleration of the curve
                 // through it: `v·|Δuᵢ| + v²·κ̄ᵢ·T_k ≤ T_k·A_i` (never more than the sharing of
                 // the one-period rule among the `1 + v·T_k/L` junctions within a filter time,
                 // which takes `κ = |Δuᵢ|/L`).
-                let k_curve = (tk * kink_mean[i].abs() / d).min(tk / l_mm);
+                let k_curve = if covered {
+                    0.0
+                } else {
+                    (tk * kink_mean[i].abs() / d).min(tk / l_mm)
+                };
                 v = v.min(shared_jump_mm_s(tk * acc_budget, d, k_curve));
                 if noise_mm_s3(d / mean_mm) > jerk_budget {
                     let budget = if turn_alone {
@@ -1980,7 +2053,7 @@ impl Planner {
             let k_n = kink_mean_norm.min(du_norm / l_mm);
             let t_i = a.tangent_end[i].abs().max(b.tangent_start[i].abs());
             let k_i = (k_n * t_i).max(kink_mean[i].abs().min(d / l_mm));
-            if k_i > 0.0 && k_n > 0.0 {
+            if k_i > 0.0 && k_n > 0.0 && !covered {
                 v = v.min((jerk_budget / (k_i * k_n)).cbrt());
             }
             let k = dk[i].abs();
@@ -2117,6 +2190,8 @@ impl Planner {
             is_blend_arc: false,
             raw_cap_start_mm_s: 0.0,
             shared_acc_mm_s2: 0.0,
+            curve_fit: None,
+            floor_reach_mm: 0.0,
         })
         .map(|mut p| {
             p.shared_acc_mm_s2 = p.limits.a_max_mm_s2();
@@ -2240,6 +2315,8 @@ impl Planner {
                     is_blend_arc: false,
                     raw_cap_start_mm_s: 0.0,
                     shared_acc_mm_s2: 0.0,
+                    curve_fit: None,
+                    floor_reach_mm: 0.0,
                 }
             }
             ElementKind::Arc { .. } => {
@@ -2456,6 +2533,8 @@ fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
     tail.seg.start_mm = at;
     tail.seg.length_mm = p.seg.length_mm - at_mm;
     tail.kink_in = Vector3::zeros();
+    tail.curve_fit = None;
+    tail.floor_reach_mm = 0.0;
     tail.provisional = None;
     tail.low_cap = false;
     tail.alone = p.alone;
@@ -2465,6 +2544,9 @@ fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
 /// Caps an element of a plateau ([`Planner::finalize_junction`]) at `fed_mm_s` (and its
 /// ceiling under a feed override at `limit_mm_s`).
 fn cap_speed(p: &mut Pending, fed_mm_s: f64, limit_mm_s: f64) {
+    if p.v_limit_mm_s > limit_mm_s {
+        p.floor_reach_mm = 0.0;
+    }
     if p.limits.v_max_mm_s() > fed_mm_s
         && let Some(lower) = ProfileLimits::trapezoid(fed_mm_s, p.limits.a_max_mm_s2())
     {

@@ -1,0 +1,675 @@
+//! Chord polylines as curves, in the jerk-limited mode.
+//!
+//! CAM writes curves as runs of short lines whose vertices turn a little each. The junction
+//! rules of [`Planner::smoothed_junction_limit_mm_s`] charged the curve such a run approximates
+//! (its centripetal acceleration `v²κ̄` and the jerk of following it, `v³κ̄²`) against the
+//! budget the elements leave each axis at the vertex (a quarter of the acceleration, an eighth
+//! of the jerk with the default `path_acc_share`), with the curvature `κ̄` of one or two
+//! vertices, which the rounding of the written coordinates makes noisy: a 10 mm circle of
+//! 30 µm chords (4 decimals) ran at 42–71 mm/s where a G2 of that radius runs at 98 mm/s, and
+//! a 0.5 mm circle of 10 µm chords at 2–6 mm/s against the G2's 13.
+//!
+//! Here the lines of a dense run take the curve from their own budget, as an arc does
+//! ([`super::arc_limits`]):
+//!
+//! - **Curvature.** At each vertex the run's curvature is estimated over a window of its last
+//!   chords: the turn of the tangent from the chord `m` back to the newest one, over the
+//!   distance between their midpoints. The window is the longest (of 2, 4, 8, … up to 64
+//!   chords) that the axis filters still average over at the speed its curvature allows (their
+//!   output spans `2·v·T_k`): their output follows the polyline's curvature averaged over about
+//!   that, and a longer window could average away a tighter part they still see. The
+//!   rounding's error on a chord's direction, `ε/L`, then weighs `1/m` as much against the
+//!   window's turn as against one vertex's. A vertex turning more than [`CURVE_MAX_TURN`], a
+//!   blended corner, an arc, a stop or auxiliary axes end the run.
+//! - **Dense runs only.** Two chords at least within the axis filters' reach `v·T_k`, at the
+//!   speed the curve allows and at the speed the vertex's own rules allow without the curve
+//!   taken: sparser vertices are steps of the axis velocity each, as the junction rules have
+//!   them (LinuxCNC's `trochoidal.ngc`, 0.29 mm chords; `contour.ngc`, whose 2.5 µm inch
+//!   rounding on 16 µm chords holds it at 3 mm/s vertex by vertex).
+//! - **Limits.** The element before the vertex gets the limits of an arc of that curvature
+//!   `κ` (normal `N`, tangent `T`), axis by axis within its `path_acc_share` of its limits:
+//!   the cap `v²κ·|Nᵢ| ≤ (√3/2)·Aᵢ` and `v³κ²·|Tᵢ| ≤ Jᵢ/4`, and the tangential acceleration
+//!   `a_t` with `a_t·|Tᵢ| + v²κ·|Nᵢ| ≤ Aᵢ` and `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ| ≤ Jᵢ`
+//!   at the speed it may run (the time law's jerk is `2·a_t/T_f`): on a nearly straight run,
+//!   a line's acceleration; at the cap, about an arc's. The `a_t` holds for the vertex's two
+//!   elements, as the old vertex rule's did ([`Planner::curve_acc_mm_s2`]).
+//! - **The vertex's own rules.** The junction rules then charge the vertex only what it
+//!   turns beyond the curve, `Δu − κ·L̄` (its velocity step against the curve's, the corner
+//!   its filters cut beyond the pull the interpolator pre-compensates), not the curve
+//!   again; and the curve's use of each axis at the speed through the junction, which is
+//!   lower than at the cap where the vertex's own rules bind
+//!   ([`Planner::curve_junction_mm_s`]).
+//! - **Erosion instead of dips.** The time-law filter's output at a point is the mean speed of
+//!   the plan over one filter time `T_f` around it. A cap `c` that holds for the plan over
+//!   `c·T_f` on either side of an element holds for that mean too (the plan cannot leave that
+//!   stretch within `T_f`), the plateau argument of [`Planner::finalize_junction`]. So each
+//!   element's cap is applied to every element within `c·T_f` before it (back through the
+//!   window, [`Planner::erode_back`]) and after it (as they come, [`CurveState::cap_at`]), and a
+//!   junction between such elements below its neighbours only by their caps needs no dip.
+//!   Where that stretch reaches an element longer than it, the junction with it is dipped as
+//!   any other (`A·T_f/4`, or a stop); where it reaches the settled part of the plan (not at
+//!   rest), or the plan could no longer come down to it from the speed it has settled, the
+//!   vertex keeps the old rules.
+//! - **Caps on a grid.** The caps are rounded down to a grid of steps of [`CAP_STEP`]: a curve
+//!   whose caps differ by the rounding's noise from vertex to vertex then has equal caps
+//!   along stretches, and the walk back through the window stops at the first element whose
+//!   ceiling, and that of all before it within reach ([`Pending::floor_reach_mm`]), is
+//!   already as low.
+//!
+//! The acceptance's chorded curves (`tests/chorded_curves.rs`) and the corpus keep every
+//! axis's limits and the tolerance with this (`tests/gcode_corpus.rs`, sampled at 3, 4 and 5 ms).
+
+use std::collections::VecDeque;
+
+use nalgebra::Vector3;
+
+use super::{Pending, Planner, SegmentPath, Smoothing, cap_speed, lower_acceleration};
+use crate::gcode::BlendMode;
+
+/// Largest turn `|Δu|` of a vertex between two lines that is taken as a point of a curve
+/// (about 20°); sharper corners keep the junction rules alone.
+pub(super) const CURVE_MAX_TURN: f64 = 0.35;
+
+/// Chords kept for the curvature's window.
+const CHORD_HISTORY: usize = 65;
+
+/// Share of each axis's acceleration (its `path_acc_share` of it) the centripetal
+/// acceleration of a chord run may take at its cap, as on an arc (`√3/2`).
+const CENTRIPETAL_SHARE: f64 = 0.866_025_403_784_438_6;
+
+/// Share of each axis's jerk the jerk of following a chord run's curve may take at its cap,
+/// as on an arc.
+const CURVE_JERK_SHARE: f64 = 0.25;
+
+/// Relative step of the grid the caps are rounded down to.
+pub(super) const CAP_STEP: f64 = 0.01;
+
+/// What the planner keeps of the current run of chords.
+#[derive(Debug, Clone, Default)]
+pub(super) struct CurveState {
+    /// The recent lines of the run: direction and the path distance of their midpoint (from
+    /// [`CurveState::pushed_mm`]'s origin).
+    chords: VecDeque<(Vector3<f64>, f64)>,
+    /// Caps that hold ahead: `(until_mm, cap_mm_s)`, every element starting before `until_mm`
+    /// capped at `cap_mm_s` (path distances as [`CurveState::pushed_mm`]).
+    ahead: Vec<(f64, f64)>,
+    /// Path distance at the end of everything pushed (blends' trims taken off).
+    pub(super) pushed_mm: f64,
+}
+
+impl CurveState {
+    /// Forgets the run (a stop, a dwell, the program's end: the filters settle there).
+    pub(super) fn reset(&mut self) {
+        self.chords.clear();
+        self.ahead.clear();
+    }
+
+    /// Ends the run of chords (a corner blended).
+    pub(super) fn end_run(&mut self) {
+        self.chords.clear();
+    }
+
+    /// The lowest cap that holds at `at_mm` (`None`: none), forgetting those that ended.
+    pub(super) fn cap_at(&mut self, at_mm: f64) -> Option<f64> {
+        self.ahead.retain(|&(until, _)| until > at_mm);
+        self.ahead.iter().map(|&(_, c)| c).reduce(f64::min)
+    }
+
+    fn hold_ahead(&mut self, until_mm: f64, cap_mm_s: f64) {
+        // Dominated entries go: a lower cap that holds as far.
+        if self
+            .ahead
+            .iter()
+            .any(|&(until, c)| c <= cap_mm_s && until >= until_mm)
+        {
+            return;
+        }
+        self.ahead
+            .retain(|&(until, c)| !(c >= cap_mm_s && until <= until_mm));
+        self.ahead.push((until_mm, cap_mm_s));
+    }
+}
+
+/// Whether `p` runs straight with nothing else moving: a line of a chord run.
+fn chord(p: &Pending) -> bool {
+    matches!(p.seg.path, SegmentPath::Line { .. }) && !p.is_blend_arc && !p.seg.aux.moves()
+}
+
+/// The cap `c` rounded down to the grid of [`CAP_STEP`].
+fn on_grid(c: f64) -> f64 {
+    if !(c > 0.0 && c.is_finite()) {
+        return c;
+    }
+    let step = (1.0 + CAP_STEP).ln();
+    let k = (c.ln() / step).floor();
+    let g = (k * step).exp();
+    if g > c { c } else { g }
+}
+
+/// A line's limits on a curve of curvature vector `kappa` (see the module documentation):
+/// `(cap, tangential acceleration)`, `None` where it does not turn.
+/// A line's limits on a curve: its cap, its tangential acceleration, and what it uses of
+/// each axis's acceleration and jerk at the speed it may run (at most the cap).
+#[derive(Debug, Clone, Copy)]
+struct CurveLimits {
+    cap_mm_s: f64,
+    acc_mm_s2: f64,
+    fit: CurveFit,
+}
+
+/// What a line of a chord run uses of each axis on its curve, at a speed: kept with the
+/// element ([`Pending::curve_fit`]) so that the junction at its end can take it at the speed
+/// the junction allows ([`Planner::curve_junction_mm_s`]).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct CurveFit {
+    tangent: Vector3<f64>,
+    normal: Vector3<f64>,
+    kappa: f64,
+    acc_mm_s2: f64,
+    /// The line's own use, before the curve.
+    base_acc_used_mm_s2: Vector3<f64>,
+    base_jerk_used_mm_s3: Vector3<f64>,
+    /// The speed its use is set for.
+    pub(super) v_mm_s: f64,
+}
+
+impl CurveFit {
+    /// The curvature vector `κ·N` of the fit.
+    pub(super) fn curvature(&self) -> Vector3<f64> {
+        self.normal * self.kappa
+    }
+
+    /// Sets `p`'s use of the axes for the curve at speed `v_mm_s`: the acceleration
+    /// `a_t·|Tᵢ| + v²κ·|Nᵢ|` and the jerk `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` of each
+    /// axis, at least the line's own.
+    pub(super) fn use_at(p: &mut Pending, v_mm_s: f64, t_f: f64) {
+        let Some(fit) = p.curve_fit.as_mut() else {
+            return;
+        };
+        fit.v_mm_s = v_mm_s;
+        let (k, a_t) = (fit.kappa, fit.acc_mm_s2);
+        let (a_n, j_curve) = (v_mm_s * v_mm_s * k, v_mm_s * v_mm_s * v_mm_s * k * k);
+        let j_t = 2.0 * a_t / t_f;
+        for i in 0..3 {
+            let (t_i, n_i) = (fit.tangent[i].abs(), fit.normal[i].abs());
+            p.acc_used_mm_s2[i] = fit.base_acc_used_mm_s2[i].max(a_t * t_i + a_n * n_i);
+            p.jerk_used_mm_s3[i] = fit.base_jerk_used_mm_s3[i]
+                .max((j_t + j_curve) * t_i + 3.0 * v_mm_s * k * a_t * n_i);
+        }
+    }
+}
+
+fn curve_limits(
+    planner: &Planner,
+    tangent: Vector3<f64>,
+    kappa: Vector3<f64>,
+    v_max_mm_s: f64,
+    smoothing: &Smoothing,
+) -> Option<CurveLimits> {
+    let k = kappa.norm();
+    if !(k > 0.0 && k.is_finite()) {
+        return None;
+    }
+    let n = kappa / k;
+    let cfg = &planner.config;
+    let share = cfg.path_acc_share;
+    let t_f = smoothing.time_law_s(cfg.period_s);
+    let axis_acc = |i: usize| share * planner.limits.max_acc_mm_s2[i];
+    let axis_jerk = |i: usize| share * cfg.max_jerk_mm_s3[i];
+    // The cap: each axis's part of the centripetal acceleration `v²κ·|Nᵢ|` within
+    // [`CENTRIPETAL_SHARE`] of its share, and of the jerk of following the curve,
+    // `v³κ²·|Tᵢ|`, within [`CURVE_JERK_SHARE`].
+    let (mut v2, mut v3) = (f64::INFINITY, f64::INFINITY);
+    for i in 0..3 {
+        let (t_i, n_i) = (tangent[i].abs(), n[i].abs());
+        if n_i > 0.0 {
+            v2 = v2.min(CENTRIPETAL_SHARE * axis_acc(i) / (k * n_i));
+        }
+        if t_i > 0.0 {
+            v3 = v3.min(CURVE_JERK_SHARE * axis_jerk(i) / (k * k * t_i));
+        }
+    }
+    let v = v2.sqrt().min(v3.cbrt());
+    // The tangential acceleration at the speed the element may run (`v_run`, at most the
+    // cap), axis by axis: the acceleration `a_t·T + v²κ·N` and the jerk
+    // `(j_t − v³κ²)·T + 3·v·κ·a_t·N`, with the time law's `j_t = 2·a_t/T_f`, within each
+    // axis's share. On a straight run this is a line's `J·T_f/2`.
+    let v_run = v.min(v_max_mm_s);
+    let a_n = v_run * v_run * k;
+    let j_curve = v_run * v_run * v_run * k * k;
+    let mut a_t = cfg.path_acc_mm_s2;
+    for i in 0..3 {
+        let (t_i, n_i) = (tangent[i].abs(), n[i].abs());
+        if t_i > 0.0 {
+            a_t = a_t.min((axis_acc(i) - a_n * n_i).max(0.0) / t_i);
+        }
+        let per_acc = 2.0 * t_i / t_f + 3.0 * v_run * k * n_i;
+        if per_acc > 0.0 {
+            a_t = a_t.min((axis_jerk(i) - j_curve * t_i).max(0.0) / per_acc);
+        }
+    }
+    if !(v.is_finite() && v > 0.0 && a_t > 0.0) {
+        return None;
+    }
+    Some(CurveLimits {
+        cap_mm_s: v,
+        acc_mm_s2: a_t,
+        fit: CurveFit {
+            tangent,
+            normal: n,
+            kappa: k,
+            acc_mm_s2: a_t,
+            base_acc_used_mm_s2: Vector3::zeros(),
+            base_jerk_used_mm_s3: Vector3::zeros(),
+            v_mm_s: v_run,
+        },
+    })
+}
+
+impl Planner {
+    /// Takes the vertex from the window's last element into `p` as a point of a curve where
+    /// it is one: caps the last element (and those within reach of it) with the curve's
+    /// limits, records the cap for the elements to come, and marks the vertex covered
+    /// ([`Pending::curve_fit`]); returns the junction's own limit with the curve taken
+    /// (`None`: not taken, nothing changed but the run's record). Jerk-limited mode only.
+    pub(super) fn take_curve_vertex(&mut self, p: &mut Pending) -> Option<f64> {
+        let smoothing = self.smoothing?;
+        let Some(prev) = self.window.back() else {
+            self.curve.chords.clear();
+            return None;
+        };
+        let du = p.tangent_start - prev.tangent_end;
+        let vertex = chord(prev)
+            && chord(p)
+            && self.config.corner_acc_mm_s2 > 0.0
+            && !matches!(prev.blend, BlendMode::ExactStop | BlendMode::ExactPath)
+            && du.norm() <= CURVE_MAX_TURN;
+        let p_mid = self.curve.pushed_mm + 0.5 * p.seg.length_mm;
+        if !vertex {
+            self.curve.chords.clear();
+            if chord(p) {
+                self.curve.chords.push_back((p.tangent_start, p_mid));
+            }
+            return None;
+        }
+        if self.curve.chords.is_empty() {
+            let mid = self.curve.pushed_mm - 0.5 * prev.seg.length_mm;
+            self.curve.chords.push_back((prev.tangent_end, mid));
+        }
+        if self.curve.chords.len() >= CHORD_HISTORY {
+            self.curve.chords.pop_front();
+        }
+        self.curve.chords.push_back((p.tangent_start, p_mid));
+        let limits = self.curve_estimate(prev, &smoothing)?;
+        // Dense chords only: at least two within the axis filters' reach at the speed the
+        // curve allows, so that the filters' output follows the curve. Sparser vertices are
+        // steps of the axis velocity each, which the junction rules hold.
+        let mean_mm = 0.5 * (prev.seg.length_mm + p.seg.length_mm);
+        let tk = smoothing.axis_s(self.config.period_s);
+        let v_dense = limits.cap_mm_s.min(prev.limits.v_max_mm_s());
+        if 2.0 * mean_mm > v_dense * tk {
+            return None;
+        }
+        // Nor where the vertex's own rules, before the curve is taken, hold the speed so low
+        // that the chords are sparse there: the rounding of the written coordinates (a turn
+        // far from the curve's) then binds vertex by vertex, as the junction rules have it.
+        if 2.0 * mean_mm > self.junction_limit_mm_s(prev, p) * tk {
+            return None;
+        }
+        // The curve taken tentatively: the element's use of the axes for it at the speed it
+        // may run, and the vertex's own rules with it.
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let (acc_used, jerk_used) = (prev.acc_used_mm_s2, prev.jerk_used_mm_s3);
+        let mut fit = limits.fit;
+        // Its own tangential acceleration, which it took from the vertex at its start.
+        fit.acc_mm_s2 = fit.acc_mm_s2.max(prev.limits.a_max_mm_s2());
+        fit.base_acc_used_mm_s2 = acc_used;
+        fit.base_jerk_used_mm_s3 = jerk_used;
+        let prev = self.window.back_mut().expect("checked above");
+        prev.curve_fit = Some(fit);
+        CurveFit::use_at(prev, fit.v_mm_s, t_f);
+        let prev = self.window.back().expect("checked above");
+        let own_mm_s = self.junction_limit_mm_s(prev, p);
+        let (acc, cap) = (limits.acc_mm_s2, on_grid(limits.cap_mm_s));
+        if 2.0 * mean_mm > own_mm_s * tk || !self.erode_back(cap, &smoothing) {
+            let prev = self.window.back_mut().expect("checked above");
+            prev.curve_fit = None;
+            (prev.acc_used_mm_s2, prev.jerk_used_mm_s3) = (acc_used, jerk_used);
+            return None;
+        }
+        let reach_mm = cap * t_f;
+        self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
+        // On the vertex's two elements, as the old vertex rule: not passed on through further
+        // junctions as the lower of two accelerations is, since one noisy vertex would slow a
+        // whole run. The window's last element's only where the plan can still stop at its
+        // end from the speed it has settled (lowering it lowers the speeds the elements
+        // before it may end at); otherwise it keeps the acceleration it took from the vertex
+        // at its start, and its use of the axes says so.
+        lower_acceleration(p, acc);
+        if self.can_lower_last(acc) {
+            let prev = self.window.back_mut().expect("checked above");
+            lower_acceleration(prev, acc);
+            if let Some(fit) = prev.curve_fit.as_mut() {
+                fit.acc_mm_s2 = prev.limits.a_max_mm_s2();
+            }
+            let v = fit.v_mm_s;
+            CurveFit::use_at(prev, v, t_f);
+        }
+        Some(own_mm_s)
+    }
+
+    /// Whether the window's last element may plan with the acceleration `acc_mm_s2`: the
+    /// plan must still stop at its end from the speed it has settled. Back from that stop at
+    /// each element's acceleration to a junction whose own cap is lower (nothing before it
+    /// changes) or to the window's start.
+    pub(super) fn can_lower_last(&self, acc_mm_s2: f64) -> bool {
+        let n = self.window.len();
+        let mut bound = 0.0f64;
+        for k in (0..n).rev() {
+            let e = &self.window[k];
+            let acc = if k == n - 1 {
+                e.limits.a_max_mm_s2().min(acc_mm_s2)
+            } else {
+                e.limits.a_max_mm_s2()
+            };
+            bound = (bound * bound + 2.0 * acc * e.seg.length_mm).sqrt();
+            let start = if k == 0 {
+                self.v_settled_mm_s
+            } else {
+                e.cap_start_mm_s
+            };
+            if start <= bound {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The junction's own limit from the window's last element, a line of a chord run taken
+    /// as a curve, into `p`: its rules charge what the curve uses of each axis at the speed
+    /// through the junction, which is lower where the vertex's own rules bind, and a lower use
+    /// leaves them more. The largest speed `v` whose own limit with the use at `v` is at
+    /// least `v` (a few bisection steps from the limit with the use at the element's speed,
+    /// which is valid); the element keeps the use at that speed.
+    pub(super) fn curve_junction_mm_s(&mut self, p: &Pending, own_mm_s: f64) -> f64 {
+        let (Some(smoothing), Some(prev)) = (self.smoothing, self.window.back()) else {
+            return own_mm_s;
+        };
+        let Some(fit) = prev.curve_fit else {
+            return own_mm_s;
+        };
+        if own_mm_s >= fit.v_mm_s {
+            return own_mm_s;
+        }
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let own_at = |planner: &mut Planner, v: f64| {
+            let a = planner.window.back_mut().expect("checked above");
+            CurveFit::use_at(a, v, t_f);
+            let a = planner.window.back().expect("checked above");
+            planner.junction_limit_mm_s(a, p)
+        };
+        let mut lo = own_mm_s;
+        let mut hi = own_at(self, lo).min(fit.v_mm_s);
+        for _ in 0..3 {
+            if hi <= lo * 1.01 {
+                break;
+            }
+            let mid = 0.5 * (lo + hi);
+            if own_at(self, mid) >= mid {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let a = self.window.back_mut().expect("checked above");
+        CurveFit::use_at(a, lo, t_f);
+        lo
+    }
+
+    /// The curve's limits at the element `prev`, from the longest valid window of chords
+    /// ending at the newest one (see the module documentation).
+    fn curve_estimate(&self, prev: &Pending, smoothing: &Smoothing) -> Option<CurveLimits> {
+        let chords = &self.curve.chords;
+        let n = chords.len();
+        if n < 2 {
+            return None;
+        }
+        let tk = smoothing.axis_s(self.config.period_s);
+        let v_max = prev.limits.v_max_mm_s();
+        let (u_new, s_new) = chords[n - 1];
+        // Whether the cap at `kappa` allows `x` (without its roots: each axis's
+        // `x²·κ·|Nᵢ|` and `x³·κ²·|Tᵢ|` within their shares).
+        let share = self.config.path_acc_share;
+        let allows = |kappa: Vector3<f64>, x: f64| {
+            let k = kappa.norm();
+            (0..3).all(|i| {
+                let (t_i, n_i) = (prev.tangent_end[i].abs(), kappa[i].abs());
+                x * x * n_i <= CENTRIPETAL_SHARE * share * self.limits.max_acc_mm_s2[i]
+                    && x * x * x * k * k * t_i
+                        <= CURVE_JERK_SHARE * share * self.config.max_jerk_mm_s3[i]
+            })
+        };
+        let kappa_over = |m: usize| {
+            let (u_old, s_old) = chords[n - 1 - m];
+            let w_mm = s_new - s_old;
+            (w_mm > 0.0).then(|| ((u_new - u_old) / w_mm, w_mm))
+        };
+        // The first window that turns, then the longest valid one: valid where the axis
+        // filters average over at least its length at the speed its curvature allows.
+        let mut best = None;
+        let mut m = 2usize.min(n - 1);
+        loop {
+            if let Some((kappa, w_mm)) = kappa_over(m)
+                && kappa.norm() > 0.0
+            {
+                let x = w_mm / tk;
+                let valid = x <= v_max && allows(kappa, x);
+                if best.is_none() || valid {
+                    best = Some(kappa);
+                }
+                if !valid {
+                    break;
+                }
+            }
+            if m == n - 1 {
+                break;
+            }
+            m = (2 * m).min(n - 1);
+        }
+        let best = best?;
+        curve_limits(self, prev.tangent_end, best, v_max, smoothing)
+    }
+
+    /// The caps `(raw, dipped)` of the junction from the window's last element into `p` (see
+    /// [`Planner::raw_junction_caps`] and [`Planner::dip_caps`]), taking the vertex as a point
+    /// of a chord run where it is one ([`take_curve_vertex`](Self::take_curve_vertex)) and
+    /// the caps held ahead ([`erode_ahead`](Self::erode_ahead)). Within a run, the caps hold
+    /// over the filter's reach either side, so a junction below its neighbours only by theirs
+    /// is no dip. `None` at the start.
+    pub(super) fn start_caps(&mut self, p: &mut Pending) -> Option<((f64, f64), (f64, f64))> {
+        let taken = self.take_curve_vertex(p);
+        let ahead = self.curve.cap_at(self.curve.pushed_mm);
+        let (p_short, ahead_mm_s) = self.erode_ahead(p, ahead);
+        let prev = self.window.back()?;
+        let own = self.junction_limit_mm_s(prev, p);
+        let own = match taken {
+            Some(_) => self.curve_junction_mm_s(p, own),
+            None => own,
+        };
+        let prev = self.window.back()?;
+        let in_run = prev.curve_fit.is_some() && p_short;
+        let raw = (
+            own.min(prev.limits.v_max_mm_s())
+                .min(p.limits.v_max_mm_s())
+                .min(ahead_mm_s),
+            own.min(prev.v_limit_mm_s)
+                .min(p.v_limit_mm_s)
+                .min(ahead_mm_s),
+        );
+        let covered = in_run && own >= prev.limits.v_max_mm_s().min(p.limits.v_max_mm_s());
+        let dipped = if covered {
+            raw
+        } else {
+            self.dip_caps(prev, p, raw)
+        };
+        Some((raw, dipped))
+    }
+
+    /// The caps held ahead, on the next element `p` at the end of the window: one within
+    /// their reach (`cap·T_f`) is capped, and `(true, ∞)` returned; a longer one is not, and
+    /// `(false, cap)` is the cap of the junction at its start, which is then dipped as any
+    /// other.
+    pub(super) fn erode_ahead(&self, p: &mut Pending, ahead: Option<f64>) -> (bool, f64) {
+        let (Some(smoothing), Some(cap)) = (self.smoothing, ahead) else {
+            return (false, f64::INFINITY);
+        };
+        if p.seg.length_mm <= cap * smoothing.time_law_s(self.config.period_s) {
+            cap_speed(p, cap, cap);
+            (true, f64::INFINITY)
+        } else {
+            (false, cap)
+        }
+    }
+
+    /// [`erode_ahead`](Self::erode_ahead) for a corner's blend arc and the element after it,
+    /// whose junction caps are already set: a longer element's is dipped here (`A·T_f/4`
+    /// with the larger of its acceleration and `before_acc_mm_s2`, or a stop).
+    pub(super) fn erode_ahead_blend(
+        &self,
+        p: &mut Pending,
+        ahead: Option<f64>,
+        before_acc_mm_s2: f64,
+    ) {
+        let (Some(smoothing), Some(cap)) = (self.smoothing, ahead) else {
+            return;
+        };
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        if p.seg.length_mm <= cap * t_f {
+            cap_speed(p, cap, cap);
+        } else {
+            let delta = 0.25 * p.limits.a_max_mm_s2().max(before_acc_mm_s2) * t_f;
+            let c = (cap - delta).max(0.0);
+            p.cap_start_mm_s = p.cap_start_mm_s.min(c);
+            p.cap_start_limit_mm_s = p.cap_start_limit_mm_s.min(c);
+            p.raw_cap_start_mm_s = p.raw_cap_start_mm_s.min(cap);
+        }
+    }
+
+    /// Caps the window's last element at `cap` and every element before it within
+    /// `cap·T_f`; the junction with a longer element there is dipped (`A·T_f/4`, or a stop).
+    /// `false`, with nothing changed, where that reaches the settled part of the plan or
+    /// where the plan could no longer come down to it from the speed it has settled.
+    fn erode_back(&mut self, cap: f64, smoothing: &Smoothing) -> bool {
+        let n = self.window.len();
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        let reach_mm = cap * t_f;
+        // Dry run: the first element capped (`j`), and whether the junction at its start is
+        // dipped. `covered_mm`: the length of the elements from `j` to the last, exclusive.
+        let last = &self.window[n - 1];
+        if last.v_limit_mm_s <= cap && last.floor_reach_mm >= reach_mm {
+            return true;
+        }
+        let mut j = n - 1;
+        let mut covered_mm = 0.0;
+        let mut dip = false;
+        // Nothing before the window's start leaks into the filter where the plan stood
+        // there until the time-law filter settled (the program's start, or a stop).
+        let rest_before = self.v_settled_mm_s == 0.0 && self.time_law_unsettled.is_none();
+        while covered_mm < reach_mm {
+            if j == 0 {
+                if rest_before {
+                    break;
+                }
+                return false;
+            }
+            let e = &self.window[j - 1];
+            let left_mm = reach_mm - covered_mm - e.seg.length_mm;
+            if e.v_limit_mm_s <= cap && e.floor_reach_mm >= left_mm {
+                break;
+            }
+            if e.v_limit_mm_s > cap && e.seg.length_mm > reach_mm {
+                dip = true;
+                break;
+            }
+            covered_mm += e.seg.length_mm;
+            j -= 1;
+        }
+        // The junction at `j`'s start: dipped where the element before is long.
+        let first = &self.window[j];
+        let mut c_j = first.cap_start_mm_s.min(cap);
+        if dip {
+            let delta = 0.25
+                * first
+                    .limits
+                    .a_max_mm_s2()
+                    .max(self.window[j - 1].limits.a_max_mm_s2())
+                * t_f;
+            c_j = c_j.min((cap - delta).max(0.0));
+        }
+        // Can the plan still come down to `c_j` there? Back from it at each element's
+        // acceleration, to a junction whose own cap is lower (nothing before it changes) or
+        // to the speed the plan has settled at the window's start.
+        if j == 0 {
+            if self.v_settled_mm_s > c_j {
+                return false;
+            }
+        } else {
+            let mut bound = c_j;
+            for k in (0..j).rev() {
+                let e = &self.window[k];
+                bound = (bound * bound + 2.0 * e.limits.a_max_mm_s2() * e.seg.length_mm).sqrt();
+                let start = if k == 0 {
+                    self.v_settled_mm_s
+                } else {
+                    e.cap_start_mm_s
+                };
+                if start <= bound {
+                    break;
+                }
+                if k == 0 {
+                    return false;
+                }
+            }
+        }
+        // Apply: `behind_mm`, what lies within reach before each element's start.
+        let mut behind_mm = reach_mm;
+        for k in (j..n).rev() {
+            if k < n - 1 {
+                behind_mm -= self.window[k].seg.length_mm;
+            }
+            let e = &mut self.window[k];
+            let was = e.v_limit_mm_s;
+            cap_speed(e, cap, cap);
+            // A provisional junction's plateau comes no higher than the cap. Its ceiling
+            // stays: it also sets how far before it the plan waits for the plateau
+            // (`Planner::held_from`), whose elements may still be slowed.
+            if let Some(raw) = e.provisional.as_mut() {
+                raw.fed_mm_s = raw.fed_mm_s.min(cap);
+            }
+            e.raw_cap_start_mm_s = e.raw_cap_start_mm_s.min(cap);
+            // Everything within `behind_mm` before it is now within its ceiling.
+            if was >= cap {
+                e.floor_reach_mm = e.floor_reach_mm.max(behind_mm);
+            }
+        }
+        let first = &mut self.window[j];
+        first.cap_start_mm_s = first.cap_start_mm_s.min(c_j);
+        first.cap_start_limit_mm_s = first.cap_start_limit_mm_s.min(c_j);
+        if let Some(raw) = first.provisional.as_mut() {
+            raw.fed_mm_s = raw.fed_mm_s.min(c_j);
+        }
+        if j > 0 && c_j == 0.0 {
+            first.low_cap = true;
+        }
+        true
+    }
+}
+
+/// Links `p`'s [`Pending::floor_reach_mm`] to the element before it.
+pub(super) fn link_floor(prev: &Pending, p: &mut Pending) {
+    p.floor_reach_mm = if prev.v_limit_mm_s <= p.v_limit_mm_s {
+        prev.floor_reach_mm + prev.seg.length_mm
+    } else {
+        0.0
+    };
+}
