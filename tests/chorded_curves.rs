@@ -167,15 +167,10 @@ fn time_curves() -> Vec<Timed> {
     for curve in ChordedCurve::acceptance_set() {
         let start = curve.start_mm(Some(4));
         let items = items(&curve.program(Some(4)), start);
-        let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
-        assert_eq!(plan.end_mm(), start, "{} ends where it began", curve.name());
-        let mut interp = Interpolator::new(plan, config.period_s).expect("interpolator");
-        let mut q = Vector3::zeros();
-        while interp.update(&mut q) != Status::Finished {}
         let timed = Timed {
             name: curve.name(),
             chords: curve.chords_per_lap() * curve.laps as usize,
-            time_s: interp.elapsed_s(),
+            time_s: streamed_time_s(&items, start, &limits, &config),
             t_lb_s: curve_bound_s(&curve, &limits, &config),
             t_lb_written_s: curvature_bound_s(&items, &limits, &config),
         };
@@ -199,17 +194,7 @@ fn time_curves() -> Vec<Timed> {
 /// curves, whose vertices the normal-jerk rule `Planner::curve_acc_mm_s2` slows).
 #[test]
 fn chorded_curves_keep_every_axis_within_its_limits() {
-    let machine = jerk_machine();
-    let (limits, config) = (limits(&machine), machine.planner);
-    let mut broken = Vec::new();
-    for curve in ChordedCurve::acceptance_set() {
-        let start = curve.start_mm(Some(4));
-        let items = items(&curve.program(Some(4)), start);
-        let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
-        if let Err(e) = setpoints::limits_hold(plan, &limits, &config) {
-            broken.push(format!("{}: {e}", curve.name()));
-        }
-    }
+    let broken = limits_broken(ChordedCurve::program, &[Some(4)]);
     assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
 }
 
@@ -220,24 +205,31 @@ fn chorded_curves_keep_every_axis_within_its_limits() {
 /// 1.1 % and the exact `ellipse 50x20` by 4.0 %.
 #[test]
 fn chorded_curves_in_the_xz_plane_keep_every_axis_within_its_limits() {
+    let broken = limits_broken(ChordedCurve::program_xz, &[Some(4), None]);
+    assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
+}
+
+/// The acceptance's curves, written by `program` with each of `decimals`, planned in the
+/// jerk-limited mode: each ends where it began, and the limits it breaks are listed.
+fn limits_broken(
+    program: fn(&ChordedCurve, Option<usize>) -> String,
+    decimals: &[Option<usize>],
+) -> Vec<String> {
     let machine = jerk_machine();
     let (limits, config) = (limits(&machine), machine.planner);
     let mut broken = Vec::new();
     for curve in ChordedCurve::acceptance_set() {
-        for decimals in [Some(4), None] {
+        for &decimals in decimals {
             let start = curve.start_mm(decimals);
-            let items = items(&curve.program_xz(decimals), start);
+            let items = items(&program(&curve, decimals), start);
             let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
             assert_eq!(plan.end_mm(), start, "{} ends where it began", curve.name());
             if let Err(e) = setpoints::limits_hold(plan, &limits, &config) {
-                broken.push(format!(
-                    "{} in XZ, decimals {decimals:?}: {e}",
-                    curve.name()
-                ));
+                broken.push(format!("{}, decimals {decimals:?}: {e}", curve.name()));
             }
         }
     }
-    assert!(broken.is_empty(), "limits broken:\n{}", broken.join("\n"));
+    broken
 }
 
 /// The jerk-limited plan of every chorded curve is slower than the curve's bound: `T_lb` is a
@@ -272,7 +264,8 @@ fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     );
 }
 
-/// The program time of `items` planned on `machine`'s planner and streamed at its period.
+/// The program time of `items` planned with `config` and streamed at its period; the plan
+/// ends where it began.
 fn streamed_time_s(
     items: &[Item],
     start: Vector3<f64>,
@@ -280,6 +273,7 @@ fn streamed_time_s(
     config: &PlannerConfig,
 ) -> f64 {
     let plan = plan_items_with(start, items, limits, config).expect("the program plans");
+    assert_eq!(plan.end_mm(), start, "the program ends where it began");
     let mut interp = Interpolator::new(plan, config.period_s).expect("interpolator");
     let mut q = Vector3::zeros();
     while interp.update(&mut q) != Status::Finished {}
