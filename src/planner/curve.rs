@@ -63,7 +63,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use super::{Pending, Planner, SegmentPath, Smoothing, cap_speed, lower_acceleration};
+use super::{Pending, Planner, SegmentPath, Smoothing, cap_speed, caps_under, lower_acceleration};
 use crate::gcode::BlendMode;
 
 /// Largest turn `|Δu|` of a vertex between two lines that is taken as a point of a curve
@@ -498,14 +498,7 @@ impl Planner {
         };
         let prev = self.window.back()?;
         let in_run = prev.curve_fit.is_some() && p_short;
-        let raw = (
-            own.min(prev.limits.v_max_mm_s())
-                .min(p.limits.v_max_mm_s())
-                .min(ahead_mm_s),
-            own.min(prev.v_limit_mm_s)
-                .min(p.v_limit_mm_s)
-                .min(ahead_mm_s),
-        );
+        let raw = caps_under(own.min(ahead_mm_s), prev, p);
         let covered = in_run && own >= prev.limits.v_max_mm_s().min(p.limits.v_max_mm_s());
         let dipped = if covered {
             raw
@@ -547,7 +540,7 @@ impl Planner {
         if p.seg.length_mm <= cap * t_f {
             cap_speed(p, cap, cap);
         } else {
-            let delta = 0.25 * p.limits.a_max_mm_s2().max(before_acc_mm_s2) * t_f;
+            let delta = self.dip_depth_mm_s(p.limits.a_max_mm_s2(), before_acc_mm_s2);
             let c = (cap - delta).max(0.0);
             p.cap_start_mm_s = p.cap_start_mm_s.min(c);
             p.cap_start_limit_mm_s = p.cap_start_limit_mm_s.min(c);
@@ -598,12 +591,10 @@ impl Planner {
         let first = &self.window[j];
         let mut c_j = first.cap_start_mm_s.min(cap);
         if dip {
-            let delta = 0.25
-                * first
-                    .limits
-                    .a_max_mm_s2()
-                    .max(self.window[j - 1].limits.a_max_mm_s2())
-                * t_f;
+            let delta = self.dip_depth_mm_s(
+                first.limits.a_max_mm_s2(),
+                self.window[j - 1].limits.a_max_mm_s2(),
+            );
             c_j = c_j.min((cap - delta).max(0.0));
         }
         // Can the plan still come down to `c_j` there? Back from it at each element's

@@ -1842,24 +1842,28 @@ impl Planner {
 
     /// [`junction_caps`](Self::junction_caps) before the time-law filter's dip.
     fn raw_junction_caps(&self, a: &Pending, b: &Pending) -> (f64, f64) {
-        let v = self.junction_limit_mm_s(a, b);
-        let fed = v.min(a.limits.v_max_mm_s()).min(b.limits.v_max_mm_s());
-        let limit = v.min(a.v_limit_mm_s).min(b.v_limit_mm_s);
-        (fed, limit)
+        caps_under(self.junction_limit_mm_s(a, b), a, b)
+    }
+
+    /// How far the time-law filter rounds a V-shaped dip of the plan between elements of the
+    /// accelerations `acc_a_mm_s2` and `acc_b_mm_s2`: `A·T_f/4` with the larger (0 without
+    /// the filter). See [`Planner::dip_caps`].
+    fn dip_depth_mm_s(&self, acc_a_mm_s2: f64, acc_b_mm_s2: f64) -> f64 {
+        self.smoothing.map_or(0.0, |smoothing| {
+            0.25 * acc_a_mm_s2.max(acc_b_mm_s2) * smoothing.time_law_s(self.config.period_s)
+        })
     }
 
     /// The caps `(fed, limit)` lowered for the time-law filter's rounding of a dip.
     fn dip_caps(&self, a: &Pending, b: &Pending, (fed, limit): (f64, f64)) -> (f64, f64) {
-        let Some(smoothing) = self.smoothing else {
+        if self.smoothing.is_none() {
             return (fed, limit);
-        };
+        }
         // The time-law filter rounds every dip of the speed: at a V-shaped dip to `c` with
         // the acceleration `A` either side, the filtered speed passes the dip's position at
         // `c + A·T_f/4`. So a cap below the speed of either neighbour is planned that much
         // lower, and one that leaves nothing is a stop, where the filter settles.
-        let delta = 0.25
-            * a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2())
-            * smoothing.time_law_s(self.config.period_s);
+        let delta = self.dip_depth_mm_s(a.limits.a_max_mm_s2(), b.limits.a_max_mm_s2());
         let dip = |cap: f64, va: f64, vb: f64| {
             if cap < va.max(vb) {
                 (cap - delta).max(0.0)
@@ -2539,6 +2543,16 @@ fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
     tail.low_cap = false;
     tail.alone = p.alone;
     Some((head, tail))
+}
+
+/// A junction's caps `(fed, limit)` from its own limit `own_mm_s`: under both elements'
+/// speed limits, with the programmed feeds and by the machine alone.
+fn caps_under(own_mm_s: f64, a: &Pending, b: &Pending) -> (f64, f64) {
+    let fed = own_mm_s
+        .min(a.limits.v_max_mm_s())
+        .min(b.limits.v_max_mm_s());
+    let limit = own_mm_s.min(a.v_limit_mm_s).min(b.v_limit_mm_s);
+    (fed, limit)
 }
 
 /// Caps an element of a plateau ([`Planner::finalize_junction`]) at `fed_mm_s` (and its
