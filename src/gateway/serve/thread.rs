@@ -54,6 +54,12 @@ pub enum Request {
 /// A request and where its answer goes.
 pub type Envelope = (Request, tokio::sync::oneshot::Sender<Result<(), Refusal>>);
 
+/// An answer waiting for its cycle's snapshot.
+type Answer = (
+    tokio::sync::oneshot::Sender<Result<(), Refusal>>,
+    Result<(), Refusal>,
+);
+
 /// One axis in a [`Snapshot`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AxisSnapshot {
@@ -184,6 +190,9 @@ fn run(
     let mut active = false;
     let mut quit: Option<bool> = None;
     let n = machine.axes.len();
+    // Answers wait for the snapshot of the cycle that acted on them: whoever reads the
+    // snapshot after an answer sees the request's effect (a cleared alarm, a new phase).
+    let mut answers: Vec<Answer> = Vec::with_capacity(16);
     loop {
         ticker.wait();
         if let Some((fraction, hold)) = control.poll(&mut control_seen) {
@@ -228,7 +237,7 @@ fn run(
                     Ok(())
                 }
             };
-            let _ = reply.send(answer);
+            answers.push((reply, answer));
         }
         let now = Duration::from_nanos(rt::now_ns());
         if let Err(e) = bus.receive(port, &mut master, &mut sup, now, ticker.timing.cycles) {
@@ -252,7 +261,7 @@ fn run(
         if let Some(tx) = &log {
             let _ = tx.try_send(rec);
         }
-        if let Ok(mut s) = snapshot.try_lock() {
+        let published = snapshot.try_lock().map(|mut s| {
             s.cycle = rec.cycle;
             s.phase = Some(master.phase());
             s.idle = master.is_idle();
@@ -281,6 +290,11 @@ fn run(
                     released: master.released(1 << i),
                 };
             }
+        });
+        if published.is_ok() {
+            for (reply, answer) in answers.drain(..) {
+                let _ = reply.send(answer);
+            }
         }
         let done = master.phase() == Phase::Done
             || match quit {
@@ -308,6 +322,9 @@ fn run(
         s.ended = true;
         s.phase = Some(master.phase());
         s.failure = master.failure().cloned();
+    }
+    for (reply, answer) in answers.drain(..) {
+        let _ = reply.send(answer);
     }
     port_err
 }
