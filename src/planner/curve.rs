@@ -63,7 +63,8 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use super::{Pending, Planner, SegmentPath, Smoothing, cap_speed, caps_under, lower_acceleration};
+use super::profile::ProfileLimits;
+use super::{Pending, Planner, SegmentPath, Smoothing, cap_speed, caps_under};
 use crate::gcode::BlendMode;
 
 /// Largest turn `|Δu|` of a vertex between two lines that is taken as a point of a curve
@@ -73,13 +74,16 @@ pub(super) const CURVE_MAX_TURN: f64 = 0.35;
 /// Chords kept for the curvature's window.
 const CHORD_HISTORY: usize = 65;
 
-/// Share of each axis's acceleration (its `path_acc_share` of it) the centripetal
-/// acceleration of a chord run may take at its cap, as on an arc (`√3/2`).
-const CENTRIPETAL_SHARE: f64 = 0.866_025_403_784_438_6;
+/// Share of each axis's acceleration and jerk a line of a chord run may use for its curve and
+/// its tangential acceleration together (what is left is the vertices' own, beyond the curve).
+const CURVE_BUDGET: f64 = 0.85;
 
-/// Share of each axis's jerk the jerk of following a chord run's curve may take at its cap,
-/// as on an arc.
-const CURVE_JERK_SHARE: f64 = 0.25;
+/// Share of that budget the centripetal acceleration `v²κ·|Nᵢ|` may take at the run's cap:
+/// at the cap the tangential acceleration is what the rest leaves.
+const CENTRIPETAL_SHARE: f64 = 0.9;
+
+/// Share of that budget the jerk of following the curve, `v³κ²·|Tᵢ|`, may take at the cap.
+const CURVE_JERK_SHARE: f64 = 0.8;
 
 /// Relative step of the grid the caps are rounded down to.
 pub(super) const CAP_STEP: f64 = 0.01;
@@ -90,6 +94,8 @@ pub(super) struct CurveState {
     /// The recent lines of the run: direction and the path distance of their midpoint (from
     /// [`CurveState::pushed_mm`]'s origin).
     chords: VecDeque<(Vector3<f64>, f64)>,
+    /// The curvature vectors of the run's vertices taken, with their path distances.
+    kappas: VecDeque<(Vector3<f64>, f64)>,
     /// Caps that hold ahead: `(until_mm, cap_mm_s)`, every element starting before `until_mm`
     /// capped at `cap_mm_s` (path distances as [`CurveState::pushed_mm`]).
     ahead: Vec<(f64, f64)>,
@@ -100,13 +106,14 @@ pub(super) struct CurveState {
 impl CurveState {
     /// Forgets the run (a stop, a dwell, the program's end: the filters settle there).
     pub(super) fn reset(&mut self) {
-        self.chords.clear();
+        self.end_run();
         self.ahead.clear();
     }
 
     /// Ends the run of chords (a corner blended).
     pub(super) fn end_run(&mut self) {
         self.chords.clear();
+        self.kappas.clear();
     }
 
     /// The lowest cap that holds at `at_mm` (`None`: none), forgetting those that ended.
@@ -146,31 +153,43 @@ fn on_grid(c: f64) -> f64 {
     if g > c { c } else { g }
 }
 
-/// A line's limits on a curve of curvature vector `kappa` (see the module documentation):
-/// `(cap, tangential acceleration)`, `None` where it does not turn.
-/// A line's limits on a curve: its cap, its tangential acceleration, and what it uses of
-/// each axis's acceleration and jerk at the speed it may run (at most the cap).
+/// A line's limits on a curve: its cap, and what it uses of each axis at a speed.
 #[derive(Debug, Clone, Copy)]
 struct CurveLimits {
     cap_mm_s: f64,
-    acc_mm_s2: f64,
     fit: CurveFit,
+    /// Where the vertex is (path distance as [`CurveState::pushed_mm`]).
+    s_vertex_mm: f64,
 }
 
 /// What a line of a chord run uses of each axis on its curve, at a speed: kept with the
 /// element ([`Pending::curve_fit`]) so that the junction at its end can take it at the speed
-/// the junction allows ([`Planner::curve_junction_mm_s`]).
+/// the junction allows ([`Planner::curve_junction_mm_s`]), and ([`Pending::curve_acc`]) so
+/// that the look-ahead gives it the tangential acceleration its speed leaves
+/// ([`CurveFit::acc_at`]).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct CurveFit {
     tangent: Vector3<f64>,
     normal: Vector3<f64>,
     kappa: f64,
+    /// The rate of change of the curvature vector along the path beyond its turn with the
+    /// tangent (`d(κN)/ds + κ²·T = κ'·N + κτ·B`): at constant speed `v`, `v³·|rateᵢ|` of
+    /// jerk on each axis besides the `v³κ²·|Tᵢ|` of the turn.
+    rate: Vector3<f64>,
+    /// The element's tangential acceleration by its other rules (a ceiling).
     acc_mm_s2: f64,
     /// The line's own use, before the curve.
     base_acc_used_mm_s2: Vector3<f64>,
     base_jerk_used_mm_s3: Vector3<f64>,
     /// The speed its use is set for.
     pub(super) v_mm_s: f64,
+    /// Each axis's budget for the curve and the tangential acceleration ([`CURVE_BUDGET`]).
+    acc_budget_mm_s2: Vector3<f64>,
+    jerk_budget_mm_s3: Vector3<f64>,
+    /// The time-law filter's length.
+    t_f: f64,
+    /// The run's cap at this curvature.
+    pub(super) cap_mm_s: f64,
 }
 
 impl CurveFit {
@@ -179,30 +198,163 @@ impl CurveFit {
         self.normal * self.kappa
     }
 
+    /// The largest tangential acceleration `a_t` whose time law keeps every axis within its
+    /// budget at the speed `w`: the acceleration `a_t·|Tᵢ| + w²κ·|Nᵢ|` and the jerk
+    /// `(j_t + w³κ²)·|Tᵢ| + 3·w·κ·a_t·|Nᵢ|`, with the time law's jerk `j_t ≤ 2·a_t/T_f` (the
+    /// filter's window sees the plan's acceleration change by at most `2·a_t`). Falls with `w`.
+    fn acc_raw(&self, w: f64) -> f64 {
+        let k = self.kappa;
+        let (a_n, w3) = (w * w * k, w * w * w);
+        let mut a_t = self.acc_mm_s2;
+        for i in 0..3 {
+            let (t_i, n_i) = (self.tangent[i].abs(), self.normal[i].abs());
+            if t_i > 0.0 {
+                a_t = a_t.min((self.acc_budget_mm_s2[i] - a_n * n_i) / t_i);
+            }
+            let j_curve = w3 * (k * k * t_i + self.rate[i].abs());
+            let per_acc = 2.0 * t_i / self.t_f + 3.0 * w * k * n_i;
+            if per_acc > 0.0 {
+                a_t = a_t.min((self.jerk_budget_mm_s3[i] - j_curve) / per_acc);
+            }
+        }
+        a_t.max(0.0)
+    }
+
+    /// The tangential acceleration the element may plan with where it runs at most at
+    /// `v_mm_s`: the time-law filter passes it on over its length `T_f`, within which the
+    /// speed rises by at most `a_t·T_f` (not beyond the run's cap), so `a_t` must hold at
+    /// `w = min(v + a_t·T_f, cap)`. The odd iterates of `a ↦ acc_raw(v + a·T_f)` from
+    /// `acc_raw(v)` are valid (each is at most `acc_raw` at its own `w`), rising to the fixed
+    /// point; the third is taken.
+    pub(super) fn acc_at(&self, v_mm_s: f64) -> f64 {
+        let w = |a: f64| (v_mm_s + a * self.t_f).min(self.cap_mm_s).max(v_mm_s);
+        let a0 = self.acc_raw(v_mm_s.min(self.cap_mm_s));
+        let a1 = self.acc_raw(w(a0));
+        let a2 = self.acc_raw(w(a1));
+        self.acc_raw(w(a2))
+    }
+
+    /// Whether the tangential acceleration `a_mm_s2` keeps the axes within their budgets
+    /// where the element runs at most at `v_mm_s` (see [`acc_at`](Self::acc_at)); then also
+    /// at any lower speed.
+    pub(super) fn valid_at(&self, a_mm_s2: f64, v_mm_s: f64) -> bool {
+        let w = (v_mm_s + a_mm_s2 * self.t_f).min(self.cap_mm_s).max(v_mm_s);
+        a_mm_s2 <= self.acc_raw(w)
+    }
+
     /// Sets `p`'s use of the axes for the curve at speed `v_mm_s`: the acceleration
     /// `a_t·|Tᵢ| + v²κ·|Nᵢ|` and the jerk `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` of each
-    /// axis, at least the line's own.
+    /// axis with the acceleration `a_t` it plans with at that speed, at least the line's own.
     pub(super) fn use_at(p: &mut Pending, v_mm_s: f64, t_f: f64) {
         let Some(fit) = p.curve_fit.as_mut() else {
             return;
         };
         fit.v_mm_s = v_mm_s;
-        let (k, a_t) = (fit.kappa, fit.acc_mm_s2);
+        let k = fit.kappa;
+        let a_t = fit.acc_at(v_mm_s);
         let (a_n, j_curve) = (v_mm_s * v_mm_s * k, v_mm_s * v_mm_s * v_mm_s * k * k);
         let j_t = 2.0 * a_t / t_f;
         for i in 0..3 {
             let (t_i, n_i) = (fit.tangent[i].abs(), fit.normal[i].abs());
             p.acc_used_mm_s2[i] = fit.base_acc_used_mm_s2[i].max(a_t * t_i + a_n * n_i);
-            p.jerk_used_mm_s3[i] = fit.base_jerk_used_mm_s3[i]
-                .max((j_t + j_curve) * t_i + 3.0 * v_mm_s * k * a_t * n_i);
+            p.jerk_used_mm_s3[i] = fit.base_jerk_used_mm_s3[i].max(
+                (j_t + j_curve) * t_i
+                    + v_mm_s * v_mm_s * v_mm_s * fit.rate[i].abs()
+                    + 3.0 * v_mm_s * k * a_t * n_i,
+            );
         }
     }
 }
+
+/// The highest speed `p` may reach from `v_from_mm_s` over its length (the end speed from a
+/// start, or a start speed back from an end: the same reach) within `vmax_mm_s`, and the
+/// tangential acceleration that reaches it: with no curve, the element's own; on a chord run
+/// taken as a curve, one that its curve allows up to the speed reached
+/// ([`CurveFit::valid_at`]), the largest speed of a speed change being at its faster end.
+/// `None` where [`super::profile::max_end_speed`] has none (a start above `vmax_mm_s`).
+pub(super) fn reach_mm_s(p: &Pending, v_from_mm_s: f64, vmax_mm_s: f64) -> Option<(f64, f64, f64)> {
+    let reach = |a: f64| {
+        ProfileLimits::trapezoid(vmax_mm_s, a)
+            .and_then(|l| super::profile::max_end_speed(p.seg.length_mm, v_from_mm_s, &l))
+    };
+    reach(p.limits.a_max_mm_s2())?;
+    Some(reach_with(p, |a| reach(a).unwrap_or(v_from_mm_s)))
+}
+
+/// A lower bound of [`reach_mm_s`]'s speed, without a speed limit: `√(v² + 2·a·L)` with the
+/// acceleration the element may plan with at any speed up to its cap
+/// ([`Pending::acc_floor_mm_s2`]). Cheap: the walks back through a braking distance
+/// ([`Planner::can_come_down`]) take it element by element; the look-ahead's backward pass
+/// reaches at least as high.
+pub(super) fn reach_free_mm_s(p: &Pending, v_from_mm_s: f64) -> f64 {
+    let a = p.limits.a_max_mm_s2().min(p.acc_floor_mm_s2);
+    (v_from_mm_s * v_from_mm_s + 2.0 * a * p.seg.length_mm).sqrt()
+}
+
+/// Sets `p`'s [`Pending::acc_floor_mm_s2`] for its curve and its cap.
+pub(super) fn refresh_floor(p: &mut Pending) {
+    p.acc_floor_mm_s2 = p
+        .curve_acc
+        .map_or(f64::INFINITY, |fit| fit.acc_at(p.limits.v_max_mm_s()));
+}
+
+/// The reach `(speed, acceleration)` with `reach` giving the speed an acceleration reaches,
+/// and the speed up to which that acceleration is known valid: the curve's acceleration where
+/// its own reach with its largest one ends (valid there, so at the lower speed it reaches
+/// too), then, where it is valid at the speed it reaches, the curve's acceleration at that
+/// lower speed; or the pair the backward pass took last ([`Pending::reach_memo`]) within the
+/// speed it is valid to, whichever reaches higher. With the last pair a candidate, the
+/// backward pass's bound at an element never falls as the bound after it rises, so the
+/// speed the plan settled at the window's start stays within it (the odd iterates alone
+/// are not monotone in the speed they start from).
+fn reach_with(p: &Pending, reach: impl Fn(f64) -> f64) -> (f64, f64, f64) {
+    let a_static = p.limits.a_max_mm_s2();
+    let Some(fit) = p.curve_acc.as_ref() else {
+        return (reach(a_static), a_static, f64::INFINITY);
+    };
+    // The last pair, where it reaches about as high as it is valid: a fresh one could hardly
+    // do better (the look-ahead's passes meet most elements several times at such speeds).
+    let memo = p.reach_memo.map(|(a_m, v_valid)| {
+        let a_m = a_m.min(a_static);
+        (reach(a_m).min(v_valid), a_m, v_valid)
+    });
+    if let Some(m) = memo
+        && m.0 >= MEMO_TIGHT * m.2
+    {
+        return m;
+    }
+    let v_up = reach(a_static);
+    let a1 = a_static.min(fit.acc_at(v_up));
+    let v1 = reach(a1);
+    let mut best = (v1, a1, v_up);
+    // The acceleration valid up to the cap, which the walks back take.
+    let a_floor = a_static.min(p.acc_floor_mm_s2);
+    let v_floor = reach(a_floor);
+    if v_floor > best.0 {
+        best = (v_floor, a_floor, p.limits.v_max_mm_s());
+    }
+    let a2 = a_static.min(fit.acc_at(v1));
+    if a2 > a1 {
+        let v2 = reach(a2);
+        if fit.valid_at(a2, v2) {
+            best = (v2, a2, v2);
+        }
+    }
+    match memo {
+        Some(m) if m.0 > best.0 => m,
+        _ => best,
+    }
+}
+
+/// [`reach_with`] takes the last pair as it is where it reaches this share of the speed it is
+/// valid to.
+const MEMO_TIGHT: f64 = 0.99;
 
 fn curve_limits(
     planner: &Planner,
     tangent: Vector3<f64>,
     kappa: Vector3<f64>,
+    rate: Vector3<f64>,
     v_max_mm_s: f64,
     smoothing: &Smoothing,
 ) -> Option<CurveLimits> {
@@ -212,57 +364,47 @@ fn curve_limits(
     }
     let n = kappa / k;
     let cfg = &planner.config;
-    let share = cfg.path_acc_share;
     let t_f = smoothing.time_law_s(cfg.period_s);
-    let axis_acc = |i: usize| share * planner.limits.max_acc_mm_s2[i];
-    let axis_jerk = |i: usize| share * cfg.max_jerk_mm_s3[i];
+    let acc_budget_mm_s2 = planner.limits.max_acc_mm_s2 * CURVE_BUDGET;
+    let jerk_budget_mm_s3 = cfg.max_jerk_mm_s3 * CURVE_BUDGET;
     // The cap: each axis's part of the centripetal acceleration `v²κ·|Nᵢ|` within
-    // [`CENTRIPETAL_SHARE`] of its share, and of the jerk of following the curve,
+    // [`CENTRIPETAL_SHARE`] of its budget, and of the jerk of following the curve,
     // `v³κ²·|Tᵢ|`, within [`CURVE_JERK_SHARE`].
     let (mut v2, mut v3) = (f64::INFINITY, f64::INFINITY);
     for i in 0..3 {
         let (t_i, n_i) = (tangent[i].abs(), n[i].abs());
         if n_i > 0.0 {
-            v2 = v2.min(CENTRIPETAL_SHARE * axis_acc(i) / (k * n_i));
+            v2 = v2.min(CENTRIPETAL_SHARE * acc_budget_mm_s2[i] / (k * n_i));
         }
-        if t_i > 0.0 {
-            v3 = v3.min(CURVE_JERK_SHARE * axis_jerk(i) / (k * k * t_i));
+        let q_i = k * k * t_i + rate[i].abs();
+        if q_i > 0.0 {
+            v3 = v3.min(CURVE_JERK_SHARE * jerk_budget_mm_s3[i] / q_i);
         }
     }
     let v = v2.sqrt().min(v3.cbrt());
-    // The tangential acceleration at the speed the element may run (`v_run`, at most the
-    // cap), axis by axis: the acceleration `a_t·T + v²κ·N` and the jerk
-    // `(j_t − v³κ²)·T + 3·v·κ·a_t·N`, with the time law's `j_t = 2·a_t/T_f`, within each
-    // axis's share. On a straight run this is a line's `J·T_f/2`.
-    let v_run = v.min(v_max_mm_s);
-    let a_n = v_run * v_run * k;
-    let j_curve = v_run * v_run * v_run * k * k;
-    let mut a_t = cfg.path_acc_mm_s2;
-    for i in 0..3 {
-        let (t_i, n_i) = (tangent[i].abs(), n[i].abs());
-        if t_i > 0.0 {
-            a_t = a_t.min((axis_acc(i) - a_n * n_i).max(0.0) / t_i);
-        }
-        let per_acc = 2.0 * t_i / t_f + 3.0 * v_run * k * n_i;
-        if per_acc > 0.0 {
-            a_t = a_t.min((axis_jerk(i) - j_curve * t_i).max(0.0) / per_acc);
-        }
-    }
-    if !(v.is_finite() && v > 0.0 && a_t > 0.0) {
+    let fit = CurveFit {
+        tangent,
+        normal: n,
+        kappa: k,
+        rate,
+        acc_mm_s2: cfg.path_acc_mm_s2,
+        base_acc_used_mm_s2: Vector3::zeros(),
+        base_jerk_used_mm_s3: Vector3::zeros(),
+        v_mm_s: v.min(v_max_mm_s),
+        acc_budget_mm_s2,
+        jerk_budget_mm_s3,
+        t_f,
+        cap_mm_s: v,
+    };
+    // What the budgets leave for the tangential acceleration at the cap: the run's speed may
+    // still change there, slowly (on a straight run, a line's `J·T_f/2`).
+    if !(v.is_finite() && v > 0.0 && fit.acc_raw(v) > 0.0) {
         return None;
     }
     Some(CurveLimits {
         cap_mm_s: v,
-        acc_mm_s2: a_t,
-        fit: CurveFit {
-            tangent,
-            normal: n,
-            kappa: k,
-            acc_mm_s2: a_t,
-            base_acc_used_mm_s2: Vector3::zeros(),
-            base_jerk_used_mm_s3: Vector3::zeros(),
-            v_mm_s: v_run,
-        },
+        fit,
+        s_vertex_mm: 0.0,
     })
 }
 
@@ -275,7 +417,7 @@ impl Planner {
     pub(super) fn take_curve_vertex(&mut self, p: &mut Pending) -> Option<f64> {
         let smoothing = self.smoothing?;
         let Some(prev) = self.window.back() else {
-            self.curve.chords.clear();
+            self.curve.end_run();
             return None;
         };
         let du = p.tangent_start - prev.tangent_end;
@@ -286,7 +428,7 @@ impl Planner {
             && du.norm() <= CURVE_MAX_TURN;
         let p_mid = self.curve.pushed_mm + 0.5 * p.seg.length_mm;
         if !vertex {
-            self.curve.chords.clear();
+            self.curve.end_run();
             if chord(p) {
                 self.curve.chords.push_back((p.tangent_start, p_mid));
             }
@@ -321,8 +463,8 @@ impl Planner {
         let t_f = smoothing.time_law_s(self.config.period_s);
         let (acc_used, jerk_used) = (prev.acc_used_mm_s2, prev.jerk_used_mm_s3);
         let mut fit = limits.fit;
-        // Its own tangential acceleration, which it took from the vertex at its start.
-        fit.acc_mm_s2 = fit.acc_mm_s2.max(prev.limits.a_max_mm_s2());
+        // Its tangential acceleration by its other rules, a ceiling.
+        fit.acc_mm_s2 = prev.limits.a_max_mm_s2();
         fit.base_acc_used_mm_s2 = acc_used;
         fit.base_jerk_used_mm_s3 = jerk_used;
         let prev = self.window.back_mut().expect("checked above");
@@ -330,7 +472,7 @@ impl Planner {
         CurveFit::use_at(prev, fit.v_mm_s, t_f);
         let prev = self.window.back().expect("checked above");
         let own_mm_s = self.junction_limit_mm_s(prev, p);
-        let (acc, cap) = (limits.acc_mm_s2, on_grid(limits.cap_mm_s));
+        let cap = on_grid(limits.cap_mm_s);
         if 2.0 * mean_mm > own_mm_s * tk || !self.erode_back(cap, &smoothing) {
             let prev = self.window.back_mut().expect("checked above");
             prev.curve_fit = None;
@@ -339,50 +481,95 @@ impl Planner {
         }
         let reach_mm = cap * t_f;
         self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
-        // On the vertex's two elements, as the old vertex rule: not passed on through further
+        if self.curve.kappas.len() >= CHORD_HISTORY {
+            self.curve.kappas.pop_front();
+        }
+        self.curve
+            .kappas
+            .push_back((fit.curvature(), limits.s_vertex_mm));
+        // The element after the vertex plans with the tangential acceleration the curve
+        // leaves at its speed ([`Pending::curve_acc`]): not passed on through further
         // junctions as the lower of two accelerations is, since one noisy vertex would slow a
-        // whole run. The window's last element's only where the plan can still stop at its
-        // end from the speed it has settled (lowering it lowers the speeds the elements
-        // before it may end at); otherwise it keeps the acceleration it took from the vertex
-        // at its start, and its use of the axes says so.
-        lower_acceleration(p, acc);
-        if self.can_lower_last(acc) {
-            let prev = self.window.back_mut().expect("checked above");
-            lower_acceleration(prev, acc);
-            if let Some(fit) = prev.curve_fit.as_mut() {
-                fit.acc_mm_s2 = prev.limits.a_max_mm_s2();
+        // whole run. The element before keeps the curve of the vertex at its start (fits
+        // change little from one vertex of a run to the next; lowering the window's last
+        // element's acceleration would need a walk back through its braking distance, to
+        // keep the stop at the window's end within reach, at every vertex).
+        let mut fit_p = fit;
+        fit_p.tangent = p.tangent_start;
+        fit_p.acc_mm_s2 = p.limits.a_max_mm_s2();
+        p.curve_acc = Some(fit_p);
+        p.reach_memo = None;
+        refresh_floor(p);
+        let prev = self.window.back().expect("checked above");
+        if prev.curve_acc.is_none() {
+            // The run's first vertex: the element before takes its curve where the plan can
+            // still stop at its end.
+            let mut last = *prev;
+            let mut fit_prev = fit;
+            fit_prev.acc_mm_s2 = prev.limits.a_max_mm_s2();
+            last.curve_acc = Some(fit_prev);
+            last.reach_memo = None;
+            refresh_floor(&mut last);
+            if self.can_stop_with(&last) {
+                *self.window.back_mut().expect("checked above") = last;
             }
-            let v = fit.v_mm_s;
-            CurveFit::use_at(prev, v, t_f);
         }
         Some(own_mm_s)
     }
 
     /// Whether the window's last element may plan with the acceleration `acc_mm_s2`: the
-    /// plan must still stop at its end from the speed it has settled. Back from that stop at
-    /// each element's acceleration to a junction whose own cap is lower (nothing before it
-    /// changes) or to the window's start.
+    /// plan must still stop at its end from the speed it has settled
+    /// ([`can_stop_with`](Self::can_stop_with)).
     pub(super) fn can_lower_last(&self, acc_mm_s2: f64) -> bool {
+        let Some(last) = self.window.back() else {
+            return true;
+        };
+        let mut last = *last;
+        super::lower_acceleration(&mut last, acc_mm_s2);
+        self.can_stop_with(&last)
+    }
+
+    /// Whether the plan could still stop at the window's end from the speed it has settled
+    /// with `last` in place of the window's last element: back from that stop at each
+    /// element's acceleration ([`reach_free_mm_s`]) to a junction whose own cap is lower
+    /// (nothing before it changes) or to the window's start.
+    pub(super) fn can_stop_with(&self, last: &Pending) -> bool {
         let n = self.window.len();
-        let mut bound = 0.0f64;
-        for k in (0..n).rev() {
-            let e = &self.window[k];
-            let acc = if k == n - 1 {
-                e.limits.a_max_mm_s2().min(acc_mm_s2)
-            } else {
-                e.limits.a_max_mm_s2()
-            };
-            bound = (bound * bound + 2.0 * acc * e.seg.length_mm).sqrt();
+        if n == 0 {
+            return true;
+        }
+        self.come_down(n - 1, reach_free_mm_s(last, 0.0))
+    }
+
+    /// Whether the plan can still come down to `to_mm_s` at the start of the window's
+    /// element `at` from the speed it has settled: back from there at each element's
+    /// acceleration ([`reach_free_mm_s`]) to a junction whose own cap is lower (nothing before
+    /// it changes) or to the window's start.
+    pub(super) fn can_come_down(&self, at: usize, to_mm_s: f64) -> bool {
+        if at == 0 {
+            return self.v_settled_mm_s <= to_mm_s;
+        }
+        self.come_down(at - 1, reach_free_mm_s(&self.window[at - 1], to_mm_s))
+    }
+
+    /// [`can_come_down`](Self::can_come_down) with `bound` the highest speed at the start of
+    /// the element `k` from which the plan comes down.
+    fn come_down(&self, mut k: usize, mut bound: f64) -> bool {
+        loop {
             let start = if k == 0 {
                 self.v_settled_mm_s
             } else {
-                e.cap_start_mm_s
+                self.window[k].cap_start_mm_s
             };
             if start <= bound {
                 return true;
             }
+            if k == 0 {
+                return false;
+            }
+            k -= 1;
+            bound = reach_free_mm_s(&self.window[k], bound);
         }
-        false
     }
 
     /// The junction's own limit from the window's last element, a line of a chord run taken
@@ -439,20 +626,32 @@ impl Planner {
         let (u_new, s_new) = chords[n - 1];
         // Whether the cap at `kappa` allows `x` (without its roots: each axis's
         // `x²·κ·|Nᵢ|` and `x³·κ²·|Tᵢ|` within their shares).
-        let share = self.config.path_acc_share;
         let allows = |kappa: Vector3<f64>, x: f64| {
             let k = kappa.norm();
             (0..3).all(|i| {
                 let (t_i, n_i) = (prev.tangent_end[i].abs(), kappa[i].abs());
-                x * x * n_i <= CENTRIPETAL_SHARE * share * self.limits.max_acc_mm_s2[i]
+                x * x * n_i <= CENTRIPETAL_SHARE * CURVE_BUDGET * self.limits.max_acc_mm_s2[i]
                     && x * x * x * k * k * t_i
-                        <= CURVE_JERK_SHARE * share * self.config.max_jerk_mm_s3[i]
+                        <= CURVE_JERK_SHARE * CURVE_BUDGET * self.config.max_jerk_mm_s3[i]
             })
         };
+        // The turn `θ` between the window's end chords over the distance between their
+        // midpoints, along the difference of their directions (the normal midway): exact on
+        // an arc (the difference's length is `2·sin(θ/2)`).
         let kappa_over = |m: usize| {
             let (u_old, s_old) = chords[n - 1 - m];
             let w_mm = s_new - s_old;
-            (w_mm > 0.0).then(|| ((u_new - u_old) / w_mm, w_mm))
+            let du = u_new - u_old;
+            let chord = du.norm();
+            (w_mm > 0.0).then(|| {
+                let theta = 2.0 * (0.5 * chord).min(1.0).asin();
+                let kappa = if chord > 0.0 {
+                    du * (theta / (chord * w_mm))
+                } else {
+                    Vector3::zeros()
+                };
+                (kappa, w_mm)
+            })
         };
         // The first window that turns, then the longest valid one: valid where the axis
         // filters average over at least its length at the speed its curvature allows.
@@ -465,7 +664,7 @@ impl Planner {
                 let x = w_mm / tk;
                 let valid = x <= v_max && allows(kappa, x);
                 if best.is_none() || valid {
-                    best = Some(kappa);
+                    best = Some((kappa, w_mm));
                 }
                 if !valid {
                     break;
@@ -476,8 +675,40 @@ impl Planner {
             }
             m = (2 * m).min(n - 1);
         }
-        let best = best?;
-        curve_limits(self, prev.tangent_end, best, v_max, smoothing)
+        let (best, w_mm) = best?;
+        // The rate of change of the curve's curvature vector, from the estimate a window's
+        // length back (the axis filters see it averaged over about that). Each estimate
+        // holds midway along its window.
+        // The axis filters' output follows the curvature averaged over about `2·v·T_k`, at
+        // the speed `v` the curvature alone would allow: the rate is taken over at least
+        // that (and two windows), which keeps the rounding's noise on each estimate from
+        // reaching it divided by a short distance.
+        let kappas = &self.curve.kappas;
+        let s_vertex = s_new - 0.5 * w_mm;
+        let j_min = self.config.max_jerk_mm_s3.min();
+        let k2 = best.norm_squared().max(f64::MIN_POSITIVE);
+        let v_k = v_max.min((CURVE_JERK_SHARE * CURVE_BUDGET * j_min / k2).cbrt());
+        let baseline_mm = (2.0 * w_mm).max(2.0 * v_k * tk);
+        // Its turn with the tangent, `−κ²·T`, is taken at the tangent midway (the chord
+        // there), where the difference quotient has it.
+        let rate = kappas
+            .iter()
+            .rev()
+            .find(|&&(_, s)| s_vertex - s >= baseline_mm)
+            .map_or(Vector3::zeros(), |&(k_old, s)| {
+                let mid = 0.5 * (s_vertex + s);
+                let (u_mid, _) = chords
+                    .iter()
+                    .min_by(|a, b| (a.1 - mid).abs().total_cmp(&(b.1 - mid).abs()))
+                    .copied()
+                    .unwrap_or((prev.tangent_end, mid));
+                let k_mean = 0.5 * (best.norm() + k_old.norm());
+                (best - k_old) / (s_vertex - s) + u_mid * (k_mean * k_mean)
+            });
+        curve_limits(self, prev.tangent_end, best, rate, v_max, smoothing).map(|l| CurveLimits {
+            s_vertex_mm: s_vertex,
+            ..l
+        })
     }
 
     /// The caps `(raw, dipped)` of the junction from the window's last element into `p` (see
@@ -600,27 +831,8 @@ impl Planner {
         // Can the plan still come down to `c_j` there? Back from it at each element's
         // acceleration, to a junction whose own cap is lower (nothing before it changes) or
         // to the speed the plan has settled at the window's start.
-        if j == 0 {
-            if self.v_settled_mm_s > c_j {
-                return false;
-            }
-        } else {
-            let mut bound = c_j;
-            for k in (0..j).rev() {
-                let e = &self.window[k];
-                bound = (bound * bound + 2.0 * e.limits.a_max_mm_s2() * e.seg.length_mm).sqrt();
-                let start = if k == 0 {
-                    self.v_settled_mm_s
-                } else {
-                    e.cap_start_mm_s
-                };
-                if start <= bound {
-                    break;
-                }
-                if k == 0 {
-                    return false;
-                }
-            }
+        if !self.can_come_down(j, c_j) {
+            return false;
         }
         // Apply: `behind_mm`, what lies within reach before each element's start.
         let mut behind_mm = reach_mm;

@@ -896,6 +896,16 @@ struct Pending {
     /// limits were made for, which the junction at its end then leaves to it, and which sets
     /// its use of the axes at a speed.
     curve_fit: Option<curve::CurveFit>,
+    /// As a line of a chord run taken as a curve, at either of its vertices: the curve whose
+    /// normal jerk and acceleration leave it the tangential acceleration it plans with at its
+    /// speed ([`curve::CurveFit::acc_at`]; the tighter of the two).
+    curve_acc: Option<curve::CurveFit>,
+    /// With [`Pending::curve_acc`]: the acceleration the look-ahead's backward pass planned
+    /// it with last and the speed up to which that is valid (`curve::reach_mm_s`).
+    reach_memo: Option<(f64, f64)>,
+    /// With [`Pending::curve_acc`]: the tangential acceleration its curve leaves at every speed
+    /// up to its cap (`curve::refresh_floor`); ∞ without.
+    acc_floor_mm_s2: f64,
     /// How far before its start every element's ceiling (`v_limit_mm_s`) is within its own:
     /// the erosion of curve caps stops walking back there (`curve::erode_back`).
     floor_reach_mm: f64,
@@ -937,6 +947,9 @@ pub struct Planner {
     v_settled_mm_s: f64,
     /// Backward-pass speeds, scratch.
     back_mm_s: Vec<f64>,
+    /// The acceleration the backward pass reached each `back_mm_s` with, on a chord run taken
+    /// as a curve ([`curve::reach_mm_s`]; NaN elsewhere). Scratch.
+    back_acc: Vec<f64>,
     /// Whether each backward speed comes from a junction's own cap (reached through elements
     /// whose lengths bind) rather than from the stop at the window's end: such a speed no
     /// longer changes as elements come. Scratch, like `back_mm_s`.
@@ -1020,6 +1033,7 @@ impl Planner {
             window: VecDeque::with_capacity(config.lookahead.min(1 << 16) + 1),
             v_settled_mm_s: 0.0,
             back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
+            back_acc: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             back_anchored: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             ready: VecDeque::new(),
             finished: false,
@@ -1314,6 +1328,8 @@ impl Planner {
         self.back_mm_s.resize(n + 1, 0.0);
         self.back_anchored.clear();
         self.back_anchored.resize(n + 1, all);
+        self.back_acc.clear();
+        self.back_acc.resize(n + 1, f64::NAN);
         let mut v_next = 0.0;
         let mut anchored = all;
         for i in (0..n).rev() {
@@ -1323,10 +1339,21 @@ impl Planner {
             } else {
                 p.cap_start_mm_s
             };
-            v_next = start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits);
+            let provisional = p.provisional.is_some();
+            v_next = if p.curve_acc.is_some() {
+                let (v, a, valid) = curve::reach_mm_s(p, v_next, p.limits.v_max_mm_s())
+                    .unwrap_or((0.0, f64::NAN, 0.0));
+                self.back_acc[i] = a;
+                if a.is_finite() {
+                    self.window[i].reach_memo = Some((a, valid));
+                }
+                v.min(cap)
+            } else {
+                start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits)
+            };
             if v_next >= cap {
                 // A provisional cap may still rise.
-                anchored = i == 0 || p.provisional.is_none();
+                anchored = i == 0 || !provisional;
             }
             self.back_mm_s[i] = v_next;
             self.back_anchored[i] = anchored;
@@ -1342,8 +1369,14 @@ impl Planner {
             let back = self.back_mm_s[i + 1];
             // The forward reach is at least `v0`: below it, `back` is the end speed and the
             // reach itself is not needed (`fwd > back`, whatever its value).
+            let mut fwd_acc = f64::NAN;
             let fwd = if back < v0 {
                 v0
+            } else if p.curve_acc.is_some() {
+                let (v, a, _) =
+                    curve::reach_mm_s(p, v0, p.limits.v_max_mm_s()).unwrap_or((v0, f64::NAN, v0));
+                fwd_acc = a;
+                v
             } else {
                 profile::max_end_speed(p.seg.length_mm, v0, &p.limits).unwrap_or(v0)
             };
@@ -1360,7 +1393,14 @@ impl Planner {
             if !fixed {
                 break;
             }
-            self.settle(i, v0, v1)?;
+            // On a chord run taken as a curve, the acceleration of the pass that bounds the
+            // speed change, valid up to that pass's reach.
+            let curve = if v1 >= v0 {
+                (fwd, fwd_acc)
+            } else {
+                (self.back_mm_s[i], self.back_acc[i])
+            };
+            self.settle(i, v0, v1, curve)?;
             v0 = v1;
             settled += 1;
         }
@@ -1496,17 +1536,9 @@ impl Planner {
             covered_mm += len_mm;
         }
         // The window starts at the speed already settled: the plan must still come down to
-        // the plateau from it.
-        if plateau && self.v_settled_mm_s > raw.fed_mm_s {
-            let (mut room_mm, mut acc) = (0.0, f64::INFINITY);
-            for p in self.window.range(..from) {
-                room_mm += p.seg.length_mm;
-                acc = acc.min(p.limits.a_max_mm_s2());
-            }
-            let v0 = self.v_settled_mm_s;
-            let c = raw.fed_mm_s;
-            plateau = from > 0 && v0 * v0 <= (c * c + 2.0 * acc * room_mm) * (1.0 - 1e-9);
-        }
+        // the plateau from it, each element at the acceleration it may plan with (on a chord
+        // run taken as a curve, the lower one its curve leaves at speed).
+        plateau = plateau && self.can_come_down(from, raw.fed_mm_s * (1.0 - 1e-9));
         // A plateau takes `2·T_f` at `c`, more than one stop costs: it pays where other
         // junctions within reach would stop too (a dense run of low caps, as on a chorded
         // curve whose chords are rounded).
@@ -1551,9 +1583,25 @@ impl Planner {
     }
 
     /// Settles the window's element `i` with the boundary speeds `v0`, `v1`.
-    fn settle(&mut self, i: usize, v0: f64, v1: f64) -> Result<(), PlanError> {
+    fn settle(
+        &mut self,
+        i: usize,
+        v0: f64,
+        v1: f64,
+        (curve_mm_s, curve_acc_mm_s2): (f64, f64),
+    ) -> Result<(), PlanError> {
         let mut seg = self.window[i].seg;
-        let limits = self.window[i].limits;
+        let mut limits = self.window[i].limits;
+        // On a chord run taken as a curve: the acceleration its look-ahead pass reached
+        // `curve_mm_s` with, valid up to there (see [`curve::reach_mm_s`]), under that cap.
+        if self.window[i].curve_acc.is_some() {
+            let cap = limits.v_max_mm_s().min(curve_mm_s).max(v0).max(v1);
+            limits = ProfileLimits::trapezoid(cap, curve_acc_mm_s2)
+                .or_else(|| {
+                    ProfileLimits::trapezoid(cap, limits.a_max_mm_s2()).filter(|_| v0 == v1)
+                })
+                .unwrap_or(limits);
+        }
         let line = seg.line;
         let no_profile = PlanError::NoProfile {
             line,
@@ -2195,6 +2243,9 @@ impl Planner {
             raw_cap_start_mm_s: 0.0,
             shared_acc_mm_s2: 0.0,
             curve_fit: None,
+            curve_acc: None,
+            reach_memo: None,
+            acc_floor_mm_s2: f64::INFINITY,
             floor_reach_mm: 0.0,
         })
         .map(|mut p| {
@@ -2320,6 +2371,9 @@ impl Planner {
                     raw_cap_start_mm_s: 0.0,
                     shared_acc_mm_s2: 0.0,
                     curve_fit: None,
+                    curve_acc: None,
+                    reach_memo: None,
+                    acc_floor_mm_s2: f64::INFINITY,
                     floor_reach_mm: 0.0,
                 }
             }
@@ -2565,6 +2619,7 @@ fn cap_speed(p: &mut Pending, fed_mm_s: f64, limit_mm_s: f64) {
         && let Some(lower) = ProfileLimits::trapezoid(fed_mm_s, p.limits.a_max_mm_s2())
     {
         p.limits = lower;
+        curve::refresh_floor(p);
     }
     p.v_limit_mm_s = p.v_limit_mm_s.min(limit_mm_s);
     p.cap_start_mm_s = p.cap_start_mm_s.min(fed_mm_s);
