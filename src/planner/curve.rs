@@ -316,13 +316,15 @@ fn reach_with(p: &Pending, reach: impl Fn(f64) -> f64) -> (f64, f64, f64) {
     // do better (the look-ahead's passes meet most elements several times at such speeds).
     let memo = p.reach_memo.map(|(a_m, v_valid)| {
         let a_m = a_m.min(a_static);
-        (reach(a_m).min(v_valid), a_m, v_valid)
+        (reach(a_m), a_m, v_valid)
     });
     if let Some(m) = memo
+        && m.0 <= m.2
         && m.0 >= MEMO_TIGHT * m.2
     {
         return m;
     }
+    let memo = memo.map(|(v, a, v_valid)| (v.min(v_valid), a, v_valid));
     let v_up = reach(a_static);
     let a1 = a_static.min(fit.acc_at(v_up));
     let v1 = reach(a1);
