@@ -291,6 +291,15 @@ pub(super) fn reach_free_mm_s(p: &Pending, v_from_mm_s: f64) -> f64 {
     (v_from_mm_s * v_from_mm_s + 2.0 * a * p.seg.length_mm).sqrt()
 }
 
+/// [`reach_mm_s`]'s speed without a speed limit: `√(v² + 2·a·L)` with the acceleration the
+/// look-ahead's backward pass would take ([`reach_with`]).
+pub(super) fn reach_exact_mm_s(p: &Pending, v_from_mm_s: f64) -> f64 {
+    reach_with(p, |a| {
+        (v_from_mm_s * v_from_mm_s + 2.0 * a * p.seg.length_mm).sqrt()
+    })
+    .0
+}
+
 /// Sets `p`'s [`Pending::acc_floor_mm_s2`] for its curve and its cap.
 pub(super) fn refresh_floor(p: &mut Pending) {
     p.acc_floor_mm_s2 = p
@@ -540,7 +549,9 @@ impl Planner {
         if n == 0 {
             return true;
         }
-        self.come_down(n - 1, reach_free_mm_s(last, 0.0))
+        // The cheap bound first; where it does not reach, the backward pass's own.
+        self.come_down(n - 1, reach_free_mm_s(last, 0.0), reach_free_mm_s)
+            || self.come_down(n - 1, reach_exact_mm_s(last, 0.0), reach_exact_mm_s)
     }
 
     /// Whether the plan can still come down to `to_mm_s` at the start of the window's
@@ -551,12 +562,16 @@ impl Planner {
         if at == 0 {
             return self.v_settled_mm_s <= to_mm_s;
         }
-        self.come_down(at - 1, reach_free_mm_s(&self.window[at - 1], to_mm_s))
+        self.come_down(
+            at - 1,
+            reach_free_mm_s(&self.window[at - 1], to_mm_s),
+            reach_free_mm_s,
+        )
     }
 
     /// [`can_come_down`](Self::can_come_down) with `bound` the highest speed at the start of
     /// the element `k` from which the plan comes down.
-    fn come_down(&self, mut k: usize, mut bound: f64) -> bool {
+    fn come_down(&self, mut k: usize, mut bound: f64, reach: fn(&Pending, f64) -> f64) -> bool {
         loop {
             let start = if k == 0 {
                 self.v_settled_mm_s
@@ -570,7 +585,7 @@ impl Planner {
                 return false;
             }
             k -= 1;
-            bound = reach_free_mm_s(&self.window[k], bound);
+            bound = reach(&self.window[k], bound);
         }
     }
 
