@@ -250,7 +250,7 @@ fn chorded_curves_take_at_least_their_curvature_bound() {
 /// Issue 11's acceptance: the jerk-limited time of every chorded curve is within 1.10× of its
 /// `T_lb`.
 #[test]
-#[ignore = "issue 11: the jerk-limited mode takes 1.11–2.78× T_lb on these curves (measured 2026-11-27, session 14, with chord runs taken as curves: 1.53–7.49× before; chords now run within 7 % of the G3 arcs they approximate, whose own budget split keeps them 1.4–1.8× T_lb on small circles); the target is 1.10×"]
+#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.45× T_lb on these curves (measured 2026-11-27, session 15, with the tangential acceleration at speed: 1.11–2.78× before; circles 1.10–1.34×, the 5×2 mm ellipse 2.45×); the target is 1.10×"]
 fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     let slow: Vec<String> = time_curves()
         .into_iter()

@@ -26,13 +26,28 @@
 //!   taken: sparser vertices are steps of the axis velocity each, as the junction rules have
 //!   them (LinuxCNC's `trochoidal.ngc`, 0.29 mm chords; `contour.ngc`, whose 2.5 µm inch
 //!   rounding on 16 µm chords holds it at 3 mm/s vertex by vertex).
-//! - **Limits.** The element before the vertex gets the limits of an arc of that curvature
-//!   `κ` (normal `N`, tangent `T`), axis by axis within its `path_acc_share` of its limits:
-//!   the cap `v²κ·|Nᵢ| ≤ (√3/2)·Aᵢ` and `v³κ²·|Tᵢ| ≤ Jᵢ/4`, and the tangential acceleration
-//!   `a_t` with `a_t·|Tᵢ| + v²κ·|Nᵢ| ≤ Aᵢ` and `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ| ≤ Jᵢ`
-//!   at the speed it may run (the time law's jerk is `2·a_t/T_f`): on a nearly straight run,
-//!   a line's acceleration; at the cap, about an arc's. The `a_t` holds for the vertex's two
-//!   elements, as the old vertex rule's did ([`Planner::curve_acc_mm_s2`]).
+//! - **Limits.** The lines either side of the vertex take the curve of curvature `κ` (normal
+//!   `N`, tangent `T`) within [`CURVE_BUDGET`] of each axis's limits, and the rate at which
+//!   its curvature vector changes beyond its turn, `ρ = d(κN)/ds + κ²·T` (estimated over at
+//!   least twice the window and the axis filters' span `2·v·T_k`): at constant speed the jerk
+//!   of following it is `v³·(κ²·|Tᵢ| + |ρᵢ|)`. The run's cap holds the centripetal
+//!   acceleration `v²κ·|Nᵢ|` within [`CENTRIPETAL_SHARE`] of that budget and this jerk within
+//!   [`CURVE_JERK_SHARE`]: a steady curve uses most of `A` and `J`, as `T_lb` counts.
+//! - **The tangential acceleration at speed.** Where the speed changes, the budget left at
+//!   that speed goes to the tangential acceleration: `a(v)`, the largest `a_t` with
+//!   `a_t·|Tᵢ| + w²κ·|Nᵢ|` and `(2·a_t/T_f + w³κ²)·|Tᵢ| + w³·|ρᵢ| + 3·w·κ·a_t·|Nᵢ|` within
+//!   the budget at `w = v + a_t·T_f` (the time law passes the acceleration on over `T_f`,
+//!   within which the speed rises by at most `a_t·T_f`; its jerk is at most `2·a_t/T_f`),
+//!   [`CurveFit::acc_at`]. It falls with `v`: at rest, about a line's `J·T_f/2`; at the cap,
+//!   what the shares leave. Each line plans with `a(v)` at the faster end of its speed
+//!   change, in both passes of the look-ahead ([`reach_mm_s`]): on runs of short chords, a
+//!   time-optimal parameterisation of the curve at chord resolution (a TOPP whose
+//!   acceleration bound depends on the speed). The backward pass keeps the pair
+//!   `(a, valid up to)` it took last ([`Pending::reach_memo`]) as a candidate, so its bound at
+//!   an element never falls as the bound after it rises, and the speed already settled stays
+//!   within reach; the walks that check a change against that speed
+//!   ([`Planner::can_come_down`], [`Planner::can_stop_with`]) take the acceleration valid up
+//!   to each element's cap, or the backward pass's own reach where that is not enough.
 //! - **The vertex's own rules.** The junction rules then charge the vertex only what it
 //!   turns beyond the curve, `Δu − κ·L̄` (its velocity step against the curve's, the corner
 //!   its filters cut beyond the pull the interpolator pre-compensates), not the curve

@@ -130,7 +130,13 @@
 //!   their own budget as an arc does, with the run's curvature estimated over a window of
 //!   chords that averages the rounding's noise away; the vertices are then charged only what
 //!   they turn beyond the curve, and each line's cap holds over the time-law filter's reach
-//!   on either side instead of a dip at every vertex ([`curve`]).
+//!   on either side instead of a dip at every vertex ([`curve`]). A steady curve may use most
+//!   of each axis's acceleration and jerk (the centripetal part and the jerk of following
+//!   it, the rate of its curvature's change included); where the speed changes, each line
+//!   plans with the tangential acceleration the curve leaves at the faster end of its speed
+//!   change, in both passes: a time-optimal parameterisation at chord resolution, whose
+//!   acceleration bound falls with the speed, in place of one split of the budget held at
+//!   every speed.
 //!
 //! # Auxiliary axes
 //!
