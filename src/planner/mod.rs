@@ -902,9 +902,9 @@ struct Pending {
     /// limits were made for, which the junction at its end then leaves to it, and which sets
     /// its use of the axes at a speed.
     curve_fit: Option<curve::CurveFit>,
-    /// As a line of a chord run taken as a curve, at either of its vertices: the curve whose
-    /// normal jerk and acceleration leave it the tangential acceleration it plans with at its
-    /// speed ([`curve::CurveFit::acc_at`]; the tighter of the two).
+    /// As a line of a chord run taken as a curve: the curve of the vertex at its start (at
+    /// its end for the run's first line), whose use of the axes leaves it the tangential
+    /// acceleration it plans with at its speed ([`curve::CurveFit::acc_at`]).
     curve_acc: Option<curve::CurveFit>,
     /// With [`Pending::curve_acc`]: the acceleration the look-ahead's backward pass planned
     /// it with last and the speed up to which that is valid (`curve::reach_mm_s`).
