@@ -168,15 +168,6 @@ fn on_grid(c: f64) -> f64 {
     if g > c { c } else { g }
 }
 
-/// A line's limits on a curve: its cap, and what it uses of each axis at a speed.
-#[derive(Debug, Clone, Copy)]
-struct CurveLimits {
-    cap_mm_s: f64,
-    fit: CurveFit,
-    /// Where the vertex is (path distance as [`CurveState::pushed_mm`]).
-    s_vertex_mm: f64,
-}
-
 /// What a line of a chord run uses of each axis on its curve, at a speed: kept with the
 /// element ([`Pending::curve_fit`]) so that the junction at its end can take it at the speed
 /// the junction allows ([`Planner::curve_junction_mm_s`]), and ([`Pending::curve_acc`]) so
@@ -242,19 +233,23 @@ impl CurveFit {
     /// `acc_raw(v)` are valid (each is at most `acc_raw` at its own `w`), rising to the fixed
     /// point; the third is taken.
     pub(super) fn acc_at(&self, v_mm_s: f64) -> f64 {
-        let w = |a: f64| (v_mm_s + a * self.t_f).min(self.cap_mm_s).max(v_mm_s);
         let a0 = self.acc_raw(v_mm_s.min(self.cap_mm_s));
-        let a1 = self.acc_raw(w(a0));
-        let a2 = self.acc_raw(w(a1));
-        self.acc_raw(w(a2))
+        let a1 = self.acc_raw(self.reach_in_t_f(v_mm_s, a0));
+        let a2 = self.acc_raw(self.reach_in_t_f(v_mm_s, a1));
+        self.acc_raw(self.reach_in_t_f(v_mm_s, a2))
+    }
+
+    /// The highest speed within one time-law filter time of `v_mm_s` at the acceleration
+    /// `a_mm_s2`, not beyond the run's cap: `w = min(v + a·T_f, cap)`.
+    fn reach_in_t_f(&self, v_mm_s: f64, a_mm_s2: f64) -> f64 {
+        (v_mm_s + a_mm_s2 * self.t_f).min(self.cap_mm_s).max(v_mm_s)
     }
 
     /// Whether the tangential acceleration `a_mm_s2` keeps the axes within their budgets
     /// where the element runs at most at `v_mm_s` (see [`acc_at`](Self::acc_at)); then also
     /// at any lower speed.
     pub(super) fn valid_at(&self, a_mm_s2: f64, v_mm_s: f64) -> bool {
-        let w = (v_mm_s + a_mm_s2 * self.t_f).min(self.cap_mm_s).max(v_mm_s);
-        a_mm_s2 <= self.acc_raw(w)
+        a_mm_s2 <= self.acc_raw(self.reach_in_t_f(v_mm_s, a_mm_s2))
     }
 
     /// Sets `p`'s use of the axes for the curve at speed `v_mm_s`: the acceleration
@@ -376,6 +371,9 @@ fn reach_with(p: &Pending, reach: impl Fn(f64) -> f64) -> (f64, f64, f64) {
 /// valid to.
 const MEMO_TIGHT: f64 = 0.99;
 
+/// A line's curve at a vertex (tangent `tangent`, curvature vector `kappa`, curvature rate
+/// `rate`): its cap and what it uses of each axis at a speed; `None` where it does not turn
+/// or leaves no tangential acceleration at its cap.
 fn curve_limits(
     planner: &Planner,
     tangent: Vector3<f64>,
@@ -383,7 +381,7 @@ fn curve_limits(
     rate: Vector3<f64>,
     v_max_mm_s: f64,
     smoothing: &Smoothing,
-) -> Option<CurveLimits> {
+) -> Option<CurveFit> {
     let k = kappa.norm();
     if !(k > 0.0 && k.is_finite()) {
         return None;
@@ -427,11 +425,7 @@ fn curve_limits(
     if !(v.is_finite() && v > 0.0 && fit.acc_raw(v) > 0.0) {
         return None;
     }
-    Some(CurveLimits {
-        cap_mm_s: v,
-        fit,
-        s_vertex_mm: 0.0,
-    })
+    Some(fit)
 }
 
 impl Planner {
@@ -468,13 +462,13 @@ impl Planner {
             self.curve.chords.pop_front();
         }
         self.curve.chords.push_back((p.tangent_start, p_mid));
-        let limits = self.curve_estimate(prev, &smoothing)?;
+        let (estimate, s_vertex_mm) = self.curve_estimate(prev, &smoothing)?;
         // Dense chords only: at least two within the axis filters' reach at the speed the
         // curve allows, so that the filters' output follows the curve. Sparser vertices are
         // steps of the axis velocity each, which the junction rules hold.
         let mean_mm = 0.5 * (prev.seg.length_mm + p.seg.length_mm);
         let tk = smoothing.axis_s(self.config.period_s);
-        let v_dense = limits.cap_mm_s.min(prev.limits.v_max_mm_s());
+        let v_dense = estimate.cap_mm_s.min(prev.limits.v_max_mm_s());
         if 2.0 * mean_mm > v_dense * tk {
             return None;
         }
@@ -488,7 +482,7 @@ impl Planner {
         // may run, and the vertex's own rules with it.
         let t_f = smoothing.time_law_s(self.config.period_s);
         let (acc_used, jerk_used) = (prev.acc_used_mm_s2, prev.jerk_used_mm_s3);
-        let mut fit = limits.fit;
+        let mut fit = estimate;
         // Its tangential acceleration by its other rules, a ceiling.
         fit.acc_mm_s2 = prev.limits.a_max_mm_s2();
         fit.base_acc_used_mm_s2 = acc_used;
@@ -498,7 +492,7 @@ impl Planner {
         CurveFit::use_at(prev, fit.v_mm_s, t_f);
         let prev = self.window.back().expect("checked above");
         let own_mm_s = self.junction_limit_mm_s(prev, p);
-        let cap = on_grid(limits.cap_mm_s);
+        let cap = on_grid(fit.cap_mm_s);
         if 2.0 * mean_mm > own_mm_s * tk || !self.erode_back(cap, &smoothing) {
             let prev = self.window.back_mut().expect("checked above");
             prev.curve_fit = None;
@@ -510,9 +504,7 @@ impl Planner {
         if self.curve.kappas.len() >= CHORD_HISTORY {
             self.curve.kappas.pop_front();
         }
-        self.curve
-            .kappas
-            .push_back((fit.curvature(), limits.s_vertex_mm));
+        self.curve.kappas.push_back((fit.curvature(), s_vertex_mm));
         // The element after the vertex plans with the tangential acceleration the curve
         // leaves at its speed ([`Pending::curve_acc`]): not passed on through further
         // junctions as the lower of two accelerations is, since one noisy vertex would slow a
@@ -647,7 +639,7 @@ impl Planner {
 
     /// The curve's limits at the element `prev`, from the longest valid window of chords
     /// ending at the newest one (see the module documentation).
-    fn curve_estimate(&self, prev: &Pending, smoothing: &Smoothing) -> Option<CurveLimits> {
+    fn curve_estimate(&self, prev: &Pending, smoothing: &Smoothing) -> Option<(CurveFit, f64)> {
         let chords = &self.curve.chords;
         let n = chords.len();
         if n < 2 {
@@ -737,10 +729,8 @@ impl Planner {
                 let k_mean = 0.5 * (best.norm() + k_old.norm());
                 (best - k_old) / (s_vertex - s) + u_mid * (k_mean * k_mean)
             });
-        curve_limits(self, prev.tangent_end, best, rate, v_max, smoothing).map(|l| CurveLimits {
-            s_vertex_mm: s_vertex,
-            ..l
-        })
+        curve_limits(self, prev.tangent_end, best, rate, v_max, smoothing)
+            .map(|fit| (fit, s_vertex))
     }
 
     /// The caps `(raw, dipped)` of the junction from the window's last element into `p` (see
