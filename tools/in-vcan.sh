@@ -102,6 +102,21 @@ done
 
 # Private temp dir under the repo (git-ignored); the guest sees it at the same path.
 mkdir -p "$REPO/.uml"
+
+# Bookworm's UML 6.1 cannot restore a guest task's FP registers on a host CPU whose XSAVE area
+# is larger than AVX's 832 bytes (AVX-512, AMX): the guest panics at boot with "ptrace set fp
+# regs failed, errno = 14". tools/uml-xstate-shim.c, preloaded into linux.uml, moves the whole
+# area; on other hosts it changes nothing. Built here (a C compiler is on the machine for the
+# crates that build C), once per source change; temp file + rename, so concurrent runs agree.
+SHIM_SRC="$REPO/tools/uml-xstate-shim.c"
+SHIM="$REPO/.uml/uml-xstate-shim.so"
+if [[ ! -f "$SHIM" || "$SHIM_SRC" -nt "$SHIM" ]]; then
+    command -v cc >/dev/null || die "no C compiler (cc) to build $SHIM_SRC: apt-get install gcc libc6-dev"
+    shim_tmp=$(mktemp "$REPO/.uml/shim.XXXXXXXX")
+    cc -O2 -Wall -Werror -shared -fPIC -o "$shim_tmp" "$SHIM_SRC" -ldl ||
+        { rm -f "$shim_tmp"; die "building $SHIM_SRC failed"; }
+    mv -f "$shim_tmp" "$SHIM"
+fi
 WORK=$(mktemp -d "$REPO/.uml/run.XXXXXXXX")
 # shellcheck disable=SC2317 # called by the trap
 cleanup() {
@@ -258,7 +273,7 @@ if [[ "${VCAN_NICE:-1}" == 1 && $(id -u) == 0 ]]; then
     pin=(nice -n -10 "${pin[@]}")
     note "UML at nice -10"
 fi
-TMPDIR="${VCAN_UML_TMPDIR:-/dev/shm}" timeout -k 10 "$TIMEOUT" "${pin[@]}" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
+TMPDIR="${VCAN_UML_TMPDIR:-/dev/shm}" timeout -k 10 "$TIMEOUT" "${pin[@]}" env LD_PRELOAD="$SHIM" linux.uml mem="${VCAN_MEM:-1G}" rootfstype=hostfs rootflags=/ rw \
     init="$INIT" uml_dir="$WORK" con=null con0=null,fd:1 "${KERNEL_LOG[@]}" \
     </dev/null >"$WORK/console" &
 uml_pid=$!
