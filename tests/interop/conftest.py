@@ -8,12 +8,31 @@
 
 from __future__ import annotations
 
+import socket
 from pathlib import Path
 
 import pytest
 
 VCAN = "vcan0"
 ARPHRD_CAN = 280  # /sys/class/net/<if>/type of a CAN interface
+
+
+# Receive buffer of a test's CAN socket. The default (~200 KiB, a few hundred frames) overflows
+# when the single-CPU guest's Python stalls while a 1-2 ms SYNC and PDOs stream, and the socket
+# then silently drops frames (an SDO response, the NMT command a test looks for).
+RCVBUF_BYTES = 4 << 20
+
+
+def roomy_receive_buffer(bus) -> None:
+    """Gives python-can's socket RCVBUF_BYTES of receive buffer (beyond rmem_max as root)."""
+    sock = getattr(bus, "socket", None)
+    if sock is None:
+        return
+    force = getattr(socket, "SO_RCVBUFFORCE", None)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, force or socket.SO_RCVBUF, RCVBUF_BYTES)
+    except OSError:  # not root: capped at net.core.rmem_max
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
 
 
 def vcan_status(ifname: str = VCAN) -> tuple[bool, str]:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import os
 import queue
-import socket
 import subprocess
 import threading
 import time
@@ -34,7 +33,7 @@ import pytest
 from canopen import objectdictionary as odt
 from canopen.profiles.p402 import BaseNode402
 
-from conftest import VCAN, vcan_status
+from conftest import VCAN, roomy_receive_buffer, vcan_status
 
 REPO = Path(__file__).resolve().parents[2]
 NODE_ID = 1
@@ -55,10 +54,6 @@ P402_TIMEOUTS = {
     "TIMEOUT_SWITCH_STATE_FINAL": 10.0,
     "TIMEOUT_SWITCH_OP_MODE": 20.0,
 }
-# Receive buffer of the master's CAN socket: a TPDO1 every 2 ms while streaming, and a stall of
-# the guest's Python must not overflow the default ~200 KiB (dropping e.g. SDO responses).
-RCVBUF_BYTES = 4 << 20
-
 SYNC_PERIOD_S = 0.002
 SYNC_PERIOD_US = 2000
 
@@ -284,13 +279,7 @@ def network():
     # which matters on a single-CPU UML guest.
     node_filter = [{"can_id": NODE_ID, "can_mask": 0x07F, "extended": False}]
     bus = can.interface.Bus(interface="socketcan", channel=VCAN, can_filters=node_filter)
-    sock = getattr(bus, "socket", None)
-    if sock is not None:
-        force = getattr(socket, "SO_RCVBUFFORCE", None)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, force or socket.SO_RCVBUF, RCVBUF_BYTES)
-        except OSError:  # not root: capped at net.core.rmem_max
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+    roomy_receive_buffer(bus)
     net = canopen.Network(bus)
     net.listeners.insert(0, trace)  # before python-canopen's own listener: trace first
     net.connect()

@@ -25,7 +25,7 @@ import can
 import canopen
 import pytest
 
-from conftest import VCAN
+from conftest import VCAN, roomy_receive_buffer
 
 REPO = Path(__file__).resolve().parents[2]
 MACHINE = REPO / "dictionaries/machines/demo-xyz.toml"
@@ -137,6 +137,7 @@ def test_python_canopen_sees_serve_home_in_order_and_end_in_order(tmp_path):
     exe = canmotion_bin()
     assert exe.is_file(), f"no canmotion binary at {exe}"
     bus = can.interface.Bus(interface="socketcan", channel=VCAN)
+    roomy_receive_buffer(bus)
     net = canopen.Network(bus)
     rec = Recorder()
     # After the network's own dispatcher: a frame the recorder holds is already in python-canopen's
