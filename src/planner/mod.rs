@@ -125,6 +125,15 @@
 //!   junction, meets no other and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
+//! - **Chord smoothing.** Before any of this, a dense run of G64 lines (chords of 0.1 mm at
+//!   most, no corner) has its vertices moved onto the smooth curve it approximates: each
+//!   across the run to the centre of the least-squares parabola through up to 16 neighbours
+//!   either side, where the run is rough, as far as it then stays within a quarter of the
+//!   tolerance of the programmed one, by a bound computed per chord; each line goes on with
+//!   the tolerance less what its chord and the next one spent. The rounding of CAM output to
+//!   4 decimals makes every vertex a kink of ±0.16 rad on 16 µm chords (`contour.ngc`);
+//!   smoothed, the run turns by its curve's few milliradians per vertex and runs at its
+//!   curvature's speed instead of a crawl ([`smooth`]).
 //! - **Chord runs as curves.** Where a run of lines is dense (two chords at least within the
 //!   axis filters' reach) and turns little at each vertex, its lines take the curve from
 //!   their own budget as an arc does, with the run's curvature estimated over a window of
@@ -172,6 +181,7 @@ mod blend;
 pub mod bounds;
 mod curve;
 pub mod profile;
+mod smooth;
 
 pub use aux_axes::AuxLimits;
 
@@ -979,6 +989,8 @@ pub struct Planner {
     provisional: VecDeque<u64>,
     /// The run of chords being taken as a curve (jerk-limited mode, [`curve`]).
     curve: curve::CurveState,
+    /// Dense runs of lines on their way in, smoothed (jerk-limited mode, [`smooth`]).
+    smoother: smooth::ChordSmoother,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -1050,12 +1062,38 @@ impl Planner {
             next_seq: 0,
             provisional: VecDeque::new(),
             curve: curve::CurveState::default(),
+            smoother: smooth::ChordSmoother::default(),
         })
     }
 
     /// Adds the next item of the program (notes and the end are ignored). Segments that
     /// settle become available to [`pop`](Self::pop).
     pub fn push(&mut self, item: &Item) -> Result<(), PlanError> {
+        if self.smoothing.is_none() {
+            return self.push_item(item);
+        }
+        // Jerk-limited mode: dense runs of G64 lines pass through the chord smoother first.
+        let tol_mm = match item {
+            Item::Motion(e) => self.blend_tolerance_mm(e.blend),
+            _ => 0.0,
+        };
+        self.smoother.push(item, tol_mm);
+        self.push_smoothed()
+    }
+
+    /// Plans what the chord smoother has passed on.
+    fn push_smoothed(&mut self) -> Result<(), PlanError> {
+        while let Some(item) = self.smoother.out.pop_front() {
+            if let Err(e) = self.push_item(&item) {
+                self.smoother.out.clear();
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// [`push`](Self::push) after the chord smoother.
+    fn push_item(&mut self, item: &Item) -> Result<(), PlanError> {
         match item {
             Item::Motion(e) => {
                 let Some(mut p) = self.element(e)? else {
@@ -1210,6 +1248,8 @@ impl Planner {
 
     /// The program ended: everything pushed settles, the motion ending at rest.
     pub fn finish(&mut self) -> Result<(), PlanError> {
+        self.smoother.flush();
+        self.push_smoothed()?;
         self.finished = true;
         self.replan(true)?;
         self.curve.reset();
@@ -2078,7 +2118,10 @@ impl Planner {
             // A vertex moves the polyline off the smooth curve through its neighbours by about
             // `ε = |Δκ|·L̄²/8`; whatever the speed, the filtered setpoints then carry at most
             // `8ε/(T·T_k²)` of jerk from it (a third difference of two moving averages of a
-            // deviation within ε), so a vertex within that bound charges nothing more.
+            // deviation within ε), so a vertex within that bound charges nothing more. The
+            // bound holds for half the budget: the deviations of a few vertices within one
+            // filter span add up where they have the same sign (a bump of `3D_Chips`' Z over
+            // chords of 16–95 µm took 102 % of its jerk at a 4 ms period with all of it).
             let noise_mm_s3 = |k: f64| k * mean_mm * mean_mm / (cfg.period_s * tk * tk);
             // On a chord run taken as a curve, the step the vertex adds to the curve's own.
             let d = (du[i] - curve_turn[i]).abs();
@@ -2093,7 +2136,7 @@ impl Planner {
                     (tk * kink_mean[i].abs() / d).min(tk / l_mm)
                 };
                 v = v.min(shared_jump_mm_s(tk * acc_budget, d, k_curve));
-                if noise_mm_s3(d / mean_mm) > jerk_budget {
+                if noise_mm_s3(d / mean_mm) > 0.5 * jerk_budget {
                     let budget = if turn_alone {
                         2.0 * jerk_budget
                     } else {
