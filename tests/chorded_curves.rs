@@ -250,7 +250,7 @@ fn chorded_curves_take_at_least_their_curvature_bound() {
 /// Issue 11's acceptance: the jerk-limited time of every chorded curve is within 1.10× of its
 /// `T_lb`.
 #[test]
-#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.45× T_lb on these curves (measured 2026-11-27, session 15, with the tangential acceleration at speed: 1.11–2.78× before; circles 1.10–1.34×, the 5×2 mm ellipse 2.45×); the target is 1.10×"]
+#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.37× T_lb on these curves (measured 2026-11-27, session 16, with chord smoothing: 1.10–2.45× before; circles 1.10–1.24×, the 5×2 mm ellipse 2.37×); the target is 1.10×"]
 fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     let slow: Vec<String> = time_curves()
         .into_iter()

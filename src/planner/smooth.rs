@@ -87,6 +87,9 @@ pub const CORNER_RAD: f64 = 0.6;
 /// a 1 ms plan's vertex rule lets pass at speed is of this order.
 pub const ROUGH_RAD: f64 = 0.01;
 
+/// Chords either side of a vertex searched for the nearest place to its smoothed position.
+const NEAREST_CHORDS: usize = 3;
+
 /// A place on the programmed polyline of a run: chord `seg` (from vertex `seg` to `seg + 1`)
 /// at the point `at`.
 #[derive(Debug, Clone, Copy)]
@@ -113,6 +116,11 @@ pub(super) struct ChordSmoother {
     /// run's first line starts), as far back as a window or a bound may still reach.
     pts: VecDeque<Vector3<f64>>,
     pts_base: usize,
+    /// Beside `pts`: the unit direction of the chord from each vertex to the next (zero for
+    /// the last), and each vertex's roughness (0 until its neighbours are known), see
+    /// [`ChordSmoother::roughness`].
+    units: VecDeque<Vector3<f64>>,
+    rough: VecDeque<f64>,
     /// The run's lines not yet passed on; the first goes from vertex `line_base` to the next.
     lines: VecDeque<Element>,
     line_base: usize,
@@ -146,9 +154,9 @@ impl ChordSmoother {
                 self.flush();
                 self.blend = Some(e.blend);
                 self.tol_mm = tol_mm;
-                self.pts.push_back(e.start_mm);
+                self.push_vertex(e.start_mm);
             }
-            self.pts.push_back(e.end_mm);
+            self.push_vertex(e.end_mm);
             self.lines.push_back(*e);
             self.advance(false);
             return;
@@ -163,6 +171,8 @@ impl ChordSmoother {
             self.advance(true);
         }
         self.pts.clear();
+        self.units.clear();
+        self.rough.clear();
         self.lines.clear();
         self.done.clear();
         self.pts_base = 0;
@@ -225,6 +235,8 @@ impl ChordSmoother {
         let keep_from = (self.line_base + self.done.len()).saturating_sub(2 * W_MAX + 2);
         while self.pts_base < keep_from.min(self.line_base) {
             self.pts.pop_front();
+            self.units.pop_front();
+            self.rough.pop_front();
             self.pts_base += 1;
         }
     }
@@ -276,7 +288,10 @@ impl ChordSmoother {
             } else {
                 self.p(i) + shift
             };
-            let near = self.nearest(q, i - w, i + w);
+            // Q_i moved across the run by about the rounding: its nearest place is on a chord
+            // beside P_i (a farther one could only be nearer, so the bound stays safe).
+            let reach = w.min(NEAREST_CHORDS);
+            let near = self.nearest(q, i - reach, i + reach);
             let d = (q - near.at).norm();
             if d <= limit {
                 let delta_in = chord_bound(self, &prev, d, near);
@@ -295,16 +310,33 @@ impl ChordSmoother {
         self.programmed(i)
     }
 
+    /// Appends a programmed vertex, with the direction of the chord that ends there and the
+    /// roughness of the vertex two back, whose neighbours are now known.
+    fn push_vertex(&mut self, p: Vector3<f64>) {
+        if let Some(&last) = self.pts.back() {
+            *self.units.back_mut().expect("beside pts") = (p - last).normalize();
+        }
+        self.pts.push_back(p);
+        self.units.push_back(Vector3::zeros());
+        self.rough.push_back(0.0);
+        let n = self.pts.len();
+        if n >= 5 {
+            // Vertex n − 3 (of the deque): its turn against the mean of its neighbours'.
+            let u = |k: usize| self.units[k];
+            let turn = |k: usize| u(k) - u(k - 1);
+            let j = n - 3;
+            self.rough[j] = (turn(j) - 0.5 * (turn(j - 1) + turn(j + 1))).norm();
+        }
+    }
+
     /// How rough the chords within `w` of vertex `i` are: the largest
-    /// `|Δu_j − (Δu_{j−1} + Δu_{j+1})/2|`, where `Δu_j` is the change of the unit chord direction
-    /// at vertex `j`. A curve's turns change smoothly, even where its curvature changes fast
-    /// (the centre of a spiral), and leave this near 0; rounding noise flips the turns from
-    /// vertex to vertex.
+    /// `|Δu_j − (Δu_{j−1} + Δu_{j+1})/2|` over the vertices `j` whose neighbours lie in the
+    /// window, where `Δu_j` is the change of the unit chord direction at vertex `j`. A curve's
+    /// turns change smoothly, even where its curvature changes fast (the centre of a spiral),
+    /// and leave this near 0; rounding noise flips the turns from vertex to vertex.
     fn roughness(&self, i: usize, w: usize) -> f64 {
-        let unit = |j: usize| (self.p(j + 1) - self.p(j)).normalize();
-        let turn = |j: usize| unit(j) - unit(j - 1);
         ((i + 2 - w)..(i + w - 1))
-            .map(|j| (turn(j) - 0.5 * (turn(j - 1) + turn(j + 1))).norm())
+            .map(|j| self.rough[j - self.pts_base])
             .fold(0.0, f64::max)
     }
 
