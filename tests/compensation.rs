@@ -70,13 +70,7 @@ fn compensate(text: &str) -> Result<Vec<Item>, Error> {
 }
 
 fn motions(items: &[Item]) -> Vec<Element> {
-    items
-        .iter()
-        .filter_map(|i| match i {
-            Item::Motion(e) => Some(*e),
-            _ => None,
-        })
-        .collect()
+    items.iter().filter_map(Item::motion).copied().collect()
 }
 
 /// The compensated elements from the start-up move on.

@@ -1005,13 +1005,7 @@ mod random {
     }
 
     fn motions_all(items: &[Item]) -> Vec<Element> {
-        items
-            .iter()
-            .filter_map(|i| match i {
-                Item::Motion(e) => Some(*e),
-                _ => None,
-            })
-            .collect()
+        items.iter().filter_map(Item::motion).copied().collect()
     }
 }
 

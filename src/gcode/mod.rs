@@ -143,6 +143,16 @@ pub enum Item {
     End(ProgramEnd),
 }
 
+impl Item {
+    /// The motion element, if this is one.
+    pub fn motion(&self) -> Option<&Element> {
+        match self {
+            Item::Motion(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
 /// G4 P: a pause of the motion.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Dwell {

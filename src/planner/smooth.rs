@@ -458,13 +458,7 @@ mod tests {
     }
 
     fn lines(items: &[Item]) -> Vec<Element> {
-        items
-            .iter()
-            .filter_map(|i| match i {
-                Item::Motion(e) => Some(*e),
-                _ => None,
-            })
-            .collect()
+        items.iter().filter_map(Item::motion).copied().collect()
     }
 
     fn distance_to_polyline(q: Vector3<f64>, path: &[Element]) -> f64 {
