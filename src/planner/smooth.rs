@@ -391,7 +391,7 @@ fn eligible(e: &Element, tol_mm: f64) -> bool {
 }
 
 /// `blend` with its G64 tolerance set to `tol_mm`.
-fn with_tolerance(blend: BlendMode, tol_mm: f64) -> BlendMode {
+pub(super) fn with_tolerance(blend: BlendMode, tol_mm: f64) -> BlendMode {
     match blend {
         BlendMode::Blend { q_mm, .. } => BlendMode::Blend {
             p_mm: tol_mm.max(0.0),

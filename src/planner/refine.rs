@@ -1,0 +1,547 @@
+//! Chord refinement (jerk-limited mode): each chord of a run of G64 lines replaced by shorter
+//! chords on a smooth curve through the run's vertices, within a share of the tolerance, where
+//! its vertices turn by more than the axis filters take at the curve's speed.
+//!
+//! A polyline's vertex is a step `v·|Δu|` of the axis velocity. The axis filters spread it
+//! over `2·T_k`, which leaves a jerk of up to `v·|Δu|/T_k²` in their output (the steps within
+//! one filter time differ by at most one from one half of its window to the other, however
+//! dense they are), so the vertex rule holds a vertex turning by `|Δu|` to `J·T_k²/|Δu|`:
+//! 4.1 mm/s on `3D_Chips.ngc`'s half circles of 0.62 mm radius written as 16 chords of
+//! 0.117 mm (0.196 rad a vertex, `T_k` = 8 ms), where the curve allows about 23 mm/s and the
+//! trapezoid plan runs at 26–30. The same circle as 128 chords runs at its curvature's speed
+//! (5 laps at F7500, demo machine at 1 ms: 5.65 s as 32 chords a lap, 1.18 s as 128).
+//!
+//! # The curve
+//!
+//! Over the chord `P_i P_{i+1}`, the arc of the circle through `P_{i−1}`, `P_i`, `P_{i+1}` and
+//! the arc of the circle through `P_i`, `P_{i+1}`, `P_{i+2}` (each parameterised by its angle)
+//! are blended with the quintic smoothstep `w(u) = 10u³ − 15u⁴ + 6u⁵`, whose first two
+//! derivatives vanish at both ends: at `P_i` the curve has the first circle's tangent and
+//! curvature, at `P_{i+1}` the second's, so the curves of neighbouring chords meet with the
+//! same tangent and curvature, and a run whose vertices lie on a circle becomes that circle.
+//! At a run's ends the missing vertex is taken along the line beyond (where that is a G64 line
+//! turning by at most [`MAX_TURN`], so the curve leaves it tangentially), else along the end
+//! chord itself. The curve is cut into `n` chords at equal steps of `u`, `n` such that each of
+//! their vertices steps the axis velocity by at most a quarter of `J·T_k²` at the speed the
+//! curve allows ([`pieces`]); a chord that needs fewer than 2 stays as it is.
+//!
+//! The pieces' vertices are computed, not written with a program's decimals: the planner's
+//! allowance for the rounding of written vertices (a vertex whose curvature step bounds its
+//! deviation below the rounding's, `8ε/(T·T_k²)` of jerk) does not apply at them
+//! (`Pending::refined`). With it, the curvature of a refined run changing over a few pieces,
+//! each within that allowance, broke Z's jerk on `3D_Chips` and `LHchips4` by up to 89 %.
+//!
+//! # The tolerance
+//!
+//! The pieces all lie within `δ` of the chord they replace, `δ` the largest distance of their
+//! vertices from it (a point's distance from a segment is convex along a segment, so largest
+//! at its ends). A chord is refined only where `δ ≤` [`SHARE`]`·tol`, and its pieces go on with
+//! the tolerance `tol − max(δ, δ_next)`, `δ_next` the next chord's, into which a blend at
+//! their junction reaches; as [`super::smooth`] shares it, so that smoothing, refinement,
+//! blends and the axis filters together stay within the tolerance of the programmed path.
+//! The programmed vertices stay where they are.
+//!
+//! # Which lines
+//!
+//! Feed moves along a straight line in X/Y/Z longer than [`super::smooth::DENSE_MM`] (shorter
+//! ones are the chord smoother's, whose vertices are dense at speed already) and at most
+//! [`LONGEST_MM`], with the auxiliary axes still, under G64 with a tolerance, each starting
+//! where the one before ends, none turning from it by more than [`MAX_TURN`]. Anything else
+//! ends the run. A chord waits for the next one (its end's tangent and the next `δ`), so the
+//! planner receives each two lines late.
+
+use std::collections::VecDeque;
+
+use nalgebra::Vector3;
+
+use super::smooth::with_tolerance;
+use crate::gcode::{BlendMode, Element, ElementKind, Item};
+
+/// Largest turn of a vertex inside a run (radians): [`super::curve::CURVE_MAX_TURN`], the
+/// sharpest vertex the planner takes as a point of a curve. Sharper ones are corners.
+pub const MAX_TURN: f64 = super::curve::CURVE_MAX_TURN;
+
+/// Longest chord refined. Longer ones bow out beyond any tolerance a program writes with
+/// G64 P before they turn enough to matter.
+pub const LONGEST_MM: f64 = 2.0;
+
+/// Share of a chord's tolerance its refinement may take.
+pub const SHARE: f64 = 0.25;
+
+/// Most chords one chord becomes.
+pub const MAX_PIECES: usize = 16;
+
+/// Share of the smallest jerk limit a vertex of the refined chords may take as its velocity
+/// step through the axis filters at the curve's speed.
+const VERTEX_JERK_SHARE: f64 = 0.25;
+
+/// What the refiner needs of the machine.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Machine {
+    /// Length `T_k` of each axis filter.
+    pub axis_filter_s: f64,
+    /// Smallest acceleration and jerk limit of X, Y and Z.
+    pub acc_mm_s2: f64,
+    pub jerk_mm_s3: f64,
+    /// Highest path feed.
+    pub max_feed_mm_s: f64,
+}
+
+/// A chord of the run, refined or not yet.
+#[derive(Debug, Clone)]
+struct Chord {
+    e: Element,
+    /// Its tolerance (`tol` above).
+    tol_mm: f64,
+    /// The curve's tangent at its start.
+    t0: Vector3<f64>,
+    /// The run's vertex before it and after it, where known.
+    prev: Option<Vector3<f64>>,
+    next: Option<Vector3<f64>>,
+    /// Its new inner vertices (none: as programmed) and their deviation `δ`.
+    inner: Vec<Vector3<f64>>,
+    delta_mm: f64,
+}
+
+/// The run being refined, and the items ready for the planner.
+#[derive(Debug, Clone, Default)]
+pub(super) struct ChordRefiner {
+    machine: Machine,
+    /// A refined chord waiting for the next one's `δ`.
+    ready: Option<Chord>,
+    /// The run's last chord, waiting for the tangent at its end.
+    last: Option<Chord>,
+    /// The direction of the last line passed on outside a run and where it ends, under G64
+    /// (a run starting there may leave it tangentially).
+    before: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// What the planner receives next, in order, each with whether it is a piece of a
+    /// refined chord.
+    pub out: VecDeque<(Item, bool)>,
+}
+
+impl ChordRefiner {
+    pub fn new(machine: Machine) -> ChordRefiner {
+        ChordRefiner {
+            machine,
+            ..Default::default()
+        }
+    }
+
+    /// Takes the next item; `tol_mm` is its G64 tolerance (0: none).
+    pub fn push(&mut self, item: Item, tol_mm: f64) {
+        let e = match item {
+            Item::Motion(e) => e,
+            other => {
+                self.end_run(None);
+                self.before = None;
+                self.out.push_back((other, false));
+                return;
+            }
+        };
+        let dir = unit(&e);
+        if eligible(&e, tol_mm) {
+            if let Some(last) = self.last.take() {
+                let u = unit(&last.e);
+                if last.e.end_mm == e.start_mm && u.angle(&dir) <= MAX_TURN {
+                    let (a, b) = (last.e.end_mm - last.e.start_mm, e.end_mm - e.start_mm);
+                    let t = vertex_tangent(a, b);
+                    let mut last = last;
+                    last.next = Some(e.end_mm);
+                    let prev = Some(last.e.start_mm);
+                    self.refined(last, t);
+                    let mut c = Chord::new(e, tol_mm, t);
+                    c.prev = prev;
+                    self.last = Some(c);
+                    return;
+                }
+                self.last = Some(last);
+                self.end_run(None);
+            }
+            let t0 = match self.before.take() {
+                Some((d, at)) if at == e.start_mm && d.angle(&dir) <= MAX_TURN => d,
+                _ => dir,
+            };
+            self.last = Some(Chord::new(e, tol_mm, t0));
+            return;
+        }
+        // The line after a run: the run's curve may end tangent to it.
+        let next = (e.kind == ElementKind::Line && tol_mm > 0.0 && !e.rapid).then_some(dir);
+        self.end_run(next.filter(|_| self.last.as_ref().is_some_and(|l| l.e.end_mm == e.start_mm)));
+        self.before = (e.kind == ElementKind::Line
+            && tol_mm > 0.0
+            && matches!(e.blend, BlendMode::Blend { .. })
+            && e.start_mm != e.end_mm)
+            .then_some((dir, e.end_mm));
+        self.out.push_back((Item::Motion(e), false));
+    }
+
+    /// Ends the run: everything goes to `out`.
+    pub fn flush(&mut self) {
+        self.end_run(None);
+        self.before = None;
+    }
+
+    /// Ends the run; `next`: the direction of the line after it, where its curve may end
+    /// tangent to that.
+    fn end_run(&mut self, next: Option<Vector3<f64>>) {
+        if let Some(last) = self.last.take() {
+            let own = unit(&last.e);
+            let t1 = next.filter(|d| d.angle(&own) <= MAX_TURN).unwrap_or(own);
+            self.refined(last, t1);
+        }
+        if let Some(ready) = self.ready.take() {
+            self.emit(ready, 0.0);
+        }
+    }
+
+    /// `c` refined with the tangent `t1` at its end: becomes the ready chord, the one ready
+    /// before it goes out.
+    fn refined(&mut self, mut c: Chord, t1: Vector3<f64>) {
+        let (p0, p1) = (c.e.start_mm, c.e.end_mm);
+        let l = (p1 - p0).norm();
+        let phi = c.t0.angle(&t1);
+        let n = pieces(&self.machine, &c.e, l, phi);
+        if n >= 2 {
+            // The circles through the vertex before and the chord, and through the chord and
+            // the vertex after (virtual ones along the tangents at a run's ends), blended
+            // along the chord with a quintic smoothstep: each end has its circle's curvature,
+            // so neighbouring chords' curves meet with equal tangent and curvature.
+            let before = p0 - c.t0 * l;
+            let after = p1 + t1 * l;
+            let inner: Vec<Vector3<f64>> = (1..n)
+                .map(|k| {
+                    let u = k as f64 / n as f64;
+                    let w = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u);
+                    let a = arc_point(c.prev.unwrap_or(before), p0, p1, u, false);
+                    let b = arc_point(p0, p1, c.next.unwrap_or(after), u, true);
+                    a * (1.0 - w) + b * w
+                })
+                .collect();
+            let delta = inner
+                .iter()
+                .map(|q| distance_to_segment(*q, p0, p1))
+                .fold(0.0, f64::max);
+            if delta <= SHARE * c.tol_mm && inner.iter().all(|q| q.iter().all(|x| x.is_finite())) {
+                c.inner = inner;
+                c.delta_mm = delta;
+            }
+        }
+        if let Some(ready) = self.ready.take() {
+            self.emit(ready, c.delta_mm);
+        }
+        self.ready = Some(c);
+    }
+
+    /// Passes `c` on as its chords, with the tolerance it and the next chord (`δ_next`) leave.
+    fn emit(&mut self, c: Chord, next_delta_mm: f64) {
+        if c.inner.is_empty() && next_delta_mm == 0.0 {
+            self.out.push_back((Item::Motion(c.e), false));
+            return;
+        }
+        let spent = c.delta_mm.max(next_delta_mm);
+        let blend = with_tolerance(c.e.blend, c.tol_mm - spent);
+        let mut from = c.e.start_mm;
+        for to in c.inner.iter().copied().chain(std::iter::once(c.e.end_mm)) {
+            let mut e = c.e;
+            e.start_mm = from;
+            e.end_mm = to;
+            e.blend = blend;
+            self.out.push_back((Item::Motion(e), !c.inner.is_empty()));
+            from = to;
+        }
+    }
+}
+
+impl Chord {
+    fn new(e: Element, tol_mm: f64, t0: Vector3<f64>) -> Chord {
+        Chord {
+            e,
+            tol_mm,
+            t0,
+            prev: None,
+            next: None,
+            inner: Vec::new(),
+            delta_mm: 0.0,
+        }
+    }
+}
+
+/// How many chords a chord of length `l_mm` whose curve turns by `phi` becomes: enough that
+/// each vertex, turning by about `φ/n`, steps the axis velocity by at most what the filters
+/// take at the curve's speed `v` (the feed, `√(A/κ)` and `(J/κ²)^(1/3)` at `κ = φ/L`):
+/// `v·φ/n ≤ s·J·T_k²`, `s` = [`VERTEX_JERK_SHARE`]; at most [`MAX_PIECES`]; 1 where that is
+/// enough already.
+fn pieces(m: &Machine, e: &Element, l_mm: f64, phi: f64) -> usize {
+    if !(phi > 0.0 && l_mm > 0.0 && m.axis_filter_s > 0.0) {
+        return 1;
+    }
+    let kappa = phi / l_mm;
+    let v = e
+        .feed_mm_s
+        .unwrap_or(f64::INFINITY)
+        .min(m.max_feed_mm_s)
+        .min((m.acc_mm_s2 / kappa).sqrt())
+        .min((m.jerk_mm_s3 / (kappa * kappa)).cbrt());
+    let n = (v * phi / (VERTEX_JERK_SHARE * m.jerk_mm_s3 * m.axis_filter_s.powi(2))).ceil();
+    if n.is_finite() && n >= 1.0 {
+        (n as usize).min(MAX_PIECES)
+    } else {
+        1
+    }
+}
+
+/// The point at the share `u` of the arc from `b` to `c` (`from_first`: from `a` to `b`) of
+/// the circle through `a`, `b` and `c`; on the straight segment where they are collinear.
+fn arc_point(
+    a: Vector3<f64>,
+    b: Vector3<f64>,
+    c: Vector3<f64>,
+    u: f64,
+    from_first: bool,
+) -> Vector3<f64> {
+    let (from, to) = if from_first { (a, b) } else { (b, c) };
+    let (x, y) = (a - c, b - c);
+    let w = x.cross(&y);
+    let w2 = w.norm_squared();
+    if w2.is_nan() || w2 <= 1e-30 * x.norm_squared() * y.norm_squared() {
+        return from + (to - from) * u;
+    }
+    let centre = c + (y * x.norm_squared() - x * y.norm_squared()).cross(&w) / (2.0 * w2);
+    let normal = (b - a).cross(&(c - b)).normalize();
+    let (r0, r1) = (from - centre, to - centre);
+    let theta = r0.cross(&r1).dot(&normal).atan2(r0.dot(&r1));
+    let side = normal.cross(&r0);
+    centre + r0 * (u * theta).cos() + side * (u * theta).sin()
+}
+
+/// The unit tangent at vertex `B` of the circle through `A`, `B` and `C`, from the chords
+/// `a = B − A` and `b = C − B`.
+fn vertex_tangent(a: Vector3<f64>, b: Vector3<f64>) -> Vector3<f64> {
+    let t = a * b.norm_squared() + b * a.norm_squared();
+    t / t.norm()
+}
+
+/// The unit direction of a line.
+fn unit(e: &Element) -> Vector3<f64> {
+    let d = e.end_mm - e.start_mm;
+    let n = d.norm();
+    if n > 0.0 { d / n } else { Vector3::zeros() }
+}
+
+/// A line the refiner may replace: see the module documentation.
+fn eligible(e: &Element, tol_mm: f64) -> bool {
+    e.kind == ElementKind::Line
+        && !e.rapid
+        && tol_mm > 0.0
+        && tol_mm.is_finite()
+        && matches!(e.blend, BlendMode::Blend { .. })
+        && e.aux.start == e.aux.end
+        && e.start_mm != e.end_mm
+        && (e.end_mm - e.start_mm).norm() <= LONGEST_MM
+        && (e.end_mm - e.start_mm).norm() > super::smooth::DENSE_MM
+        && e.start_mm
+            .iter()
+            .chain(e.end_mm.iter())
+            .all(|c| c.is_finite())
+}
+
+fn distance_to_segment(q: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>) -> f64 {
+    let ab = b - a;
+    let l2 = ab.norm_squared();
+    let t = if l2 > 0.0 {
+        ((q - a).dot(&ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q - (a + ab * t)).norm()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::parse_program;
+
+    const TOL_MM: f64 = 0.1;
+
+    /// The demo machine at 1 ms: 8 ms axis filters.
+    fn machine() -> Machine {
+        Machine {
+            axis_filter_s: 0.008,
+            acc_mm_s2: 2000.0,
+            jerk_mm_s3: 50_000.0,
+            max_feed_mm_s: 200.0,
+        }
+    }
+
+    /// A G64 P0.1 run at F7500 through `points` after a G0 to the first, then a dwell.
+    fn polyline(points: &[(f64, f64)]) -> String {
+        let (x0, y0) = points[0];
+        let mut text = format!("G21 G90 G64 P{TOL_MM} F7500\nG0 X{x0:.6} Y{y0:.6}\n");
+        for (x, y) in &points[1..] {
+            text.push_str(&format!("G1 X{x:.6} Y{y:.6}\n"));
+        }
+        text.push_str("G4 P0.1\nM2\n");
+        text
+    }
+
+    /// `laps` of a circle of `n` chords of radius `r_mm` about the origin.
+    fn circle(r_mm: f64, n: usize, laps: usize) -> Vec<(f64, f64)> {
+        (0..=n * laps)
+            .map(|k| std::f64::consts::TAU * k as f64 / n as f64)
+            .map(|a| (r_mm * a.cos(), r_mm * a.sin()))
+            .collect()
+    }
+
+    /// The program's items, and what the refiner makes of them (with the flags).
+    fn run(text: &str) -> (Vec<Item>, Vec<(Item, bool)>) {
+        let program = parse_program(text, "t.ngc", Vector3::zeros()).expect("parses");
+        let mut r = ChordRefiner::new(machine());
+        let mut out = Vec::new();
+        for item in &program.items {
+            let tol = match item {
+                Item::Motion(e) if matches!(e.blend, BlendMode::Blend { .. }) => TOL_MM,
+                _ => 0.0,
+            };
+            r.push(item.clone(), tol);
+            out.extend(r.out.drain(..));
+        }
+        r.flush();
+        out.extend(r.out.drain(..));
+        (program.items, out)
+    }
+
+    fn lines(items: impl IntoIterator<Item = Item>) -> Vec<Element> {
+        items
+            .into_iter()
+            .filter_map(|i| i.motion().copied())
+            .collect()
+    }
+
+    fn tolerance(e: &Element) -> f64 {
+        match e.blend {
+            BlendMode::Blend { p_mm, .. } => p_mm,
+            _ => 0.0,
+        }
+    }
+
+    fn distance_to_polyline(q: Vector3<f64>, path: &[Element]) -> f64 {
+        path.iter()
+            .map(|e| distance_to_segment(q, e.start_mm, e.end_mm))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    #[test]
+    fn a_coarse_circle_becomes_finer_chords_on_the_same_circle() {
+        // 3D_Chips' half circles: 0.62 mm radius, 16 chords a half circle (0.117 mm).
+        let r = 0.62;
+        let (program, out) = run(&polyline(&circle(r, 32, 2)));
+        let before = lines(program);
+        let after = lines(out.iter().map(|(i, _)| i.clone()));
+        assert!(
+            after.len() >= 3 * before.len(),
+            "{} → {}",
+            before.len(),
+            after.len()
+        );
+        // One chain, from the same start to the same end, bit for bit, through every
+        // programmed vertex.
+        for w in after.windows(2) {
+            assert_eq!(w[0].end_mm, w[1].start_mm);
+        }
+        assert_eq!(after[0].start_mm, before[0].start_mm);
+        assert_eq!(after.last().unwrap().end_mm, before.last().unwrap().end_mm);
+        let mut ends = after.iter().map(|e| e.end_mm);
+        for e in &before[1..] {
+            assert!(ends.any(|q| q == e.end_mm), "vertex {:?} kept", e.end_mm);
+        }
+        // Inside the run (the G0's neighbour and the last chord have one circle each), the
+        // new vertices lie on the circle the programmed ones lie on (to their 6 decimals; a
+        // chord sags by 2.8 µm), and each turns by a
+        // fraction of a programmed vertex's 0.196 rad.
+        let inner = &after[after.len() / 4..3 * after.len() / 4];
+        for e in inner {
+            let radius = Vector3::new(e.end_mm.x, e.end_mm.y, 0.0).norm();
+            assert!((radius - r).abs() < 1e-6, "{radius}");
+        }
+        for w in inner.windows(2) {
+            let (u, v) = (w[0].end_mm - w[0].start_mm, w[1].end_mm - w[1].start_mm);
+            assert!(u.angle(&v) < 0.196 / 3.0, "{}", u.angle(&v));
+        }
+        // The pieces are flagged, and go on with the tolerance the chords' sag leaves.
+        assert!(
+            out.iter()
+                .filter(|(i, _)| i.motion().is_some_and(|e| !e.rapid))
+                .all(|(_, refined)| *refined)
+        );
+        let sag = r * (1.0 - (std::f64::consts::PI / 32.0).cos());
+        for e in &after {
+            let p = tolerance(e);
+            assert!(p <= TOL_MM && p >= TOL_MM - 1.01 * sag, "{p}");
+        }
+    }
+
+    #[test]
+    fn every_piece_stays_within_its_share_and_leaves_the_rest_of_the_tolerance() {
+        // An ellipse of chords of 0.2–0.5 mm, written with 3 decimals.
+        let pts: Vec<(f64, f64)> = (0..=120)
+            .map(|k| std::f64::consts::TAU * k as f64 / 120.0)
+            .map(|a| {
+                (
+                    (5.0 * a.cos() * 1000.0).round() / 1000.0,
+                    (2.0 * a.sin() * 1000.0).round() / 1000.0,
+                )
+            })
+            .collect();
+        let (program, out) = run(&polyline(&pts));
+        let before = lines(program);
+        let after = lines(out.into_iter().map(|(i, _)| i));
+        assert!(after.len() > before.len());
+        for e in &after {
+            // A piece's points are within its chord's δ of the program, and δ plus the
+            // tolerance it goes on with is at most the program's.
+            let d = (0..=8)
+                .map(|k| e.start_mm + (e.end_mm - e.start_mm) * (k as f64 / 8.0))
+                .map(|q| distance_to_polyline(q, &before))
+                .fold(0.0, f64::max);
+            assert!(d <= SHARE * TOL_MM + 1e-12, "{d}");
+            assert!(d + tolerance(e) <= TOL_MM + 1e-12, "{d} + {}", tolerance(e));
+        }
+    }
+
+    #[test]
+    fn corners_short_and_long_lines_and_other_items_pass_as_they_are() {
+        // A square of 1 mm sides (90° corners), then chords of 0.05 mm (the smoother's) and a
+        // 3 mm line, with a dwell between.
+        let text = "G21 G90 G64 P0.1 F3000\nG1 X1\nY1\nX0\nY0\nG4 P0.5\n\
+                    G1 X0.05 Y0.001\nX0.1 Y0.004\nX0.15 Y0.009\nX3.15\nM2\n";
+        let (program, out) = run(text);
+        let program: Vec<Item> = program
+            .into_iter()
+            .filter(|i| !matches!(i, Item::Note(_)))
+            .collect();
+        let out: Vec<Item> = out
+            .into_iter()
+            .map(|(i, refined)| {
+                assert!(!refined);
+                i
+            })
+            .filter(|i| !matches!(i, Item::Note(_)))
+            .collect();
+        assert_eq!(out, program);
+    }
+
+    #[test]
+    fn the_tangent_of_the_circle_through_three_points() {
+        let r = 2.0;
+        let at = |a: f64| Vector3::new(r * a.cos(), r * a.sin(), 0.0);
+        let (a, b, c) = (at(0.1), at(0.5), at(1.4));
+        let t = vertex_tangent(b - a, c - b);
+        let expected = Vector3::new(-(0.5f64).sin(), (0.5f64).cos(), 0.0);
+        assert!((t - expected).norm() < 1e-12, "{t:?}");
+        // And a point of its arc.
+        let q = arc_point(a, b, c, 0.5, false);
+        assert!((q - at(0.95)).norm() < 1e-12, "{q:?}");
+        let q = arc_point(a, b, c, 0.25, true);
+        assert!((q - at(0.2)).norm() < 1e-12, "{q:?}");
+    }
+}
