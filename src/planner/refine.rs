@@ -54,7 +54,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use super::smooth::with_tolerance;
+use super::smooth::{DENSE_MM, closest_on_segment, g64_chord, with_tolerance};
 use crate::gcode::{BlendMode, Element, ElementKind, Item};
 
 /// Largest turn of a vertex inside a run (radians): [`super::curve::CURVE_MAX_TURN`], the
@@ -330,30 +330,11 @@ fn unit(e: &Element) -> Vector3<f64> {
 
 /// A line the refiner may replace: see the module documentation.
 fn eligible(e: &Element, tol_mm: f64) -> bool {
-    e.kind == ElementKind::Line
-        && !e.rapid
-        && tol_mm > 0.0
-        && tol_mm.is_finite()
-        && matches!(e.blend, BlendMode::Blend { .. })
-        && e.aux.start == e.aux.end
-        && e.start_mm != e.end_mm
-        && (e.end_mm - e.start_mm).norm() <= LONGEST_MM
-        && (e.end_mm - e.start_mm).norm() > super::smooth::DENSE_MM
-        && e.start_mm
-            .iter()
-            .chain(e.end_mm.iter())
-            .all(|c| c.is_finite())
+    g64_chord(e, tol_mm, DENSE_MM, LONGEST_MM)
 }
 
 fn distance_to_segment(q: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>) -> f64 {
-    let ab = b - a;
-    let l2 = ab.norm_squared();
-    let t = if l2 > 0.0 {
-        ((q - a).dot(&ab) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (q - (a + ab * t)).norm()
+    (q - closest_on_segment(q, a, b)).norm()
 }
 
 #[cfg(test)]

@@ -376,6 +376,14 @@ fn chord_bound(s: &ChordSmoother, a: &Smoothed, d: f64, near: OnPath) -> f64 {
 
 /// A line the smoother may move the ends of: see the module documentation.
 fn eligible(e: &Element, tol_mm: f64) -> bool {
+    g64_chord(e, tol_mm, 0.0, DENSE_MM)
+}
+
+/// A feed move along a straight line in X/Y/Z longer than `above_mm` and at most `up_to_mm`,
+/// with the auxiliary axes still, under G64 with a tolerance `tol_mm`: a chord the smoother
+/// or the refiner ([`super::refine`]) may reshape within that tolerance.
+pub(super) fn g64_chord(e: &Element, tol_mm: f64, above_mm: f64, up_to_mm: f64) -> bool {
+    let l_mm = (e.end_mm - e.start_mm).norm();
     e.kind == ElementKind::Line
         && !e.rapid
         && tol_mm > 0.0
@@ -383,7 +391,8 @@ fn eligible(e: &Element, tol_mm: f64) -> bool {
         && matches!(e.blend, BlendMode::Blend { .. })
         && e.aux.start == e.aux.end
         && e.start_mm != e.end_mm
-        && (e.end_mm - e.start_mm).norm() <= DENSE_MM
+        && l_mm > above_mm
+        && l_mm <= up_to_mm
         && e.start_mm
             .iter()
             .chain(e.end_mm.iter())
@@ -401,7 +410,11 @@ pub(super) fn with_tolerance(blend: BlendMode, tol_mm: f64) -> BlendMode {
     }
 }
 
-fn closest_on_segment(q: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>) -> Vector3<f64> {
+pub(super) fn closest_on_segment(
+    q: Vector3<f64>,
+    a: Vector3<f64>,
+    b: Vector3<f64>,
+) -> Vector3<f64> {
     let ab = b - a;
     let l2 = ab.norm_squared();
     if l2 == 0.0 {
