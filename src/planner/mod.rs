@@ -1004,8 +1004,6 @@ pub struct Planner {
     smoother: smooth::ChordSmoother,
     /// The chord refiner after it ([`refine`]).
     refiner: refine::ChordRefiner,
-    /// Whether the element being pushed is a piece of a refined chord.
-    refined_next: bool,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -1087,7 +1085,6 @@ impl Planner {
             curve: curve::CurveState::default(),
             smoother: smooth::ChordSmoother::default(),
             refiner,
-            refined_next: false,
         })
     }
 
@@ -1095,7 +1092,7 @@ impl Planner {
     /// settle become available to [`pop`](Self::pop).
     pub fn push(&mut self, item: &Item) -> Result<(), PlanError> {
         if self.smoothing.is_none() {
-            return self.push_item(item);
+            return self.push_item(item, false);
         }
         // Jerk-limited mode: dense runs of G64 lines pass through the chord smoother first.
         let tol_mm = match item {
@@ -1122,10 +1119,7 @@ impl Planner {
     /// Plans what the chord refiner has passed on.
     fn push_refined(&mut self) -> Result<(), PlanError> {
         while let Some((item, refined)) = self.refiner.out.pop_front() {
-            self.refined_next = refined;
-            let pushed = self.push_item(&item);
-            self.refined_next = false;
-            if let Err(e) = pushed {
+            if let Err(e) = self.push_item(&item, refined) {
                 self.smoother.out.clear();
                 self.refiner.out.clear();
                 return Err(e);
@@ -1134,14 +1128,15 @@ impl Planner {
         Ok(())
     }
 
-    /// [`push`](Self::push) after the chord smoother.
-    fn push_item(&mut self, item: &Item) -> Result<(), PlanError> {
+    /// [`push`](Self::push) after the chord smoother and refiner; `refined`: the item is a
+    /// piece of a refined chord ([`refine`]).
+    fn push_item(&mut self, item: &Item, refined: bool) -> Result<(), PlanError> {
         match item {
             Item::Motion(e) => {
                 let Some(mut p) = self.element(e)? else {
                     return Ok(());
                 };
-                p.refined = self.refined_next;
+                p.refined = refined;
                 let blend = match self.window.back() {
                     Some(prev) => self.blend_arc(prev, &p)?,
                     None => None,
