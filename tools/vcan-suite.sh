@@ -42,6 +42,7 @@ if [ ! -e /sys/class/net/vcan0 ] && ! { modprobe vcan 2>/dev/null && ip link add
   export CANMOTION_RT_PRIORITY="${CANMOTION_RT_PRIORITY:-0}"
 fi
 export VCAN_TIMEOUT="${VCAN_TIMEOUT:-900}"
+rust_log=$(mktemp /tmp/vcan-rust.XXXXXX)
 echo "== vcan suite: running on vcan0 ($vcan_bin, python-canopen from $venv)"
 exec tools/in-vcan.sh sh -c '
   set -u
@@ -52,12 +53,20 @@ exec tools/in-vcan.sh sh -c '
   cat "$1" "$CANMOTION_BIN" > /dev/null
   rc=0
   echo "== Rust vcan0 tests (tests/vcan.rs)"
-  "$1" --test-threads=1 || rc=1
+  # Its output is kept in a file too: CI shows the end of the log, so the failures are
+  # repeated after the python-canopen tests.
+  { "$1" --test-threads=1 2>&1 || echo "vcan-suite: FAILED: the Rust vcan0 tests"; } | tee "$3"
+  rust_failed=0
+  grep -q "^vcan-suite: FAILED" "$3" && { rust_failed=1; rc=1; }
   if [ -d tests/interop ]; then
     echo "== python-canopen interop tests on vcan0 (tests/interop)"
     "$2/bin/python" -m pytest -v -rA -p no:cacheprovider tests/interop || rc=1
   else
     echo "vcan-suite: ERROR: tests/interop is missing" >&2; rc=1
   fi
+  if [ "$rust_failed" = 1 ]; then
+    echo "== the Rust vcan0 tests failed; their failures again (the end of $3):"
+    sed -n "/^failures:/,\$p" "$3" | tail -n 80
+  fi
   exit $rc
-' vcan-suite "$vcan_bin" "$venv"
+' vcan-suite "$vcan_bin" "$venv" "$rust_log"
