@@ -66,7 +66,11 @@ impl Planner {
     /// one plane (helices), or an arc no faster than the sharp corner. Two lines:
     /// [`blend_lines`](Self::blend_lines); an arc on either side:
     /// [`blend_curves`](Self::blend_curves).
-    pub(super) fn blend_arc(&self, a: &Pending, b: &Pending) -> Result<Option<Blend>, PlanError> {
+    pub(super) fn blend_arc(
+        &self,
+        a: &Pending,
+        b: &Pending,
+    ) -> Result<Option<Box<Blend>>, PlanError> {
         let BlendMode::Blend { .. } = a.blend else {
             return Ok(None);
         };
@@ -135,7 +139,7 @@ impl Planner {
     /// nothing): the centripetal limit grows as `√r`, the jerk of circular motion as `r^⅔`, so
     /// `r_need = r_max · (v_target/v_arc(r_max))^1.5`. On the arc every axis's centripetal
     /// acceleration and jerk stay within its share ([`arc_limits`]).
-    fn blend_lines(&self, a: &Pending, b: &Pending) -> Result<Option<Blend>, PlanError> {
+    fn blend_lines(&self, a: &Pending, b: &Pending) -> Result<Option<Box<Blend>>, PlanError> {
         let tol_mm = self.blend_tolerance_mm(a.blend);
         let (SegmentPath::Line { direction: u1 }, SegmentPath::Line { direction: u2 }) =
             (a.seg.path, b.seg.path)
@@ -235,19 +239,19 @@ impl Planner {
         a_after.seg.length_mm -= tangent_mm;
         b_after.seg.start_mm = arc.seg.end_mm;
         b_after.seg.length_mm -= tangent_mm;
-        Ok(Some(Blend {
+        Ok(Some(Box::new(Blend {
             arc,
             a: a_after,
             b: b_after,
             cap_in,
             cap_out,
-        }))
+        })))
     }
 
     /// The blend of a corner where an arc takes part (see the module documentation), or
     /// `None` where the corner stays sharp. Errors building the arcs (none are expected: their
     /// lengths are positive and finite) keep the corner sharp too.
-    fn blend_curves(&self, a: &Pending, b: &Pending) -> Option<Blend> {
+    fn blend_curves(&self, a: &Pending, b: &Pending) -> Option<Box<Blend>> {
         let tol_mm = self.blend_tolerance_mm(a.blend);
         if tol_mm.is_nan() || tol_mm <= 0.0 || self.config.corner_acc_mm_s2 == 0.0 {
             return None;
@@ -283,7 +287,7 @@ impl Planner {
             .rev()
             .map(|k| corner.grid_start_mm() * GRID_RATIO.powi(k));
         let candidates = std::iter::once(widest.radius_mm).chain(grid);
-        let mut best: Option<(f64, Blend)> = None;
+        let mut best: Option<(f64, Box<Blend>)> = None;
         for rho in candidates {
             let Some(circle) = corner
                 .tangent_circle(rho)
@@ -308,13 +312,13 @@ impl Planner {
             }
             let cost_s = cost.blended_s(&arc, v_blend, (circle.taken_a_mm, circle.taken_b_mm));
             if best.as_ref().is_none_or(|(c, _)| cost_s < *c) {
-                let blend = Blend {
+                let blend = Box::new(Blend {
                     arc,
                     a: a_after,
                     b: b_after,
                     cap_in,
                     cap_out,
-                };
+                });
                 best = Some((cost_s, blend));
             }
         }

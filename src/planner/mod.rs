@@ -1188,7 +1188,7 @@ impl Planner {
                             cap_in,
                             cap_out,
                             ..
-                        } = blend;
+                        } = *blend;
                         // No auxiliary axis moves on either side of a blended corner.
                         arc.seg.aux = AuxMove::still(prev.seg.aux.end);
                         (arc.cap_start_mm_s, arc.cap_start_limit_mm_s) = cap_in;
