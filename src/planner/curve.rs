@@ -310,6 +310,28 @@ pub(super) fn reach_exact_mm_s(p: &Pending, v_from_mm_s: f64) -> f64 {
     .0
 }
 
+/// The direction of the chord whose midpoint is nearest to `at_mm` along the path (the
+/// first of equally near ones), by bisection: the chords' midpoints rise along the run.
+fn nearest_chord(chords: &VecDeque<(Vector3<f64>, f64)>, at_mm: f64) -> Option<Vector3<f64>> {
+    let d = |k: usize| (chords[k].1 - at_mm).abs();
+    // The first midpoint at or beyond `at_mm`; the distances fall before it and rise from it.
+    let after = chords.partition_point(|&(_, s)| s < at_mm);
+    let mut best = after.checked_sub(1);
+    while let Some(k) = best
+        && k > 0
+        && d(k - 1) == d(k)
+    {
+        best = Some(k - 1);
+    }
+    let best = match best {
+        Some(k) if after < chords.len() && d(after) < d(k) => after,
+        Some(k) => k,
+        None if after < chords.len() => after,
+        None => return None,
+    };
+    Some(chords[best].0)
+}
+
 /// Sets `p`'s [`Pending::acc_floor_mm_s2`] for its curve and its cap.
 pub(super) fn refresh_floor(p: &mut Pending) {
     p.acc_floor_mm_s2 = p
@@ -721,11 +743,7 @@ impl Planner {
             .find(|&&(_, s)| s_vertex - s >= baseline_mm)
             .map_or(Vector3::zeros(), |&(k_old, s)| {
                 let mid = 0.5 * (s_vertex + s);
-                let (u_mid, _) = chords
-                    .iter()
-                    .min_by(|a, b| (a.1 - mid).abs().total_cmp(&(b.1 - mid).abs()))
-                    .copied()
-                    .unwrap_or((prev.tangent_end, mid));
+                let u_mid = nearest_chord(chords, mid).unwrap_or(prev.tangent_end);
                 let k_mean = 0.5 * (best.norm() + k_old.norm());
                 (best - k_old) / (s_vertex - s) + u_mid * (k_mean * k_mean)
             });
@@ -897,4 +915,35 @@ pub(super) fn link_floor(prev: &Pending, p: &mut Pending) {
     } else {
         0.0
     };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The bisection finds the chord a scan of every chord finds (the first of equally
+        /// near ones), midpoints repeated and the point outside the run included.
+        #[test]
+        fn nearest_chord_is_the_scan_s(
+            steps in proptest::collection::vec(prop_oneof![Just(0.0), 0.0..2.0f64], 0..40),
+            at in -1.0..45.0f64,
+        ) {
+            let mut s = 0.0;
+            let chords: VecDeque<(Vector3<f64>, f64)> = steps
+                .iter()
+                .enumerate()
+                .map(|(k, step)| {
+                    s += step;
+                    (Vector3::new(k as f64, 0.0, 0.0), s)
+                })
+                .collect();
+            let scan = chords
+                .iter()
+                .min_by(|a, b| (a.1 - at).abs().total_cmp(&(b.1 - at).abs()))
+                .map(|c| c.0);
+            prop_assert_eq!(nearest_chord(&chords, at), scan);
+        }
+    }
 }
