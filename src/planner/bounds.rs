@@ -46,10 +46,21 @@
 //! `A` and `J` along its starting direction. `T_ref = max(T_lb, T_trapezoid + Σ cost)`
 //! ([`reference_time_s`]): `A/J` per exact stop, as issue 11 states it, for every run that
 //! reaches `A²/J` (80 mm/s on the demo machine), less for the slower ones.
+//!
+//! That derivation assumes the S-curve reaches the trapezoid's peak. A run of one segment too
+//! short for that (the trapezoid a triangle, the S-curve reaching neither its peak nor `A`)
+//! costs more: a 1 mm move with `A = 1500 mm/s²` and `J = 37 500 mm/s³` takes `2√(L/A)` =
+//! 51.6 ms as a trapezoid and `4·(L/2J)^⅓` = 94.9 ms as the time-optimal S-curve, 43.2 ms
+//! more, beyond `A/J` = 40 ms. Such a run is charged at least its exact cost
+//! ([`lone_run_cost_s`]: the time-optimal S-curve from rest to rest with the trapezoid's
+//! limits and the machine's `J/A`, as the jerk-limited mode plans a move alone), so `T_ref`
+//! stays what a jerk-limited plan cannot beat. Runs of several segments keep the estimate
+//! above.
 
 use nalgebra::Vector3;
 
-use super::{Limits, Plan, PlannerConfig, SegmentPath};
+use super::profile::{self, JerkShape, ProfileLimits};
+use super::{Limits, Plan, PlannerConfig, Segment, SegmentPath};
 use crate::gcode::{ArcGeometry, Element, Item};
 
 /// Curvature below this is straight (a turn of 1e-12 rad per mm).
@@ -114,7 +125,8 @@ pub fn curvature_bound_s<'a>(
 pub struct ExactStops {
     /// Moving segments that start at rest (the first one included).
     pub count: usize,
-    /// [`run_cost_s`] summed over the runs they start.
+    /// What a jerk-limited plan pays for the runs they start, summed: [`run_cost_s`], and for
+    /// a run of one segment at least its exact cost ([`lone_run_cost_s`]).
     pub cost_s: f64,
 }
 
@@ -144,6 +156,15 @@ pub fn exact_stops(plan: &Plan, limits: &Limits, config: &PlannerConfig) -> Exac
     };
     // The run under way: its highest speed, and A and J at its start.
     let mut run: Option<(f64, f64, f64)> = None;
+    // Its moving segments so far, and the first of them.
+    let mut run_segments = 0usize;
+    let mut first: Option<&Segment> = None;
+    let run_cost = |run: Option<(f64, f64, f64)>, segments: usize, first: Option<&Segment>| {
+        run.map_or(0.0, |(v, acc, jerk)| {
+            let lone = first.filter(|_| segments == 1);
+            run_cost_s(v, acc, jerk).max(lone.map_or(0.0, |seg| lone_run_cost_s(seg, acc, jerk)))
+        })
+    };
     for seg in plan.segments() {
         let u = match &seg.path {
             SegmentPath::Line { direction } => *direction,
@@ -155,20 +176,43 @@ pub fn exact_stops(plan: &Plan, limits: &Limits, config: &PlannerConfig) -> Exac
         }
         let acc_mm_s2 = along(&u, &limits.max_acc_mm_s2).min(config.path_acc_mm_s2);
         if seg.v_start_mm_s <= acc_mm_s2 * config.period_s {
-            if let Some((v, acc, jerk)) = run.take() {
-                stops.cost_s += run_cost_s(v, acc, jerk);
-            }
+            stops.cost_s += run_cost(run.take(), run_segments, first);
             stops.count += 1;
             run = Some((0.0, acc_mm_s2, along(&u, &config.max_jerk_mm_s3)));
+            (run_segments, first) = (0, Some(seg));
         }
         if let Some(r) = run.as_mut() {
             r.0 = r.0.max(seg.v_peak_mm_s);
+            run_segments += 1;
         }
     }
-    if let Some((v, acc, jerk)) = run {
-        stops.cost_s += run_cost_s(v, acc, jerk);
-    }
+    stops.cost_s += run_cost(run, run_segments, first);
     stops
+}
+
+/// What the time-optimal jerk-limited profile of a run of one segment, from rest to rest,
+/// takes beyond the trapezoid's: with the trapezoid's speed and acceleration limits and the
+/// jerk `a·J/A` (the machine's `J/A` along the segment, `acc_mm_s2` and `jerk_mm_s3`), as the
+/// jerk-limited mode plans such a move ([`run_cost_s`] assumes the S-curve reaches the
+/// trapezoid's peak; over a move too short for that it takes longer). 0 where the segment
+/// has no profile. The segment ends at rest: the next run starts there, or the plan ends.
+fn lone_run_cost_s(seg: &Segment, acc_mm_s2: f64, jerk_mm_s3: f64) -> f64 {
+    let Some(trapezoid) = seg.profile else {
+        return 0.0;
+    };
+    let limits = trapezoid.limits();
+    if !jerk_mm_s3.is_finite() {
+        return 0.0;
+    }
+    let jerk = limits.a_max_mm_s2() * jerk_mm_s3 / acc_mm_s2;
+    ProfileLimits::new(
+        limits.v_max_mm_s(),
+        limits.a_max_mm_s2(),
+        jerk,
+        JerkShape::Square,
+    )
+    .and_then(|l| profile::plan(seg.length_mm, 0.0, 0.0, &l))
+    .map_or(0.0, |s| (s.duration_s() - trapezoid.duration_s()).max(0.0))
 }
 
 /// `T_ref = max(T_lb, T_trapezoid + Σ run cost)`: the time a jerk-limited plan of a program should
@@ -408,8 +452,47 @@ mod tests {
             .expect("plans");
         let stops = exact_stops(&plan, &limits(), &config);
         assert_eq!(stops.count, 4);
+        // The run of two lines costs `run_cost_s` at its peak (10 mm/s, below A²/J); the
+        // three of one line each what their S-curve from rest to rest takes beyond their
+        // trapezoid with its limits (1500 mm/s², and the jerk 1500·J/A = 37 500 mm/s³):
+        // `2·√(v/J) − v/A` at the same cruise (the trapezoid passes the reversal at up to
+        // `A·T`, not 0, and is up to a period the shorter there).
         let run = run_cost_s(10.0, 2000.0, 50_000.0);
-        assert!((stops.cost_s - 4.0 * run).abs() < 1e-12, "{stops:?}");
+        let lone = 2.0 * (10.0f64 / 37_500.0).sqrt() - 10.0 / 1500.0;
+        assert!(lone > run);
+        let expected = run + 3.0 * lone;
+        assert!(
+            stops.cost_s >= expected - 1e-12 && stops.cost_s < expected + 1e-3,
+            "{stops:?}, expected {expected}"
+        );
+    }
+
+    #[test]
+    fn a_move_too_short_to_reach_its_trapezoid_s_peak_costs_its_exact_s_curve() {
+        // 1 mm along X from rest to rest: the trapezoid (1500 mm/s² with the share) peaks at
+        // √(L·A) = 38.7 mm/s in 2·√(L/A); the S-curve (37 500 mm/s³) reaches neither that
+        // peak nor A, in 4·(L/2J)^⅓. It costs more than A/J over the trapezoid, and more
+        // than `run_cost_s` at the trapezoid's peak says.
+        let config = PlannerConfig {
+            period_s: 0.001,
+            path_acc_share: 0.75,
+            ..config()
+        };
+        let items = [line(Vector3::zeros(), Vector3::new(1.0, 0.0, 0.0), 100.0)];
+        let plan = super::super::plan_items_with(Vector3::zeros(), &items, &limits(), &config)
+            .expect("plans");
+        let stops = exact_stops(&plan, &limits(), &config);
+        assert_eq!(stops.count, 1);
+        let trapezoid_s = plan.duration_s();
+        assert!((trapezoid_s - 2.0 * (1.0f64 / 1500.0).sqrt()).abs() < 1e-9);
+        let s_curve_s = 4.0 * (1.0f64 / (2.0 * 37_500.0)).cbrt();
+        assert!(
+            (stops.cost_s - (s_curve_s - trapezoid_s)).abs() < 1e-9,
+            "{stops:?} against {}",
+            s_curve_s - trapezoid_s
+        );
+        assert!(stops.cost_s > 2000.0 / 50_000.0);
+        assert!(stops.cost_s > run_cost_s((1500.0f64).sqrt(), 2000.0, 50_000.0));
     }
 
     #[test]
