@@ -1055,11 +1055,10 @@ impl Planner {
             return Err(PlanError::NonFiniteStart);
         }
         let smoothing = Smoothing::for_machine(limits, config);
-        let min3 = |v: Vector3<f64>| v.x.min(v.y).min(v.z);
         let refiner = refine::ChordRefiner::new(refine::Machine {
             axis_filter_s: smoothing.map_or(0.0, |s| s.axis_s(config.period_s)),
-            acc_mm_s2: min3(limits.max_acc_mm_s2),
-            jerk_mm_s3: min3(config.max_jerk_mm_s3),
+            acc_mm_s2: limits.max_acc_mm_s2.min(),
+            jerk_mm_s3: config.max_jerk_mm_s3.min(),
             max_feed_mm_s: limits.max_feed_mm_s,
         });
         Ok(Planner {

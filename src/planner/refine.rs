@@ -323,9 +323,9 @@ fn vertex_tangent(a: Vector3<f64>, b: Vector3<f64>) -> Vector3<f64> {
 
 /// The unit direction of a line.
 fn unit(e: &Element) -> Vector3<f64> {
-    let d = e.end_mm - e.start_mm;
-    let n = d.norm();
-    if n > 0.0 { d / n } else { Vector3::zeros() }
+    (e.end_mm - e.start_mm)
+        .try_normalize(0.0)
+        .unwrap_or_else(Vector3::zeros)
 }
 
 /// A line the refiner may replace: see the module documentation.
