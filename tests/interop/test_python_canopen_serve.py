@@ -206,9 +206,17 @@ def test_python_canopen_sees_serve_home_in_order_and_end_in_order(tmp_path):
         assert serve.wait(timeout=20) == 0, (tmp_path / "serve.log").read_text()
         # The orderly end: Pre-operational, and no drive consumes the gateway's heartbeat.
         settle(rec, NODES, 0x1016, 1)
-        frames = rec.snapshot()
+        # The gateway has exited, but python's listener thread may not have handed us its last
+        # frames yet (a CI run once snapshotted before the NMT commands): wait for them.
+        deadline = time.monotonic() + 10
+        def pre_operational(n: int) -> bool:
+            return any(f.arbitration_id == 0 and bytes(f.data) == bytes([0x80, n])
+                       for f in rec.snapshot())
+        while not all(pre_operational(n) for n in NODES):
+            assert time.monotonic() < deadline, \
+                f"no NMT Pre-operational for {[n for n in NODES if not pre_operational(n)]}"
+            time.sleep(0.05)
         for n in NODES:
-            assert any(f.arbitration_id == 0 and bytes(f.data) == bytes([0x80, n]) for f in frames), n
             assert read(nodes[n], 0x1016, 1) == 0, f"node {n} still consumes a heartbeat"
     finally:
         if serve is not None and serve.poll() is None:
