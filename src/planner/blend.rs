@@ -63,7 +63,8 @@ impl Blend {
 impl Planner {
     /// The tangent arc that replaces the corner from `a` into `b` under G64 P, or `None`
     /// where the corner stays sharp: no tolerance (P0), auxiliary axes moving, no turn, not in
-    /// one plane (helices), or an arc no faster than the sharp corner. Two lines:
+    /// one plane (helices), two pieces of a refined chord, or an arc no faster than the sharp
+    /// corner. Two lines:
     /// [`blend_lines`](Self::blend_lines); an arc on either side:
     /// [`blend_curves`](Self::blend_curves).
     pub(super) fn blend_arc(
@@ -75,6 +76,14 @@ impl Planner {
             return Ok(None);
         };
         if aux_axes::keeps_corner(a, b) || a.is_blend_arc || b.is_blend_arc {
+            return Ok(None);
+        }
+        if a.refined && b.refined {
+            // Two pieces of a refined chord ([`super::refine`]) lie on its curvature-continuous
+            // curve and turn by that curve's own turn: a chord run taken as a curve
+            // ([`super::curve`]). A tangent arc between them would step the curvature from 0
+            // to `1/r` and back at every piece, each step a junction of its own (3D_Chips.ngc:
+            // 187 s with them, 165 s without; LHchips4.ngc 649 s, 548 s).
             return Ok(None);
         }
         let blend = match (a.seg.path, b.seg.path) {

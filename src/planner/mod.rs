@@ -140,7 +140,9 @@
 //!   shorter chords on the curve through the run's vertices that blends the circles through
 //!   each three of them, curvature-continuous at the programmed vertices, within a quarter of
 //!   the tolerance ([`refine`]). The pieces' vertices are computed, so the vertex rules'
-//!   allowance for the rounding of written coordinates does not apply to them.
+//!   allowance for the rounding of written coordinates does not apply to them; and no blend
+//!   arc goes between two pieces, whose curve the run already follows (an arc would step
+//!   the curvature at both of its ends).
 //! - **Chord runs as curves.** Where a run of lines is dense (two chords at least within the
 //!   axis filters' reach) and turns little at each vertex, its lines take the curve from
 //!   their own budget as an arc does, with the run's curvature estimated over a window of
