@@ -4,7 +4,7 @@
 //! reference time `T_ref` of [`canmotion::planner::bounds`].
 //!
 //! ```text
-//! cargo run --release --example corpus_times -- [MACHINE] [--corpus DIR]
+//! cargo run --release --example corpus_times -- [MACHINE] [--corpus DIR] [--check]
 //! ```
 //!
 //! `MACHINE` (default `dictionaries/machines/demo-xyz.toml`) is rewritten into a temporary
@@ -21,6 +21,13 @@
 //! the trapezoid time, and of the jerk-limited time over `T_ref`), the ten worst
 //! programs and those above 1.5× whose jerk-limited time is not within 1.1× of `T_ref`.
 //! Progress and the programs that do not plan go to stderr.
+//!
+//! With `--check`, each jerk-limited plan is also checked as the acceptance's second item asks,
+//! at the benchmark's period: every axis's velocity, acceleration and jerk of the setpoints by
+//! finite differences within 1 % of the machine's limits (`tests/common/setpoints.rs`), and
+//! every setpoint's distance from the programmed path within the tolerance in force, under
+//! 1 µm at rest and at the end, the end exact (`tests/common/path_deviation.rs`); the
+//! programs that fail are listed last, and the exit status is 1 if any does.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -36,6 +43,11 @@ use canmotion::planner::bounds::{curvature_bound_s, exact_stops, reference_time_
 use canmotion::planner::{Plan, plan_items_with};
 use nalgebra::Vector3;
 
+#[path = "../tests/common/path_deviation.rs"]
+mod path_deviation;
+#[path = "../tests/common/setpoints.rs"]
+mod setpoints;
+
 /// Above this ratio a program must be within [`REF_SLACK`] of its `T_ref`.
 const RATIO_TARGET: f64 = 1.5;
 /// See [`RATIO_TARGET`].
@@ -45,7 +57,8 @@ const WORST: usize = 10;
 
 fn main() -> ExitCode {
     match run() {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
         Err(e) => {
             eprintln!("corpus_times: {e}");
             ExitCode::FAILURE
@@ -56,18 +69,22 @@ fn main() -> ExitCode {
 struct Args {
     machine: PathBuf,
     corpus: PathBuf,
+    /// Check every jerk-limited plan's limits and path deviation too.
+    check: bool,
 }
 
 fn args() -> Result<Args, String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut machine = None;
     let mut corpus = root.join("../shared/corpus/linuxcnc-tp");
+    let mut check = false;
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         match a.as_str() {
             "--corpus" => corpus = it.next().ok_or("--corpus needs a directory")?.into(),
+            "--check" => check = true,
             "-h" | "--help" => {
-                return Err("usage: corpus_times [MACHINE] [--corpus DIR]".into());
+                return Err("usage: corpus_times [MACHINE] [--corpus DIR] [--check]".into());
             }
             _ if machine.is_none() && !a.starts_with('-') => machine = Some(PathBuf::from(a)),
             _ => return Err(format!("unexpected argument {a:?}")),
@@ -76,6 +93,7 @@ fn args() -> Result<Args, String> {
     Ok(Args {
         machine: machine.unwrap_or_else(|| root.join("dictionaries/machines/demo-xyz.toml")),
         corpus,
+        check,
     })
 }
 
@@ -121,14 +139,14 @@ fn header() {
     );
 }
 
-fn run() -> Result<(), String> {
+fn run() -> Result<bool, String> {
     let args = args()?;
     if !args.corpus.is_dir() {
         println!(
             "corpus {} is absent: nothing to time",
             args.corpus.display()
         );
-        return Ok(());
+        return Ok(true);
     }
     let corpus = args.corpus.canonicalize().unwrap_or(args.corpus);
     let dir = tempfile::tempdir().map_err(|e| format!("temporary directory: {e}"))?;
@@ -150,6 +168,7 @@ fn run() -> Result<(), String> {
     );
     header();
     let mut rows = Vec::new();
+    let mut failed = Vec::new();
     for (k, path) in files.iter().enumerate() {
         let name = path
             .strip_prefix(&corpus)
@@ -157,16 +176,31 @@ fn run() -> Result<(), String> {
             .display()
             .to_string();
         eprintln!("[{}/{}] {name}", k + 1, files.len());
-        match time_program(path, &name, &trapezoid, &jerk) {
-            Ok(row) => {
+        match time_program(path, &name, &trapezoid, &jerk, args.check) {
+            Ok((row, check)) => {
                 row.print();
+                if let Err(why) = check {
+                    failed.push(format!("{name}: {why}"));
+                }
                 rows.push(row);
             }
             Err(why) => eprintln!("  skipped: {why}"),
         }
     }
     summary(&rows, files.len());
-    Ok(())
+    if args.check {
+        println!(
+            "--check, jerk-limited plans at {} ms: {} of {} fail (limits within 1 %, the tolerance, at rest and at the end within 1 µm, the end exact){}",
+            jerk.planner.period_s * 1e3,
+            failed.len(),
+            rows.len(),
+            if failed.is_empty() { "" } else { ":" }
+        );
+        for f in &failed {
+            println!("  {f}");
+        }
+    }
+    Ok(failed.is_empty())
 }
 
 fn summary(rows: &[Row], programs: usize) {
@@ -217,13 +251,15 @@ fn summary(rows: &[Row], programs: usize) {
     }
 }
 
-/// Times one program in both modes; why not, when it does not plan.
+/// Times one program in both modes, with the check of its jerk-limited plan where `check`
+/// asks for it (`Ok(())` otherwise); why not, when it does not plan.
 fn time_program(
     path: &Path,
     name: &str,
     trapezoid: &Machine,
     jerk: &Machine,
-) -> Result<Row, String> {
+    check: bool,
+) -> Result<(Row, Result<(), String>), String> {
     let items = interpret(path, name, trapezoid)?;
     let start = Vector3::zeros();
     let (trap_limits, jerk_limits) = (limits(trapezoid), limits(jerk));
@@ -234,19 +270,41 @@ fn time_program(
     let t_lb_s = curvature_bound_s(&items, &jerk_limits, &jerk.planner);
     // The stops of the trapezoid plan, priced at the jerk limits.
     let stops = exact_stops(&trap_plan, &jerk_limits, &jerk.planner);
+    let checked = if check {
+        check_plan(start, &items, &jerk_plan, &jerk_limits, &jerk.planner)
+    } else {
+        Ok(())
+    };
     let trapezoid_s = streamed_s(trap_plan, trapezoid.planner.period_s)?;
     let jerk_s = streamed_s(jerk_plan, jerk.planner.period_s)?;
     if trapezoid_s <= 0.0 {
         return Err("no motion".into());
     }
-    Ok(Row {
+    let row = Row {
         name: name.to_string(),
         trapezoid_s,
         jerk_s,
         t_lb_s,
         t_ref_s: reference_time_s(t_lb_s, trapezoid_s, &stops),
         stops: stops.count,
-    })
+    };
+    Ok((row, checked))
+}
+
+/// The acceptance's check of a jerk-limited plan (see the module documentation): the first
+/// limit it breaks, else how far it strays from the path beyond the tolerance.
+fn check_plan(
+    start: Vector3<f64>,
+    items: &[Item],
+    plan: &Plan,
+    limits: &canmotion::planner::Limits,
+    config: &canmotion::planner::PlannerConfig,
+) -> Result<(), String> {
+    setpoints::limits_hold(plan.clone(), limits, config)?;
+    path_deviation::measure_items(start, items, plan.clone(), config)
+        .map_err(|e| e.to_string())?
+        .check()
+        .map_err(|e| e.to_string())
 }
 
 /// The time a run of `plan` takes: its samples times the period.
