@@ -389,6 +389,13 @@ fn reach_with(p: &Pending, reach: impl Fn(f64) -> f64) -> (f64, f64, f64) {
     }
 }
 
+/// Times at most the curvature rate's baseline is shortened to the span of the axis filters
+/// at the cap it gives ([`Planner::curve_estimate`]).
+const RATE_ROUNDS: usize = 3;
+
+/// A baseline is shortened again only where the cap shortens it below this share of the last.
+const RATE_SHRINK: f64 = 0.9;
+
 /// [`reach_with`] takes the last pair as it is where it reaches this share of the speed it is
 /// valid to.
 const MEMO_TIGHT: f64 = 0.99;
@@ -712,7 +719,10 @@ impl Planner {
                 if best.is_none() || valid {
                     best = Some((kappa, w_mm));
                 }
-                if !valid {
+                // On a refined chord's pieces the vertices are computed, with no rounding to
+                // average away: the first window is the curve's own curvature, which a longer
+                // one would smear over the chords where it turns.
+                if !valid || prev.refined {
                     break;
                 }
             }
@@ -722,33 +732,67 @@ impl Planner {
             m = (2 * m).min(n - 1);
         }
         let (best, w_mm) = best?;
-        // The rate of change of the curve's curvature vector, from the estimate a window's
-        // length back (the axis filters see it averaged over about that). Each estimate
-        // holds midway along its window.
-        // The axis filters' output follows the curvature averaged over about `2·v·T_k`, at
-        // the speed `v` the curvature alone would allow: the rate is taken over at least
-        // that (and two windows), which keeps the rounding's noise on each estimate from
-        // reaching it divided by a short distance.
+        // The rate of change of the curve's curvature vector, from the estimate a baseline
+        // back (each estimate holds midway along its window). The axis filters, two moving
+        // averages each `B = v·T_k` long at the speed `v` the curve runs at, pass on the
+        // curvature's rate averaged over `B` (the derivative of the first average is the
+        // difference quotient over `B`, which the second only averages): on a refined chord's
+        // pieces, whose computed vertices carry no rounding, the rate is taken over `B`.
+        // Written chords take it over `2·B` (and at least two windows), which keeps the
+        // rounding's noise on each estimate from reaching it divided by a short distance.
+        // That speed is the cap the rate itself sets: from the speed the curvature alone
+        // would allow, the baseline is shortened to the cap it gives, and again, while it
+        // shrinks ([`RATE_ROUNDS`]). Taken at the curvature's speed over `2·B` and over
+        // windows of four pieces, the rate of a curvature that turns within a few pieces
+        // (`LHchips4.ngc`: 95 µm pieces of a refined chord, `κ` from 0.10 to −0.04 /mm in
+        // 0.4 mm at 55 mm/s) came out at half what the filters pass on: X's jerk +3 % at
+        // 1 ms on the demo machine.
         let kappas = &self.curve.kappas;
         let s_vertex = s_new - 0.5 * w_mm;
         let j_min = self.config.max_jerk_mm_s3.min();
         let k2 = best.norm_squared().max(f64::MIN_POSITIVE);
         let v_k = v_max.min((CURVE_JERK_SHARE * CURVE_BUDGET * j_min / k2).cbrt());
-        let baseline_mm = (2.0 * w_mm).max(2.0 * v_k * tk);
         // Its turn with the tangent, `−κ²·T`, is taken at the tangent midway (the chord
         // there), where the difference quotient has it.
-        let rate = kappas
-            .iter()
-            .rev()
-            .find(|&&(_, s)| s_vertex - s >= baseline_mm)
-            .map_or(Vector3::zeros(), |&(k_old, s)| {
-                let mid = 0.5 * (s_vertex + s);
-                let u_mid = nearest_chord(chords, mid).unwrap_or(prev.tangent_end);
-                let k_mean = 0.5 * (best.norm() + k_old.norm());
-                (best - k_old) / (s_vertex - s) + u_mid * (k_mean * k_mean)
-            });
-        curve_limits(self, prev.tangent_end, best, rate, v_max, smoothing)
-            .map(|fit| (fit, s_vertex))
+        let rate_over = |baseline_mm: f64| {
+            kappas
+                .iter()
+                .rev()
+                .find(|&&(_, s)| s_vertex - s >= baseline_mm)
+                .map_or(Vector3::zeros(), |&(k_old, s)| {
+                    let mid = 0.5 * (s_vertex + s);
+                    let u_mid = nearest_chord(chords, mid).unwrap_or(prev.tangent_end);
+                    let k_mean = 0.5 * (best.norm() + k_old.norm());
+                    (best - k_old) / (s_vertex - s) + u_mid * (k_mean * k_mean)
+                })
+        };
+        let span = if prev.refined { 1.0 } else { 2.0 };
+        let baseline = |v_mm_s: f64| (2.0 * w_mm).max(span * v_mm_s * tk);
+        let mut baseline_mm = baseline(v_k);
+        let mut fit = curve_limits(
+            self,
+            prev.tangent_end,
+            best,
+            rate_over(baseline_mm),
+            v_max,
+            smoothing,
+        )?;
+        for _ in 0..RATE_ROUNDS {
+            let shorter_mm = baseline(fit.cap_mm_s.min(v_max));
+            if shorter_mm >= RATE_SHRINK * baseline_mm {
+                break;
+            }
+            baseline_mm = shorter_mm;
+            fit = curve_limits(
+                self,
+                prev.tangent_end,
+                best,
+                rate_over(baseline_mm),
+                v_max,
+                smoothing,
+            )?;
+        }
+        Some((fit, s_vertex))
     }
 
     /// The caps `(raw, dipped)` of the junction from the window's last element into `p` (see
