@@ -143,6 +143,12 @@
 //!   allowance for the rounding of written coordinates does not apply to them; and no blend
 //!   arc goes between two pieces, whose curve the run already follows (an arc would step
 //!   the curvature at both of its ends).
+//! - **Collinear lines.** After the smoother and the refiner, G64 lines that continue one
+//!   another exactly along one straight line (the vertex within a nanometre of the merged
+//!   line, same feed, mode, compensation and plane, the auxiliary axes still) become one line
+//!   ([`merge`]): a straight move written as many short lines is then a move alone, an exact
+//!   S-curve, instead of a run of trapezoids at the time-law filter's `J·T_f/2`
+//!   (`straight_short_lines_X.ngc`: 0.422 s → 0.318 s, against 0.261 s in trapezoid mode).
 //! - **Chord runs as curves.** Where a run of lines is dense (two chords at least within the
 //!   axis filters' reach) and turns little at each vertex, its lines take the curve from
 //!   their own budget as an arc does, with the run's curvature estimated over a window of
@@ -189,6 +195,7 @@ pub mod aux_axes;
 mod blend;
 pub mod bounds;
 mod curve;
+mod merge;
 pub mod profile;
 mod refine;
 mod smooth;
@@ -1006,6 +1013,8 @@ pub struct Planner {
     smoother: smooth::ChordSmoother,
     /// The chord refiner after it ([`refine`]).
     refiner: refine::ChordRefiner,
+    /// Collinear lines after them, merged ([`merge`]).
+    merger: merge::CollinearMerger,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -1084,6 +1093,7 @@ impl Planner {
             next_seq: 0,
             provisional: VecDeque::new(),
             curve: curve::CurveState::default(),
+            merger: merge::CollinearMerger::default(),
             smoother: smooth::ChordSmoother::default(),
             refiner,
         })
@@ -1095,7 +1105,8 @@ impl Planner {
         if self.smoothing.is_none() {
             return self.push_item(item, false);
         }
-        // Jerk-limited mode: dense runs of G64 lines pass through the chord smoother first.
+        // Jerk-limited mode: dense runs of G64 lines pass through the chord smoother, then
+        // the refiner, then collinear lines merge.
         let tol_mm = match item {
             Item::Motion(e) => self.blend_tolerance_mm(e.blend),
             _ => 0.0,
@@ -1120,9 +1131,29 @@ impl Planner {
     /// Plans what the chord refiner has passed on.
     fn push_refined(&mut self) -> Result<(), PlanError> {
         while let Some((item, refined)) = self.refiner.out.pop_front() {
-            if let Err(e) = self.push_item(&item, refined) {
+            // A refined chord's pieces go straight on; anything else through the merger.
+            let pushed = if refined {
+                self.merger.flush();
+                self.push_merged()
+                    .and_then(|()| self.push_item(&item, true))
+            } else {
+                self.merger.push(&item);
+                self.push_merged()
+            };
+            if let Err(e) = pushed {
                 self.smoother.out.clear();
                 self.refiner.out.clear();
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Plans what the collinear merger has passed on.
+    fn push_merged(&mut self) -> Result<(), PlanError> {
+        while let Some(item) = self.merger.out.pop_front() {
+            if let Err(e) = self.push_item(&item, false) {
+                self.merger.out.clear();
                 return Err(e);
             }
         }
@@ -1291,6 +1322,8 @@ impl Planner {
         self.push_smoothed()?;
         self.refiner.flush();
         self.push_refined()?;
+        self.merger.flush();
+        self.push_merged()?;
         self.finished = true;
         self.replan(true)?;
         self.curve.reset();
