@@ -38,34 +38,36 @@ pub const COLLINEAR_MM: f64 = 1e-6;
 /// The line held back, and the items ready for the planner.
 #[derive(Debug, Clone, Default)]
 pub(super) struct CollinearMerger {
-    held: Option<Element>,
+    /// The last line, an [`Item::Motion`], while the next may continue it.
+    held: Option<Item>,
     /// What the planner receives next, in order.
     pub out: VecDeque<Item>,
 }
 
 impl CollinearMerger {
     /// Takes the next item; items ready for the planner go to `out`.
-    pub fn push(&mut self, item: &Item) {
-        if let Item::Motion(e) = item
+    pub fn push(&mut self, item: Item) {
+        if let Item::Motion(e) = &item
             && mergeable(e)
         {
-            match self.held.as_mut() {
-                Some(held) if continues(held, e) => held.end_mm = e.end_mm,
-                _ => {
-                    self.flush();
-                    self.held = Some(*e);
-                }
+            if let Some(Item::Motion(held)) = self.held.as_mut()
+                && continues(held, e)
+            {
+                held.end_mm = e.end_mm;
+                return;
             }
+            self.flush();
+            self.held = Some(item);
             return;
         }
         self.flush();
-        self.out.push_back(item.clone());
+        self.out.push_back(item);
     }
 
     /// Passes the held line on.
     pub fn flush(&mut self) {
-        if let Some(e) = self.held.take() {
-            self.out.push_back(Item::Motion(e));
+        if let Some(item) = self.held.take() {
+            self.out.push_back(item);
         }
     }
 }
@@ -115,7 +117,7 @@ mod tests {
     fn merged(text: &str) -> Vec<Item> {
         let mut m = CollinearMerger::default();
         for item in Interpreter::new(text.as_bytes(), "t.ngc", Setup::new(Vector3::zeros())) {
-            m.push(&item.expect("interprets"));
+            m.push(item.expect("interprets"));
         }
         m.flush();
         m.out.into_iter().collect()

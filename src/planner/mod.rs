@@ -1137,7 +1137,7 @@ impl Planner {
                 self.push_merged()
                     .and_then(|()| self.push_item(&item, true))
             } else {
-                self.merger.push(&item);
+                self.merger.push(item);
                 self.push_merged()
             };
             if let Err(e) = pushed {
