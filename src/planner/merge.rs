@@ -20,13 +20,17 @@
 //! both feed moves at the same feed, under the same G64 blend mode (not G61 or G61.1, where a
 //! program asks for the junction), the same cutter compensation and plane, the second
 //! starting exactly where the first ends, in the same direction, and the vertex between them
-//! within [`COLLINEAR_MM`] of the line that replaces them. The merged line carries the first
-//! line's source line and column: a run reports its first line while it moves.
+//! within [`COLLINEAR_MM`] of the line that replaces them. A run merges once it is as long as
+//! [`CollinearMerger::new`]'s `min_mm`; shorter runs pass on as written. The merged line
+//! carries the first line's source line and column: a run reports its first line while it
+//! moves.
 //!
-//! The merger holds the last line until the next item shows whether it continues it; any
-//! other item (an arc, a dwell, a note, a stop, the end) first passes the held line on.
+//! The merger holds the run until the next item shows whether it continues it; any other item
+//! (an arc, a dwell, a note, a stop, the end) first passes the run on.
 
 use std::collections::VecDeque;
+
+use nalgebra::Vector3;
 
 use crate::gcode::{BlendMode, Element, ElementKind, Item};
 
@@ -35,40 +39,80 @@ use crate::gcode::{BlendMode, Element, ElementKind, Item};
 /// stay apart.
 pub const COLLINEAR_MM: f64 = 1e-6;
 
-/// The line held back, and the items ready for the planner.
+/// The run of collinear lines held back, and the items ready for the planner.
 #[derive(Debug, Clone, Default)]
 pub(super) struct CollinearMerger {
-    /// The last line, an [`Item::Motion`], while the next may continue it.
-    held: Option<Item>,
+    /// The lines of the current run, oldest first; one line once merged.
+    run: Vec<Element>,
+    /// Whether the run is merged: as long as [`CollinearMerger::min_mm`] at least.
+    merged: bool,
+    /// Length of the run.
+    run_mm: f64,
+    /// Shortest run merged: see [`CollinearMerger::new`].
+    min_mm: f64,
     /// What the planner receives next, in order.
     pub out: VecDeque<Item>,
 }
 
 impl CollinearMerger {
+    /// A merger of runs at least `min_mm` long. Shorter runs stay as written: where a dense
+    /// chorded curve's written vertices happen to line up (a 50 mm circle of 50 µm chords with
+    /// 4 decimals lines up two or three near its flat parts), one longer chord among the
+    /// short ones is a vertex the axis filters see apart from the curve (1.10 → 1.64× `T_lb`
+    /// on that circle when every such pair merged). The planner takes the axis filters' span
+    /// at the max feed, `2·T_k·F`, beyond which a straight stretch is never part of a curve
+    /// they see.
+    pub fn new(min_mm: f64) -> CollinearMerger {
+        CollinearMerger {
+            min_mm,
+            ..CollinearMerger::default()
+        }
+    }
+
     /// Takes the next item; items ready for the planner go to `out`.
     pub fn push(&mut self, item: Item) {
         if let Item::Motion(e) = &item
             && mergeable(e)
         {
-            if let Some(Item::Motion(held)) = self.held.as_mut()
-                && continues(held, e)
-            {
-                held.end_mm = e.end_mm;
+            let (Some(first), Some(last)) = (self.run.first(), self.run.last()) else {
+                self.start(*e);
+                return;
+            };
+            if !continues(first.start_mm, last, e) {
+                self.flush();
+                self.start(*e);
                 return;
             }
-            self.flush();
-            self.held = Some(item);
+            self.run_mm += (e.end_mm - e.start_mm).norm();
+            if self.merged {
+                self.run[0].end_mm = e.end_mm;
+            } else {
+                self.run.push(*e);
+                if self.run_mm >= self.min_mm {
+                    let end_mm = e.end_mm;
+                    self.run.truncate(1);
+                    self.run[0].end_mm = end_mm;
+                    self.merged = true;
+                }
+            }
             return;
         }
         self.flush();
         self.out.push_back(item);
     }
 
-    /// Passes the held line on.
+    /// Starts a run with `e`.
+    fn start(&mut self, e: Element) {
+        self.run_mm = (e.end_mm - e.start_mm).norm();
+        self.merged = false;
+        self.run.push(e);
+    }
+
+    /// Passes the run on: merged, or as written.
     pub fn flush(&mut self) {
-        if let Some(item) = self.held.take() {
-            self.out.push_back(item);
-        }
+        self.out.extend(self.run.drain(..).map(Item::Motion));
+        self.merged = false;
+        self.run_mm = 0.0;
     }
 }
 
@@ -84,26 +128,26 @@ fn mergeable(e: &Element) -> bool {
             .all(|c| c.is_finite())
 }
 
-/// Whether `next` continues `held` along the same straight line (see the module
-/// documentation).
-fn continues(held: &Element, next: &Element) -> bool {
-    if next.start_mm != held.end_mm
-        || next.rapid != held.rapid
-        || next.feed_mm_s != held.feed_mm_s
-        || next.blend != held.blend
-        || next.comp != held.comp
-        || next.plane != held.plane
-        || next.aux.start != held.aux.end
+/// Whether `next` continues the run from `start_mm` whose last line is `last`, along the same
+/// straight line (see the module documentation).
+fn continues(start_mm: Vector3<f64>, last: &Element, next: &Element) -> bool {
+    if next.start_mm != last.end_mm
+        || next.rapid != last.rapid
+        || next.feed_mm_s != last.feed_mm_s
+        || next.blend != last.blend
+        || next.comp != last.comp
+        || next.plane != last.plane
+        || next.aux.start != last.aux.end
     {
         return false;
     }
-    let (a, b) = (held.end_mm - held.start_mm, next.end_mm - next.start_mm);
+    let (a, b) = (last.end_mm - last.start_mm, next.end_mm - next.start_mm);
     if a.dot(&b) <= 0.0 {
         return false;
     }
     // The vertex's distance from the merged line.
-    let chord = next.end_mm - held.start_mm;
-    let off = held.end_mm - held.start_mm;
+    let chord = next.end_mm - start_mm;
+    let off = last.end_mm - start_mm;
     let l2 = chord.norm_squared();
     l2 > 0.0 && (off - chord * (off.dot(&chord) / l2)).norm() <= COLLINEAR_MM
 }
@@ -112,10 +156,13 @@ fn continues(held: &Element, next: &Element) -> bool {
 mod tests {
     use super::*;
     use crate::gcode::{Interpreter, Setup};
-    use nalgebra::Vector3;
 
     fn merged(text: &str) -> Vec<Item> {
-        let mut m = CollinearMerger::default();
+        merged_from(text, 1.0)
+    }
+
+    fn merged_from(text: &str, min_mm: f64) -> Vec<Item> {
+        let mut m = CollinearMerger::new(min_mm);
         for item in Interpreter::new(text.as_bytes(), "t.ngc", Setup::new(Vector3::zeros())) {
             m.push(item.expect("interprets"));
         }
@@ -141,6 +188,18 @@ mod tests {
             vec![(2, Vector3::zeros(), Vector3::new(2.0, 0.0, 0.0))]
         );
         assert!(matches!(items.last(), Some(Item::End(_))));
+    }
+
+    #[test]
+    fn a_run_shorter_than_the_shortest_merged_stays_as_written() {
+        let text = "G21 G64 P0.01\nG1 X0.5 F600\nX1\nX1.5\nX2\nY1\nX3 Y2\nX4 Y3\nM2\n";
+        // 2 mm along X, then 1 mm along Y, then 2.83 mm along the diagonal.
+        let lines = lines(&merged_from(text, 3.0));
+        assert_eq!(lines.len(), 7, "{lines:?}");
+        let lines = self::lines(&merged_from(text, 2.0));
+        assert_eq!(lines.len(), 3, "{lines:?}");
+        assert_eq!(lines[0].2, Vector3::new(2.0, 0.0, 0.0));
+        assert_eq!(lines[2].1, Vector3::new(2.0, 1.0, 0.0));
     }
 
     #[test]

@@ -146,8 +146,10 @@
 //! - **Collinear lines.** After the smoother and the refiner, G64 lines that continue one
 //!   another exactly along one straight line (the vertex within a nanometre of the merged
 //!   line, same feed, mode, compensation and plane, the auxiliary axes still) become one line
-//!   ([`merge`]): a straight move written as many short lines is then a move alone, an exact
-//!   S-curve, instead of a run of trapezoids at the time-law filter's `J·T_f/2`
+//!   where the run is at least as long as the axis filters' span at the max feed `2·T_k·F`
+//!   ([`merge`]; shorter, it may be a few written vertices of a curve that line up): a
+//!   straight move written as many short lines is then a move alone, an exact S-curve,
+//!   instead of a run of trapezoids at the time-law filter's `J·T_f/2`
 //!   (`straight_short_lines_X.ngc`: 0.422 s → 0.318 s, against 0.261 s in trapezoid mode).
 //! - **Chord runs as curves.** Where a run of lines is dense (two chords at least within the
 //!   axis filters' reach) and turns little at each vertex, its lines take the curve from
@@ -1093,7 +1095,10 @@ impl Planner {
             next_seq: 0,
             provisional: VecDeque::new(),
             curve: curve::CurveState::default(),
-            merger: merge::CollinearMerger::default(),
+            // Straight runs as long as the axis filters' span at the max feed.
+            merger: merge::CollinearMerger::new(smoothing.map_or(0.0, |s| {
+                2.0 * s.axis_s(config.period_s) * limits.max_feed_mm_s
+            })),
             smoother: smooth::ChordSmoother::default(),
             refiner,
         })
