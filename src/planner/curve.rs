@@ -768,29 +768,19 @@ impl Planner {
         };
         let span = if prev.refined { 1.0 } else { 2.0 };
         let baseline = |v_mm_s: f64| (2.0 * w_mm).max(span * v_mm_s * tk);
+        let fit_over = |baseline_mm: f64| {
+            let rate = rate_over(baseline_mm);
+            curve_limits(self, prev.tangent_end, best, rate, v_max, smoothing)
+        };
         let mut baseline_mm = baseline(v_k);
-        let mut fit = curve_limits(
-            self,
-            prev.tangent_end,
-            best,
-            rate_over(baseline_mm),
-            v_max,
-            smoothing,
-        )?;
+        let mut fit = fit_over(baseline_mm)?;
         for _ in 0..RATE_ROUNDS {
             let shorter_mm = baseline(fit.cap_mm_s.min(v_max));
             if shorter_mm >= RATE_SHRINK * baseline_mm {
                 break;
             }
             baseline_mm = shorter_mm;
-            fit = curve_limits(
-                self,
-                prev.tangent_end,
-                best,
-                rate_over(baseline_mm),
-                v_max,
-                smoothing,
-            )?;
+            fit = fit_over(baseline_mm)?;
         }
         Some((fit, s_vertex))
     }
