@@ -381,11 +381,11 @@ fn the_supervision_counting_a_warning_and_losing_a_heartbeat_allocates_nothing()
         let (_, n) = counted(|| {
             for node in 1..=3 {
                 if node != 3 || !silent {
-                    sup.on_frame(now, &hb(node));
+                    sup.on_frame(now, &hb(node), &r.master);
                 }
             }
             if !warned {
-                sup.on_frame(now, &warning);
+                sup.on_frame(now, &warning, &r.master);
             }
             sup.poll(now, &mut r.master);
         });

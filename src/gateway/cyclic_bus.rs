@@ -334,7 +334,7 @@ impl CyclicBus {
         loop {
             match port.recv_any(Duration::ZERO) {
                 Ok(Some(Received::Frame(f))) => {
-                    sup.on_frame(now, &f);
+                    sup.on_frame(now, &f, master);
                     master.on_frame(&f);
                 }
                 Ok(Some(Received::Error(e))) => self.on_error_frame(&e, master, cycle),

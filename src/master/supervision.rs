@@ -14,7 +14,9 @@
 //!   bit (3) a fault, [`Alarm::Emcy`], which stops the group; without it a warning (bit 7, or a
 //!   communication warning), counted in [`Supervision::warnings`] and the run goes on. The EMCY
 //!   can arrive before the TPDO that carries the fault bit: one seen without it waits for a TPDO
-//!   received in a later cycle.
+//!   received in a later cycle. An EMCY from a drive whose TPDO before it already showed the
+//!   fault bit did not fault it: it is counted as a warning (no new alarm, e.g. after a reset
+//!   while the drive's fault reset is on its way).
 //! - **Boot-up during the run**: the master freezes the node in its own
 //!   [`CyclicMaster::on_frame`] (at once, in the cycle that reads it); here a boot-up counts as
 //!   the node's heartbeat (it is one, state 0).
@@ -74,6 +76,12 @@ struct PendingEmcy {
     code: u16,
     /// The master's cycle number when a poll first saw it (`None` until then).
     seen_cycle: Option<u64>,
+    /// The drive's last TPDO before the EMCY already showed the fault bit: the EMCY is not what
+    /// faulted it (a drive in fault reports, say, a SYNC it missed meanwhile). The fault itself
+    /// is the master's (its statusword check, or the alarm standing); such an EMCY is counted as
+    /// a warning, and never raises a new alarm, also not once the alarm is reset while the
+    /// drive's fault reset is still on its way.
+    faulted_before: bool,
 }
 
 /// The supervision of one run's drives (see the module documentation).
@@ -117,8 +125,9 @@ impl Supervision {
     }
 
     /// A frame received at `now`: a heartbeat (or boot-up) or an EMCY of one of the axes'
-    /// nodes; anything else is ignored.
-    pub fn on_frame(&mut self, now: Duration, f: &Frame) {
+    /// nodes; anything else is ignored. `master` is as it was before the frame (its feedback
+    /// tells whether the drive was in fault already).
+    pub fn on_frame(&mut self, now: Duration, f: &Frame, master: &CyclicMaster) {
         if f.is_remote() {
             return;
         }
@@ -138,7 +147,10 @@ impl Supervision {
             && e.code != 0
             && let Some(i) = self.axis(e.node)
         {
-            self.emcy(i, e.code);
+            let faulted = master
+                .feedback(i)
+                .is_some_and(|fb| fb.statusword & swb::FAULT != 0);
+            self.emcy(i, e.code, faulted);
         }
     }
 
@@ -155,17 +167,18 @@ impl Supervision {
         if code != 0
             && let Some(i) = self.axis(node)
         {
-            self.emcy(i, code);
+            self.emcy(i, code, false);
         }
     }
 
-    fn emcy(&mut self, axis: usize, code: u16) {
+    fn emcy(&mut self, axis: usize, code: u16, faulted_before: bool) {
         match self.pending.get_mut(self.pending_len) {
             Some(slot) => {
                 *slot = Some(PendingEmcy {
                     axis,
                     code,
                     seen_cycle: None,
+                    faulted_before,
                 });
                 self.pending_len += 1;
             }
@@ -203,7 +216,7 @@ impl Supervision {
             let seen = *p.seen_cycle.get_or_insert(master.cycle_number());
             let keep = match master.feedback(p.axis) {
                 None => true,
-                Some(fb) if fb.statusword & swb::FAULT != 0 => {
+                Some(fb) if fb.statusword & swb::FAULT != 0 && !p.faulted_before => {
                     master.alarm(
                         self.nodes[p.axis],
                         Alarm::Emcy {
@@ -318,7 +331,7 @@ mod tests {
         let mut sup = Supervision::new(&m);
         let consumer = sup.consumer();
         let hb = Frame::new(cob::HEARTBEAT + 2, &[NmtState::Operational.byte()]).unwrap();
-        sup.on_frame(10 * MS, &hb);
+        sup.on_frame(10 * MS, &hb, &master);
         // Exactly the consumer time: still fine; one nanosecond more: lost.
         sup.poll(10 * MS + consumer, &mut master);
         assert_eq!(master.failure(), None);
@@ -352,7 +365,7 @@ mod tests {
         master.on_frame(&tpdo(&master, 0, 0x0237));
         cycle(&mut master);
         // The EMCY arrives first; the TPDO of the same cycle still shows no fault: it waits.
-        sup.on_frame(MS, &emcy(1, 0x2310));
+        sup.on_frame(MS, &emcy(1, 0x2310), &master);
         master.on_frame(&tpdo(&master, 0, 0x0237));
         sup.poll(MS, &mut master);
         assert_eq!(master.failure(), None);
@@ -372,12 +385,59 @@ mod tests {
     }
 
     #[test]
+    fn an_emcy_from_a_drive_already_in_fault_raises_no_new_alarm_after_the_reset() {
+        // `canmotion serve`: node 1 faults (its EMCY, then the fault bit): the alarm. While it
+        // stands, the faulted drive reports a SYNC it missed (a late wake-up of the host); the
+        // operator's reset comes before the drive's next TPDO, which still shows the fault (its
+        // fault reset is on its way). The late EMCY is no new alarm: the drive was in fault
+        // before it.
+        let m = Machine::demo();
+        let mut master = CyclicMaster::service(&m);
+        let mut sup = Supervision::new(&m);
+        master.on_frame(&tpdo(&master, 0, 0x0250));
+        cycle(&mut master);
+        sup.on_frame(MS, &emcy(1, 0x2310), &master);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(MS, &mut master);
+        let code = |master: &CyclicMaster| match master.failure().map(|f| &f.alarm) {
+            Some(Alarm::Emcy { code, .. }) => Some(*code),
+            _ => None,
+        };
+        assert_eq!(code(&master), Some(0x2310));
+        cycle(&mut master);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(2 * MS, &mut master);
+        cycle(&mut master);
+        sup.on_frame(3 * MS, &emcy(1, 0x8100), &master);
+        master.reset_alarm().expect("reset");
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(3 * MS, &mut master);
+        cycle(&mut master);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(4 * MS, &mut master);
+        assert_eq!(master.failure(), None);
+        // Told to the run's summary as what the drive reported.
+        let w = &sup.warnings()[0];
+        assert_eq!((w.node, w.code, w.count), (1, 0x8100, 1));
+        // A drive that faults anew after the reset (its TPDO without the fault bit before the
+        // EMCY) is an alarm again.
+        cycle(&mut master);
+        master.on_frame(&tpdo(&master, 0, 0x0250));
+        sup.poll(5 * MS, &mut master);
+        cycle(&mut master);
+        sup.on_frame(6 * MS, &emcy(1, 0x2310), &master);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(6 * MS, &mut master);
+        assert_eq!(code(&master), Some(0x2310));
+    }
+
+    #[test]
     fn an_emcy_without_the_fault_bit_in_a_later_tpdo_is_a_counted_warning() {
         let m = Machine::demo();
         let mut master = CyclicMaster::new(&m);
         let mut sup = Supervision::new(&m);
         for k in 1..=3u64 {
-            sup.on_frame(MS, &emcy(3, 0x4210));
+            sup.on_frame(MS, &emcy(3, 0x4210), &master);
             master.on_frame(&tpdo(&master, 2, 0x0237 | sw::WARNING));
             sup.poll(MS, &mut master);
             // Seen in this cycle; the TPDO read with it does not count as later.
