@@ -29,8 +29,9 @@
 //! - **Limits.** The lines either side of the vertex take the curve of curvature `κ` (normal
 //!   `N`, tangent `T`) within [`CURVE_BUDGET`] of each axis's limits, and the rate at which
 //!   its curvature vector changes beyond its turn, `ρ = d(κN)/ds + κ²·T` (estimated over at
-//!   least twice the window and the axis filters' span `2·v·T_k`): at constant speed the jerk
-//!   of following it is `v³·(κ²·|Tᵢ| + |ρᵢ|)`. The run's cap holds the centripetal
+//!   least twice the window and the axis filters' span `2·v·T_k`, from the curvature
+//!   estimated at every vertex of the run, taken as a curve or not): at constant speed the
+//!   jerk of following it is `v³·(κ²·|Tᵢ| + |ρᵢ|)`. The run's cap holds the centripetal
 //!   acceleration `v²κ·|Nᵢ|` within [`CENTRIPETAL_SHARE`] of that budget and this jerk within
 //!   [`CURVE_JERK_SHARE`]: a steady curve uses most of `A` and `J`, as `T_lb` counts.
 //! - **The tangential acceleration at speed.** Where the speed changes, the budget left at
@@ -492,6 +493,13 @@ impl Planner {
         }
         self.curve.chords.push_back((p.tangent_start, p_mid));
         let (estimate, s_vertex_mm) = self.curve_estimate(prev, &smoothing)?;
+        // Every estimate goes into the record the curvature's rate is taken from, the vertex
+        // taken or not: a rate over a baseline that skipped the vertices not taken reached
+        // back to the last one taken, and understated a curvature that turns between.
+        if self.curve.kappas.len() >= CHORD_HISTORY {
+            self.curve.kappas.pop_front();
+        }
+        self.curve.kappas.push_back((estimate.curvature(), s_vertex_mm));
         // Dense chords only: at least two within the axis filters' reach at the speed the
         // curve allows, so that the filters' output follows the curve. Sparser vertices are
         // steps of the axis velocity each, which the junction rules hold.
@@ -530,10 +538,6 @@ impl Planner {
         }
         let reach_mm = cap * t_f;
         self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
-        if self.curve.kappas.len() >= CHORD_HISTORY {
-            self.curve.kappas.pop_front();
-        }
-        self.curve.kappas.push_back((fit.curvature(), s_vertex_mm));
         // The element after the vertex plans with the tangential acceleration the curve
         // leaves at its speed ([`Pending::curve_acc`]): not passed on through further
         // junctions as the lower of two accelerations is, since one noisy vertex would slow a
