@@ -767,7 +767,7 @@ proptest! {
     /// periods of axis filter) the jerk-limited setpoints keep every axis's limits and the
     /// tolerance.
     #[test]
-    #[ignore = "issue 11: breaks Z's jerk by up to 4.7 % (measured 2026-11-27, session 19): the time-law filter's window spans pieces whose curve leaves them different tangential accelerations, and each charges only its own; with the curvature's rate over twice the filters' span at the curvature's speed, 1.7 % on such profiles"]
+    #[ignore = "issue 11: breaks Z's jerk by up to 4.4 % (measured 2026-11-28, session 20): the time-law filter's output at a point takes the plan's accelerations up to c*T_f/2 either side, and each line charges only its own curve's budget; planning each line with the curves within that reach (coefficient-wise maximum, README session 20) passes 2 x 1000 cases but made the look-ahead 7-10x slower on 200 000 spiral chords"]
     fn chorded_profiles_of_changing_curvature_keep_every_limit(
         pieces in prop::collection::vec((-0.3..0.3f64, 0.3..1.5f64), 20..40),
         chord_mm in 0.12..0.5f64,

@@ -499,7 +499,9 @@ impl Planner {
         if self.curve.kappas.len() >= CHORD_HISTORY {
             self.curve.kappas.pop_front();
         }
-        self.curve.kappas.push_back((estimate.curvature(), s_vertex_mm));
+        self.curve
+            .kappas
+            .push_back((estimate.curvature(), s_vertex_mm));
         // Dense chords only: at least two within the axis filters' reach at the speed the
         // curve allows, so that the filters' output follows the curve. Sparser vertices are
         // steps of the axis velocity each, which the junction rules hold.
