@@ -14,9 +14,9 @@
 //!   bit (3) a fault, [`Alarm::Emcy`], which stops the group; without it a warning (bit 7, or a
 //!   communication warning), counted in [`Supervision::warnings`] and the run goes on. The EMCY
 //!   can arrive before the TPDO that carries the fault bit: one seen without it waits for a TPDO
-//!   received in a later cycle. An EMCY from a drive whose TPDO before it already showed the
-//!   fault bit did not fault it: it is counted as a warning (no new alarm, e.g. after a reset
-//!   while the drive's fault reset is on its way).
+//!   received in a later cycle. An EMCY from a drive in a fault already reported (its TPDO
+//!   before it showed the fault bit, an alarm named it) did not fault it: it is counted as a
+//!   warning (no new alarm, e.g. after a reset while the drive's fault reset is on its way).
 //! - **Boot-up during the run**: the master freezes the node in its own
 //!   [`CyclicMaster::on_frame`] (at once, in the cycle that reads it); here a boot-up counts as
 //!   the node's heartbeat (it is one, state 0).
@@ -76,11 +76,12 @@ struct PendingEmcy {
     code: u16,
     /// The master's cycle number when a poll first saw it (`None` until then).
     seen_cycle: Option<u64>,
-    /// The drive's last TPDO before the EMCY already showed the fault bit: the EMCY is not what
-    /// faulted it (a drive in fault reports, say, a SYNC it missed meanwhile). The fault itself
-    /// is the master's (its statusword check, or the alarm standing); such an EMCY is counted as
-    /// a warning, and never raises a new alarm, also not once the alarm is reset while the
-    /// drive's fault reset is still on its way.
+    /// The drive was in a fault already reported when the EMCY came (its last TPDO showed the
+    /// fault bit, and an alarm named it): the EMCY is not what faulted it (a drive in fault
+    /// reports, say, a SYNC it missed meanwhile). Such an EMCY is counted as a warning and
+    /// raises no new alarm, also not once the alarm is reset while the drive's fault reset is
+    /// still on its way. A fault not reported yet (its EMCY later than the TPDO) still raises
+    /// one.
     faulted_before: bool,
 }
 
@@ -96,6 +97,9 @@ pub struct Supervision {
     pending_len: usize,
     lost_emcys: u64,
     warnings: Vec<Warning>,
+    /// Per axis: the drive is in fault (its last TPDO shows the bit) and that fault is
+    /// reported: an alarm names its node, or an EMCY of it raised one.
+    fault_reported: [bool; MAX_AXES],
 }
 
 impl Supervision {
@@ -117,6 +121,7 @@ impl Supervision {
             pending_len: 0,
             lost_emcys: 0,
             warnings: Vec::with_capacity(WARNING_KINDS),
+            fault_reported: [false; MAX_AXES],
         }
     }
 
@@ -147,9 +152,10 @@ impl Supervision {
             && e.code != 0
             && let Some(i) = self.axis(e.node)
         {
-            let faulted = master
-                .feedback(i)
-                .is_some_and(|fb| fb.statusword & swb::FAULT != 0);
+            let faulted = self.fault_reported[i]
+                && master
+                    .feedback(i)
+                    .is_some_and(|fb| fb.statusword & swb::FAULT != 0);
             self.emcy(i, e.code, faulted);
         }
     }
@@ -189,6 +195,14 @@ impl Supervision {
     /// Once per cycle at `now`, before [`CyclicMaster::cycle`]: raise on `master` a lost
     /// heartbeat and every fault EMCY, and count the warnings.
     pub fn poll(&mut self, now: Duration, master: &mut CyclicMaster) {
+        let named = master.failure().and_then(|f| f.alarm.node());
+        for i in 0..self.n {
+            let in_fault = master
+                .feedback(i)
+                .is_some_and(|fb| fb.statusword & swb::FAULT != 0);
+            self.fault_reported[i] =
+                in_fault && (self.fault_reported[i] || named == Some(self.nodes[i]));
+        }
         for i in 0..self.n {
             if let Some(at) = self.last_heartbeat[i] {
                 let silent = now.saturating_sub(at);
@@ -217,6 +231,7 @@ impl Supervision {
             let keep = match master.feedback(p.axis) {
                 None => true,
                 Some(fb) if fb.statusword & swb::FAULT != 0 && !p.faulted_before => {
+                    self.fault_reported[p.axis] = true;
                     master.alarm(
                         self.nodes[p.axis],
                         Alarm::Emcy {
@@ -429,6 +444,29 @@ mod tests {
         master.on_frame(&tpdo(&master, 0, 0x0218));
         sup.poll(6 * MS, &mut master);
         assert_eq!(code(&master), Some(0x2310));
+    }
+
+    #[test]
+    fn the_late_emcy_of_a_fault_no_alarm_reported_is_an_alarm() {
+        // A drive that faults while disabled, its EMCY later than the TPDO with the fault bit
+        // (an EMCY inhibit time, say): nothing reported that fault yet, so its EMCY does.
+        let m = Machine::demo();
+        let mut master = CyclicMaster::service(&m);
+        let mut sup = Supervision::new(&m);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(MS, &mut master);
+        cycle(&mut master);
+        sup.on_frame(2 * MS, &emcy(1, 0x2310), &master);
+        master.on_frame(&tpdo(&master, 0, 0x0218));
+        sup.poll(2 * MS, &mut master);
+        assert_eq!(
+            master.failure().map(|f| &f.alarm),
+            Some(&Alarm::Emcy {
+                axis: "X",
+                node: 1,
+                code: 0x2310
+            })
+        );
     }
 
     #[test]
