@@ -516,9 +516,11 @@ fn dense_low_caps_are_a_plateau_not_stops() {
         .filter(|s| s.line > 2 && s.line < 401 && s.v_end_mm_s == 0.0)
         .count();
     // 304 of the 398 vertices stopped (9.05 s) before the plateaus; a few remain where
-    // the run of low caps begins, before any is known to be dense.
+    // the run of low caps begins, before any is known to be dense (8, 0.95 s, before the
+    // lines planned with the curves within the time-law filter's reach in session 21; 12,
+    // 1.20 s, since).
     assert!(
-        stops < 10,
+        stops < 16,
         "{stops} stops on the arc ({} s)",
         plan.duration_s()
     );
@@ -767,7 +769,6 @@ proptest! {
     /// periods of axis filter) the jerk-limited setpoints keep every axis's limits and the
     /// tolerance.
     #[test]
-    #[ignore = "issue 11: breaks Z's jerk by up to 4.4 % (measured 2026-11-28, session 20): the time-law filter's output at a point takes the plan's accelerations up to c*T_f/2 either side, and each line charges only its own curve's budget; planning each line with the curves within that reach (coefficient-wise maximum, README session 20) passes 2 x 1000 cases but made the look-ahead 7-10x slower on 200 000 spiral chords"]
     fn chorded_profiles_of_changing_curvature_keep_every_limit(
         pieces in prop::collection::vec((-0.3..0.3f64, 0.3..1.5f64), 20..40),
         chord_mm in 0.12..0.5f64,

@@ -49,6 +49,26 @@
 //!   within reach; the walks that check a change against that speed
 //!   ([`Planner::can_come_down`], [`Planner::can_stop_with`]) take the acceleration valid up
 //!   to each element's cap, or the backward pass's own reach where that is not enough.
+//! - **The filter's reach.** The time-law filter's output at a point has the jerk
+//!   `(a⁺ − a⁻)/T_f` and the acceleration the mean of `a` over `T_f`, with `a⁺`, `a⁻` the
+//!   plan's accelerations where it is at the two ends of the filter's window, up to `c·T_f/2`
+//!   either side of that point at the cap `c` (the erosion below holds it there). So the
+//!   budget a point's curve leaves for `2·a_t/T_f` must hold for the acceleration of every
+//!   line within that reach, not its own only: each line plans with the curves within reach
+//!   of it too, taken together coefficient by coefficient (each axis's share of the
+//!   tangential acceleration `|Tᵢ|`, of the centripetal `κ·|Nᵢ|`, and of the jerk of following
+//!   the curve `κ²·|Tᵢ| + |ρᵢ|`, the larger: [`Charge`], [`CurveFit::worst`]): those before
+//!   the vertex back through the window where the look-ahead's backward pass still comes
+//!   down to the speed the plan has settled ([`Planner::merge_back`]; else the vertex keeps
+//!   the old rules), those after it as they come. With each line's own curve only, a
+//!   curvature that steps from 0.3 to −0.3 /mm between pieces of 0.3–1.5 mm broke Z's jerk
+//!   by 4.7 % (`tests/planner_limits.rs`,
+//!   `chorded_profiles_of_changing_curvature_keep_every_limit`). The rounding of the written
+//!   coordinates makes the curvature's rate, and with it `qᵢ`, noisy by a factor of two
+//!   from vertex to vertex: the walk back is skipped where the charge taken back last (a
+//!   little wider, [`WIDEN`], and the larger of those taken within the last reach) covers
+//!   the vertex's, and takes only the lines whose charge does not; on 200 000 spiral chords
+//!   it walks at about one vertex in 25.
 //! - **The vertex's own rules.** The junction rules then charge the vertex only what it
 //!   turns beyond the curve, `Δu − κ·L̄` (its velocity step against the curve's, the corner
 //!   its filters cut beyond the pull the interpolator pre-compensates), not the curve
@@ -101,6 +121,14 @@ const CENTRIPETAL_SHARE: f64 = 0.9;
 /// Share of that budget the jerk of following the curve, `v³κ²·|Tᵢ|`, may take at the cap.
 const CURVE_JERK_SHARE: f64 = 0.8;
 
+/// How much wider a curve's charge is taken for its neighbours ([`Charge::widened`]).
+const WIDEN: f64 = 0.02;
+
+/// How much further back than the time-law filter's reach a curve is taken by the lines
+/// before it ([`Planner::merge_back`]): the reach varies with the noisy cap from vertex to
+/// vertex, and a walk back is needed only where a vertex's reach goes beyond the last one's.
+const BACK_MARGIN: f64 = 1.25;
+
 /// Relative step of the grid the caps are rounded down to.
 pub(super) const CAP_STEP: f64 = 0.01;
 
@@ -115,8 +143,33 @@ pub(super) struct CurveState {
     /// Caps that hold ahead: `(until_mm, cap_mm_s)`, every element starting before `until_mm`
     /// capped at `cap_mm_s` (path distances as [`CurveState::pushed_mm`]).
     ahead: Vec<(f64, f64)>,
+    /// Curves that hold ahead: `(until_mm, charge)`, every line of a chord run starting
+    /// before `until_mm` planning its tangential acceleration with `charge` too
+    /// ([`Planner::take_curve_vertex`], [`CurveState::worst_ahead`]).
+    ahead_fits: VecDeque<(f64, Charge)>,
+    /// The last charge taken back through the window ([`Planner::merge_back`]): from where
+    /// (path distance), until where it is held ahead, and the charge (widened, with those
+    /// taken back within the reach before it).
+    last_back: Option<(f64, f64, Charge)>,
     /// Path distance at the end of everything pushed (blends' trims taken off).
     pub(super) pushed_mm: f64,
+    /// What [`Planner::merge_back`] changed (kept to reuse its memory).
+    undo: Vec<Changed>,
+    /// The [`Pending::reach_memo`]s [`Planner::merge_back`]'s backward pass replaced, with
+    /// their window's indices.
+    memos: Vec<(usize, Option<(f64, f64)>)>,
+}
+
+/// A line [`Planner::merge_back`] changed, as it was.
+#[derive(Debug, Clone, Copy)]
+struct Changed {
+    /// Its index in the window.
+    at: usize,
+    charge: Charge,
+    /// Its [`Pending::reach_memo`].
+    memo: Option<(f64, f64)>,
+    /// Its [`Pending::acc_floor_mm_s2`].
+    floor_mm_s2: f64,
 }
 
 impl CurveState {
@@ -124,6 +177,8 @@ impl CurveState {
     pub(super) fn reset(&mut self) {
         self.end_run();
         self.ahead.clear();
+        self.ahead_fits.clear();
+        self.last_back = None;
     }
 
     /// Ends the run of chords (a corner blended).
@@ -136,6 +191,38 @@ impl CurveState {
     pub(super) fn cap_at(&mut self, at_mm: f64) -> Option<f64> {
         self.ahead.retain(|&(until, _)| until > at_mm);
         self.ahead.iter().map(|&(_, c)| c).reduce(f64::min)
+    }
+
+    /// `fit` made to charge every axis what the curves held ahead at `at_mm` do
+    /// ([`CurveFit::worst`]), forgetting those that ended.
+    fn worst_ahead(&mut self, at_mm: f64, fit: CurveFit) -> CurveFit {
+        let mut worst = fit.charge;
+        let mut ended = false;
+        for (until, c) in &self.ahead_fits {
+            if *until > at_mm {
+                worst = worst.sup(c);
+            } else {
+                ended = true;
+            }
+        }
+        if ended {
+            self.ahead_fits.retain(|&(until, _)| until > at_mm);
+        }
+        fit.worst(&worst)
+    }
+
+    fn hold_fit_ahead(&mut self, until_mm: f64, charge: Charge) {
+        // Dominated entries go: one charging at least as much that holds as far.
+        if self
+            .ahead_fits
+            .iter()
+            .any(|(until, c)| *until >= until_mm && c.covers(&charge))
+        {
+            return;
+        }
+        self.ahead_fits
+            .retain(|(until, c)| !(*until <= until_mm && charge.covers(c)));
+        self.ahead_fits.push_back((until_mm, charge));
     }
 
     fn hold_ahead(&mut self, until_mm: f64, cap_mm_s: f64) {
@@ -169,6 +256,60 @@ fn on_grid(c: f64) -> f64 {
     if g > c { c } else { g }
 }
 
+/// A curve's charge on each axis `i` per unit of the time law, for
+/// [`CurveFit::acc_at`]: at the speed `w` and the tangential acceleration `a_t` the
+/// acceleration `a_t·tᵢ + w²·mᵢ` and the jerk `(2·a_t/T_f)·tᵢ + w³·qᵢ + 3·w·a_t·mᵢ`. Fits
+/// within the time-law filter's reach of each other are taken together coefficient by
+/// coefficient ([`CurveFit::worst`]): the filter's output at a point follows that point's
+/// curve, with the tangential acceleration of the plan around it.
+#[derive(Debug, Clone, Copy)]
+struct Charge {
+    /// `|Tᵢ|`.
+    t: Vector3<f64>,
+    /// `κ·|Nᵢ|`.
+    m: Vector3<f64>,
+    /// `κ²·|Tᵢ| + |ρᵢ|`, with `ρ` the curvature's rate beyond its turn.
+    q: Vector3<f64>,
+}
+
+impl Charge {
+    /// Each coefficient the larger of `self`'s and `other`'s.
+    fn sup(&self, other: &Charge) -> Charge {
+        Charge {
+            t: self.t.sup(&other.t),
+            m: self.m.sup(&other.m),
+            q: self.q.sup(&other.q),
+        }
+    }
+
+    /// Whether every coefficient of `self` is at least `other`'s.
+    fn covers(&self, other: &Charge) -> bool {
+        let ge = |a: &Vector3<f64>, b: &Vector3<f64>| (0..3).all(|i| a[i] >= b[i]);
+        ge(&self.t, &other.t) && ge(&self.m, &other.m) && ge(&self.q, &other.q)
+    }
+
+    /// The charge a little wider ([`WIDEN`] of each coefficient and of the largest it may
+    /// have on a curve of curvature `kappa`: `1` for a share of the tangent, `κ`, `κ²`), so
+    /// that it covers those of the vertices after it on a curve that changes slowly.
+    fn widened(&self, kappa: f64) -> Charge {
+        let widen = |c: Vector3<f64>, most: f64| c.map(|x| x * (1.0 + WIDEN) + WIDEN * most);
+        Charge {
+            t: widen(self.t, 1.0),
+            m: widen(self.m, kappa),
+            q: widen(self.q, kappa * kappa),
+        }
+    }
+
+    fn of(tangent: Vector3<f64>, normal: Vector3<f64>, kappa: f64, rate: Vector3<f64>) -> Charge {
+        let t = tangent.abs();
+        Charge {
+            t,
+            m: normal.abs() * kappa,
+            q: t * (kappa * kappa) + rate.abs(),
+        }
+    }
+}
+
 /// What a line of a chord run uses of each axis on its curve, at a speed: kept with the
 /// element ([`Pending::curve_fit`]) so that the junction at its end can take it at the speed
 /// the junction allows ([`Planner::curve_junction_mm_s`]), and ([`Pending::curve_acc`]) so
@@ -183,6 +324,8 @@ pub(super) struct CurveFit {
     /// tangent (`d(κN)/ds + κ²·T = κ'·N + κτ·B`): at constant speed `v`, `v³·|rateᵢ|` of
     /// jerk on each axis besides the `v³κ²·|Tᵢ|` of the turn.
     rate: Vector3<f64>,
+    /// What it charges each axis per unit of speed and acceleration ([`CurveFit::acc_at`]).
+    charge: Charge,
     /// The element's tangential acceleration by its other rules (a ceiling).
     acc_mm_s2: f64,
     /// The line's own use, before the curve.
@@ -205,23 +348,57 @@ impl CurveFit {
         self.normal * self.kappa
     }
 
+    /// A fit that charges every axis at least what `self` and `charge` charge it at any
+    /// speed and tangential acceleration: each of its coefficients the larger of the two. Its
+    /// [`acc_at`](Self::acc_at) is at most `self`'s. The geometry (`tangent`, `normal`,
+    /// `kappa`, `rate`) stays `self`'s: [`use_at`](Self::use_at) charges the element's own.
+    fn worst(&self, charge: &Charge) -> CurveFit {
+        CurveFit {
+            charge: self.charge.sup(charge),
+            ..*self
+        }
+    }
+
+    /// The fit for an element whose speed is held within `v_mm_s`: its acceleration need hold
+    /// up to there only ([`acc_at`](Self::acc_at) takes the cap as the highest speed).
+    fn within(self, v_mm_s: f64) -> CurveFit {
+        CurveFit {
+            cap_mm_s: self.cap_mm_s.min(v_mm_s),
+            ..self
+        }
+    }
+
+    /// Whether `self` and `other`, both charging `charge`, have the same
+    /// [`acc_at`](Self::acc_at) but for their caps.
+    fn same_but_cap(&self, other: &CurveFit) -> bool {
+        self.acc_mm_s2 == other.acc_mm_s2
+            && self.acc_budget_mm_s2 == other.acc_budget_mm_s2
+            && self.jerk_budget_mm_s3 == other.jerk_budget_mm_s3
+            && self.t_f == other.t_f
+    }
+
+    /// The fit with the tangent `tangent` (the line after the vertex).
+    fn with_tangent(mut self, tangent: Vector3<f64>) -> CurveFit {
+        self.tangent = tangent;
+        self.charge = Charge::of(tangent, self.normal, self.kappa, self.rate);
+        self
+    }
+
     /// The largest tangential acceleration `a_t` whose time law keeps every axis within its
     /// budget at the speed `w`: the acceleration `a_t·|Tᵢ| + w²κ·|Nᵢ|` and the jerk
     /// `(j_t + w³κ²)·|Tᵢ| + 3·w·κ·a_t·|Nᵢ|`, with the time law's jerk `j_t ≤ 2·a_t/T_f` (the
     /// filter's window sees the plan's acceleration change by at most `2·a_t`). Falls with `w`.
     fn acc_raw(&self, w: f64) -> f64 {
-        let k = self.kappa;
-        let (a_n, w3) = (w * w * k, w * w * w);
+        let Charge { t, m, q } = &self.charge;
+        let (w2, w3) = (w * w, w * w * w);
         let mut a_t = self.acc_mm_s2;
         for i in 0..3 {
-            let (t_i, n_i) = (self.tangent[i].abs(), self.normal[i].abs());
-            if t_i > 0.0 {
-                a_t = a_t.min((self.acc_budget_mm_s2[i] - a_n * n_i) / t_i);
+            if t[i] > 0.0 {
+                a_t = a_t.min((self.acc_budget_mm_s2[i] - w2 * m[i]) / t[i]);
             }
-            let j_curve = w3 * (k * k * t_i + self.rate[i].abs());
-            let per_acc = 2.0 * t_i / self.t_f + 3.0 * w * k * n_i;
+            let per_acc = 2.0 * t[i] / self.t_f + 3.0 * w * m[i];
             if per_acc > 0.0 {
-                a_t = a_t.min((self.jerk_budget_mm_s3[i] - j_curve) / per_acc);
+                a_t = a_t.min((self.jerk_budget_mm_s3[i] - w3 * q[i]) / per_acc);
             }
         }
         a_t.max(0.0)
@@ -234,6 +411,10 @@ impl CurveFit {
     /// `acc_raw(v)` are valid (each is at most `acc_raw` at its own `w`), rising to the fixed
     /// point; the third is taken.
     pub(super) fn acc_at(&self, v_mm_s: f64) -> f64 {
+        if v_mm_s >= self.cap_mm_s {
+            // Every iterate is at `v_mm_s` itself.
+            return self.acc_raw(v_mm_s);
+        }
         let a0 = self.acc_raw(v_mm_s.min(self.cap_mm_s));
         let a1 = self.acc_raw(self.reach_in_t_f(v_mm_s, a0));
         let a2 = self.acc_raw(self.reach_in_t_f(v_mm_s, a1));
@@ -441,6 +622,7 @@ fn curve_limits(
         normal: n,
         kappa: k,
         rate,
+        charge: Charge::of(tangent, n, k, rate),
         acc_mm_s2: cfg.path_acc_mm_s2,
         base_acc_used_mm_s2: Vector3::zeros(),
         base_jerk_used_mm_s3: Vector3::zeros(),
@@ -459,6 +641,29 @@ fn curve_limits(
 }
 
 impl Planner {
+    /// Keeps, for the lines of chord runs among the window's last `count` elements (just
+    /// pushed), the pair the look-ahead's backward pass takes from a stop at the window's
+    /// end ([`Pending::reach_memo`]): their bounds then never fall below that as the bound
+    /// after them rises with more elements ([`reach_with`] alone is not monotone in it), so
+    /// that what the walks check against now stays within reach.
+    pub(super) fn memo_pushed(&mut self, count: usize) {
+        let n = self.window.len();
+        let mut v_next = 0.0;
+        for k in (n.saturating_sub(count)..n).rev() {
+            let e = &mut self.window[k];
+            if e.curve_acc.is_none() {
+                return;
+            }
+            let Some((v, a, valid)) = reach_mm_s(e, v_next, e.limits.v_max_mm_s()) else {
+                return;
+            };
+            if a.is_finite() {
+                e.reach_memo = Some((a, valid));
+            }
+            v_next = v.min(e.cap_start_mm_s);
+        }
+    }
+
     /// Takes the vertex from the window's last element into `p` as a point of a curve where
     /// it is one: caps the last element (and those within reach of it) with the curve's
     /// limits, records the cap for the elements to come, and marks the vertex covered
@@ -538,18 +743,70 @@ impl Planner {
             (prev.acc_used_mm_s2, prev.jerk_used_mm_s3) = (acc_used, jerk_used);
             return None;
         }
+        // The time-law filter's output at a point is made of the plan's accelerations up to
+        // `cap·T_f/2` either side of it (module documentation): the lines within that of
+        // the vertex plan their tangential acceleration with its curve too, those before it
+        // here, those after it as they come. Where the charge taken back last covers the
+        // vertex's, from as far back and held ahead up to the line before the vertex, the
+        // lines within reach already plan with at least this curve's: it is held further
+        // ahead, and the walk back is not needed.
+        let fit_reach_mm = 0.5 * cap * t_f;
+        let wide = fit.charge.widened(fit.kappa);
+        let from_mm = self.curve.pushed_mm - fit_reach_mm;
+        let prev_start_mm =
+            self.curve.pushed_mm - self.window.back().expect("checked above").seg.length_mm;
+        let until_mm = self.curve.pushed_mm + fit_reach_mm;
+        let covering = self
+            .curve
+            .last_back
+            .filter(|&(back_from_mm, last_until_mm, c)| {
+                back_from_mm <= from_mm
+                    && from_mm - back_from_mm <= fit_reach_mm
+                    && prev_start_mm < last_until_mm
+                    && c.covers(&fit.charge)
+            });
+        if let Some((back_from_mm, last_until_mm, c)) = covering {
+            if until_mm > last_until_mm {
+                self.curve.last_back = Some((back_from_mm, until_mm, c));
+                self.curve.hold_fit_ahead(until_mm, c);
+            }
+        } else {
+            // A recent one's charge (taken back within the last reach) is kept with it: the
+            // rounding's noise on the estimates then rarely exceeds what the lines already
+            // plan with. The walk goes a little further back than the reach
+            // ([`BACK_MARGIN`]), whose noise would otherwise end the cover at most vertices.
+            let (back_from_mm, wide) = match self.curve.last_back {
+                Some((b, _, c)) if b <= from_mm && from_mm - b <= fit_reach_mm => (
+                    b.min(self.curve.pushed_mm - BACK_MARGIN * fit_reach_mm),
+                    c.sup(&wide),
+                ),
+                _ => (self.curve.pushed_mm - BACK_MARGIN * fit_reach_mm, wide),
+            };
+            if !self.merge_back(&fit.charge, &wide, self.curve.pushed_mm - back_from_mm) {
+                let prev = self.window.back_mut().expect("checked above");
+                prev.curve_fit = None;
+                (prev.acc_used_mm_s2, prev.jerk_used_mm_s3) = (acc_used, jerk_used);
+                return None;
+            }
+            self.curve.last_back = Some((back_from_mm, until_mm, wide));
+            self.curve.hold_fit_ahead(until_mm, wide);
+        }
         let reach_mm = cap * t_f;
         self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
         // The element after the vertex plans with the tangential acceleration the curve
-        // leaves at its speed ([`Pending::curve_acc`]): not passed on through further
-        // junctions as the lower of two accelerations is, since one noisy vertex would slow a
-        // whole run. The element before keeps the curve of the vertex at its start (fits
-        // change little from one vertex of a run to the next; lowering the window's last
-        // element's acceleration would need a walk back through its braking distance, to
-        // keep the stop at the window's end within reach, at every vertex).
-        let mut fit_p = fit;
-        fit_p.tangent = p.tangent_start;
+        // leaves at its speed ([`Pending::curve_acc`]), and that of every curve held ahead
+        // over it; not passed on through further junctions beyond the time-law filter's
+        // reach, as the lower of two accelerations is, since one noisy vertex would slow a
+        // whole run.
+        let mut fit_p = fit.with_tangent(p.tangent_start);
         fit_p.acc_mm_s2 = p.limits.a_max_mm_s2();
+        let mut fit_p = self.curve.worst_ahead(self.curve.pushed_mm, fit_p);
+        // The caps held ahead hold `p` where it is within their reach (`erode_ahead`).
+        if let Some(c) = self.curve.cap_at(self.curve.pushed_mm)
+            && p.seg.length_mm <= c * t_f
+        {
+            fit_p = fit_p.within(c);
+        }
         p.curve_acc = Some(fit_p);
         p.reach_memo = None;
         refresh_floor(p);
@@ -560,14 +817,154 @@ impl Planner {
             let mut last = *prev;
             let mut fit_prev = fit;
             fit_prev.acc_mm_s2 = prev.limits.a_max_mm_s2();
+            let start_mm = self.curve.pushed_mm - prev.seg.length_mm;
+            let fit_prev = self
+                .curve
+                .worst_ahead(start_mm, fit_prev)
+                .within(prev.limits.v_max_mm_s());
             last.curve_acc = Some(fit_prev);
-            last.reach_memo = None;
             refresh_floor(&mut last);
+            // The pair the look-ahead's pass takes from a stop at its end: its bound then
+            // never falls below that as the bound after it rises ([`reach_with`]).
+            last.reach_memo = reach_mm_s(&last, 0.0, last.limits.v_max_mm_s())
+                .filter(|r| r.1.is_finite())
+                .map(|(_, a, valid)| (a, valid));
             if self.can_stop_with(&last) {
                 *self.window.back_mut().expect("checked above") = last;
             }
         }
         Some(own_mm_s)
+    }
+
+    /// Makes the lines of chord runs within `reach_mm` before the window's end whose charge
+    /// does not cover `charge` plan their tangential acceleration with `wide` too
+    /// ([`CurveFit::worst`]), where the look-ahead's backward pass from a stop at the
+    /// window's end still comes down to the speed the plan has settled with the
+    /// accelerations lowered; `false`, with nothing changed, where it could not.
+    fn merge_back(&mut self, charge: &Charge, wide: &Charge, reach_mm: f64) -> bool {
+        let n = self.window.len();
+        let mut behind_mm = 0.0;
+        let mut first = n;
+        let mut k = n;
+        while k > 0 && behind_mm < reach_mm {
+            k -= 1;
+            let e = &self.window[k];
+            if e.curve_acc.is_some_and(|f| !f.charge.covers(charge)) {
+                first = k;
+            }
+            behind_mm += e.seg.length_mm;
+        }
+        if first == n {
+            return true;
+        }
+        // In place, with what changed kept to undo it where the plan could not stop.
+        let mut undo = std::mem::take(&mut self.curve.undo);
+        undo.clear();
+        // The lines whose charge `wide` covers take it as it is, and share one floor: the
+        // acceleration valid at the highest of their caps is valid at each's
+        // ([`CurveFit::acc_at`] falls as the cap rises).
+        let mut shared: Option<CurveFit> = None;
+        let mut shared_v_max = 0.0;
+        for (k, e) in self.window.range_mut(first..).enumerate() {
+            let Some(f) = e.curve_acc.filter(|f| !f.charge.covers(charge)) else {
+                continue;
+            };
+            undo.push(Changed {
+                at: first + k,
+                charge: f.charge,
+                memo: e.reach_memo,
+                floor_mm_s2: e.acc_floor_mm_s2,
+            });
+            // Its speed is held within its limits (the erosion of the caps of the curves
+            // within reach among them): the acceleration need hold up to there only.
+            let merged = f.worst(wide).within(e.limits.v_max_mm_s());
+            e.curve_acc = Some(merged);
+            e.reach_memo = None;
+            let v_max = e.limits.v_max_mm_s();
+            if wide.covers(&f.charge) {
+                match shared.as_mut() {
+                    None => (shared, shared_v_max) = (Some(merged), v_max),
+                    Some(s) if s.same_but_cap(&merged) && shared_v_max == v_max => {
+                        s.cap_mm_s = s.cap_mm_s.max(merged.cap_mm_s);
+                        e.acc_floor_mm_s2 = f64::NAN;
+                        continue;
+                    }
+                    Some(_) => {}
+                }
+            }
+            refresh_floor(e);
+        }
+        if let Some(s) = shared {
+            let floor = s.acc_at(shared_v_max);
+            for &Changed { at: k, .. } in &undo {
+                let e = &mut self.window[k];
+                if e.acc_floor_mm_s2.is_nan() {
+                    e.acc_floor_mm_s2 = floor;
+                }
+            }
+        }
+        // The look-ahead's backward pass, from a stop at the window's end: the plan must
+        // still come down to the speed it has settled at the window's start. Each line of a
+        // run keeps the pair it takes ([`Pending::reach_memo`]), as in the look-ahead, so
+        // that its bound never falls below this one as the bound after it rises (a line's
+        // reach with its best acceleration is not monotone in the speed after it, and the
+        // bounds after the lines changed may have fallen).
+        let mut memos = std::mem::take(&mut self.curve.memos);
+        memos.clear();
+        let ok = self.backward_pass_reaches_start(&mut memos);
+        if !ok {
+            for &(k, memo) in memos.iter().rev() {
+                self.window[k].reach_memo = memo;
+            }
+            for &Changed {
+                at: k,
+                charge,
+                memo,
+                floor_mm_s2: floor,
+            } in &undo
+            {
+                let e = &mut self.window[k];
+                if let Some(f) = e.curve_acc.as_mut() {
+                    f.charge = charge;
+                }
+                e.reach_memo = memo;
+                e.acc_floor_mm_s2 = floor;
+            }
+        }
+        self.curve.memos = memos;
+        self.curve.undo = undo;
+        ok
+    }
+
+    /// The look-ahead's backward pass ([`Planner::replan`]) from a stop at the window's end,
+    /// keeping each line's pair ([`Pending::reach_memo`]; the one it had, with its window's
+    /// index, in `memos`): whether it comes down to the speed the plan has settled at the
+    /// window's start.
+    fn backward_pass_reaches_start(
+        &mut self,
+        memos: &mut Vec<(usize, Option<(f64, f64)>)>,
+    ) -> bool {
+        let mut v_next = 0.0;
+        for k in (0..self.window.len()).rev() {
+            let e = &mut self.window[k];
+            let cap = if k == 0 {
+                f64::INFINITY
+            } else {
+                e.cap_start_mm_s
+            };
+            v_next = if e.curve_acc.is_some() {
+                let (v, a, valid) =
+                    reach_mm_s(e, v_next, e.limits.v_max_mm_s()).unwrap_or((0.0, f64::NAN, 0.0));
+                if a.is_finite() {
+                    memos.push((k, e.reach_memo));
+                    e.reach_memo = Some((a, valid));
+                }
+                v.min(cap)
+            } else {
+                super::start_reach_mm_s(e.seg.length_mm, v_next, cap, &e.limits)
+            };
+        }
+        v_next >= self.v_settled_mm_s
     }
 
     /// Whether the window's last element may plan with the acceleration `acc_mm_s2`: the

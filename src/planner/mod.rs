@@ -1271,11 +1271,13 @@ impl Planner {
                     self.provisional.push_back(p.seq);
                 }
                 self.window.push_back(p);
+                let pushed = 1 + usize::from(rest.is_some());
                 if let Some(mut rest) = rest {
                     rest.seq = self.next_seq;
                     self.next_seq += 1;
                     self.window.push_back(rest);
                 }
+                self.memo_pushed(pushed);
                 self.finalize_junctions(false);
                 if self.window.len() >= self.config.lookahead {
                     self.replan(false)?;
@@ -2542,7 +2544,12 @@ impl Planner {
 /// The result is capped at `cap_mm_s` (the junction's speed): when the cap itself is within the
 /// bound (or below `v_end_mm_s`), it is the result, without solving; this is the common case on
 /// a path of tiny segments, whose junctions rather than their lengths bound the speed.
-fn start_reach_mm_s(length_mm: f64, v_end_mm_s: f64, cap_mm_s: f64, limits: &ProfileLimits) -> f64 {
+pub(super) fn start_reach_mm_s(
+    length_mm: f64,
+    v_end_mm_s: f64,
+    cap_mm_s: f64,
+    limits: &ProfileLimits,
+) -> f64 {
     if limits.is_trapezoid() {
         return profile::max_start_speed(length_mm, v_end_mm_s, limits)
             .unwrap_or(0.0)
