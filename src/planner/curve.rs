@@ -473,6 +473,24 @@ pub(super) fn reach_mm_s(p: &Pending, v_from_mm_s: f64, vmax_mm_s: f64) -> Optio
     Some(reach_with(p, |a| reach(a).unwrap_or(v_from_mm_s)))
 }
 
+/// One step of the look-ahead's backward pass: the highest start speed of `p`, within its
+/// start's cap `cap_mm_s`, from which it can end at `v_next_mm_s`; on a line of a chord run,
+/// with the acceleration it takes (NaN elsewhere) and the pair it keeps
+/// ([`Pending::reach_memo`]; `None` where there is none to keep).
+pub(super) fn back_reach(
+    p: &Pending,
+    v_next_mm_s: f64,
+    cap_mm_s: f64,
+) -> (f64, f64, Option<(f64, f64)>) {
+    if p.curve_acc.is_none() {
+        let v = super::start_reach_mm_s(p.seg.length_mm, v_next_mm_s, cap_mm_s, &p.limits);
+        return (v, f64::NAN, None);
+    }
+    let (v, a, valid) =
+        reach_mm_s(p, v_next_mm_s, p.limits.v_max_mm_s()).unwrap_or((0.0, f64::NAN, 0.0));
+    (v.min(cap_mm_s), a, a.is_finite().then_some((a, valid)))
+}
+
 /// A lower bound of [`reach_mm_s`]'s speed, without a speed limit: `√(v² + 2·a·L)` with the
 /// acceleration the element may plan with at any speed up to its cap
 /// ([`Pending::acc_floor_mm_s2`]). Cheap: the walks back through a braking distance
@@ -944,17 +962,12 @@ impl Planner {
             } else {
                 e.cap_start_mm_s
             };
-            v_next = if e.curve_acc.is_some() {
-                let (v, a, valid) =
-                    reach_mm_s(e, v_next, e.limits.v_max_mm_s()).unwrap_or((0.0, f64::NAN, 0.0));
-                if a.is_finite() {
-                    memos.push((k, e.reach_memo));
-                    e.reach_memo = Some((a, valid));
-                }
-                v.min(cap)
-            } else {
-                super::start_reach_mm_s(e.seg.length_mm, v_next, cap, &e.limits)
-            };
+            let (v, _, pair) = back_reach(e, v_next, cap);
+            v_next = v;
+            if pair.is_some() {
+                memos.push((k, e.reach_memo));
+                e.reach_memo = pair;
+            }
         }
         v_next >= self.v_settled_mm_s
     }

@@ -1467,17 +1467,12 @@ impl Planner {
                 p.cap_start_mm_s
             };
             let provisional = p.provisional.is_some();
-            v_next = if p.curve_acc.is_some() {
-                let (v, a, valid) = curve::reach_mm_s(p, v_next, p.limits.v_max_mm_s())
-                    .unwrap_or((0.0, f64::NAN, 0.0));
-                self.back_acc[i] = a;
-                if a.is_finite() {
-                    self.window[i].reach_memo = Some((a, valid));
-                }
-                v.min(cap)
-            } else {
-                start_reach_mm_s(p.seg.length_mm, v_next, cap, &p.limits)
-            };
+            let (v, a, pair) = curve::back_reach(p, v_next, cap);
+            v_next = v;
+            self.back_acc[i] = a;
+            if pair.is_some() {
+                self.window[i].reach_memo = pair;
+            }
             if v_next >= cap {
                 // A provisional cap may still rise.
                 anchored = i == 0 || !provisional;
