@@ -941,6 +941,8 @@ struct Pending {
     /// With [`Pending::curve_acc`]: the acceleration the look-ahead's backward pass planned
     /// it with last and the speed up to which that is valid (`curve::reach_mm_s`).
     reach_memo: Option<(f64, f64)>,
+    /// What the look-ahead's backward pass found here last (`curve::PassMark`).
+    pass_mark: Option<curve::PassMark>,
     /// With [`Pending::curve_acc`]: the tangential acceleration its curve leaves at every speed
     /// up to its cap (`curve::refresh_floor`); ∞ without.
     acc_floor_mm_s2: f64,
@@ -1468,11 +1470,13 @@ impl Planner {
             };
             let provisional = p.provisional.is_some();
             let (v, a, pair) = curve::back_reach(p, v_next, cap);
-            v_next = v;
             self.back_acc[i] = a;
+            let p = &mut self.window[i];
             if pair.is_some() {
-                self.window[i].reach_memo = pair;
+                p.reach_memo = pair;
             }
+            p.pass_mark = curve::PassMark::of(p, v, v_next, cap);
+            v_next = v;
             if v_next >= cap {
                 // A provisional cap may still rise.
                 anchored = i == 0 || !provisional;
@@ -2375,6 +2379,7 @@ impl Planner {
             curve_fit: None,
             curve_acc: None,
             reach_memo: None,
+            pass_mark: None,
             acc_floor_mm_s2: f64::INFINITY,
             floor_reach_mm: 0.0,
         })
@@ -2504,6 +2509,7 @@ impl Planner {
                     curve_fit: None,
                     curve_acc: None,
                     reach_memo: None,
+                    pass_mark: None,
                     acc_floor_mm_s2: f64::INFINITY,
                     floor_reach_mm: 0.0,
                 }
