@@ -505,8 +505,14 @@ fn dense_low_caps_are_a_plateau_not_stops() {
     }
     text.push_str("M2\n");
     let prog = parse_program(&text, "contour.ngc", Vector3::zeros()).unwrap();
+    // A window of 256 elements (4 mm of these chords): the random programs' 64 hold 1 mm,
+    // against about 13 mm of braking from the arc's speed, and there the plan also stops
+    // where the window leaves no room to lower the acceleration of its last line at a
+    // junction (`Planner::share_at_junction`: 4 stops along the arc at 64 elements, none at
+    // 256, session 22).
     let cfg = PlannerConfig {
         period_s: 0.001,
+        lookahead: 256,
         ..config(ProfileKind::SCurve)
     };
     let plan = plan_with(&prog, &limits(), &cfg).unwrap();
@@ -515,15 +521,21 @@ fn dense_low_caps_are_a_plateau_not_stops() {
         .iter()
         .filter(|s| s.line > 2 && s.line < 401 && s.v_end_mm_s == 0.0)
         .count();
-    // 304 of the 398 vertices stopped (9.05 s) before the plateaus; a few remain where
-    // the run of low caps begins, before any is known to be dense (8, 0.95 s, before the
-    // lines planned with the curves within the time-law filter's reach in session 21; 10,
-    // 1.12 s, since).
+    // 304 of the 398 vertices stopped (9.05 s) before the plateaus; what remains is where
+    // the run of low caps begins, before any is known to be dense, and the last chords
+    // (4 stops, 0.78 s; 13 with a window of 64 elements).
     assert!(
-        stops < 12,
+        stops <= 5,
         "{stops} stops on the arc ({} s)",
         plan.duration_s()
     );
+    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+    // With the random programs' window, more stops, within every limit still.
+    let cfg = PlannerConfig {
+        period_s: 0.001,
+        ..config(ProfileKind::SCurve)
+    };
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
     limits_and_path_hold(&prog, plan, &limits(), &cfg);
 }
 
