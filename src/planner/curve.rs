@@ -65,11 +65,11 @@
 //!   the curve `κ²·|Tᵢ| + |ρᵢ|`, the larger: [`Charge`], [`CurveFit::worst`]): those before
 //!   the vertex back through the window where the look-ahead's backward pass still comes
 //!   down to the speed the plan has settled ([`Planner::merge_back`]; else the vertex keeps
-//!   the old rules), those after it as they come. That pass keeps, for each line it changed,
-//!   the floor's pair (one speed change per line; the pass's own pair where the floor's does
-//!   not come down), and stops where the marks of earlier passes show it would come down
-//!   ([`PassMark`]): on 200 000 spiral chords it visits about 110 elements a walk instead
-//!   of the window's 550, and the look-ahead runs 1.65× as fast. With each line's own curve only, a
+//!   the old rules), those after it as they come. That pass takes each line's pairs known
+//!   valid, its floor's and the one it kept, the better ([`floor_back_reach`]: one or two
+//!   speed changes a line; the pass's own where that does not come down), and stops where
+//!   the marks of earlier passes show it would come down ([`PassMark`]): on 200 000 spiral
+//!   chords it visits about 110 elements a walk instead of the window's 550. With each line's own curve only, a
 //!   curvature that steps from 0.3 to −0.3 /mm between pieces of 0.3–1.5 mm broke Z's jerk
 //!   by 4.7 % (`tests/planner_limits.rs`,
 //!   `chorded_profiles_of_changing_curvature_keep_every_limit`). The rounding of the written
@@ -567,11 +567,12 @@ pub(super) fn back_reach(
     (v.min(cap_mm_s), a, a.is_finite().then_some((a, valid)))
 }
 
-/// A step of the backward pass that keeps the floor's pair: the acceleration valid at every
-/// speed up to the element's speed limit ([`Pending::acc_floor_mm_s2`]), valid to there. A
-/// lower bound of [`back_reach`]'s speed, for one speed change (no curve's acceleration to
-/// find); the look-ahead's passes, which take the pair as a candidate, never find less. `None`
-/// where `p` is no line of a chord run or has no floor, or `v_next_mm_s` is above its limit.
+/// A step of the backward pass with the pairs known valid: the floor's, the acceleration
+/// valid at every speed up to the element's speed limit ([`Pending::acc_floor_mm_s2`]), and
+/// the one kept last ([`Pending::reach_memo`]), whichever reaches higher, with that pair. A
+/// lower bound of [`back_reach`]'s speed for one or two speed changes (no curve's acceleration
+/// to find); the look-ahead's passes, which take the pair as a candidate, never find less.
+/// `None` where `p` is no line of a chord run or `v_next_mm_s` is above its limit.
 pub(super) fn floor_back_reach(
     p: &Pending,
     v_next_mm_s: f64,
@@ -579,10 +580,21 @@ pub(super) fn floor_back_reach(
 ) -> Option<(f64, (f64, f64))> {
     p.curve_acc?;
     let v_max = p.limits.v_max_mm_s();
-    let a = p.limits.a_max_mm_s2().min(p.acc_floor_mm_s2);
-    let v = ProfileLimits::trapezoid(v_max, a)
-        .and_then(|l| super::profile::max_end_speed(p.seg.length_mm, v_next_mm_s, &l))?;
-    Some((v.min(cap_mm_s), (a, v_max)))
+    let a_static = p.limits.a_max_mm_s2();
+    let reach = |a: f64| {
+        ProfileLimits::trapezoid(v_max, a)
+            .and_then(|l| super::profile::max_end_speed(p.seg.length_mm, v_next_mm_s, &l))
+    };
+    let a = a_static.min(p.acc_floor_mm_s2);
+    let mut best = (reach(a)?, (a, v_max));
+    if let Some((a_m, valid)) = p.reach_memo {
+        let a_m = a_m.min(a_static);
+        let v = reach(a_m)?.min(valid);
+        if v > best.0 {
+            best = (v, (a_m, valid));
+        }
+    }
+    Some((best.0.min(cap_mm_s), best.1))
 }
 
 /// A lower bound of [`reach_mm_s`]'s speed, without a speed limit: `√(v² + 2·a·L)` with the
@@ -1129,15 +1141,15 @@ impl Planner {
             } else {
                 e.cap_start_mm_s
             };
-            // A line changed above, without a pair, keeps its floor's: one speed change.
-            let (v, pair) = match e.reach_memo {
-                None if floor => floor_back_reach(e, v_next, cap).map(|(v, pair)| (v, Some(pair))),
-                _ => None,
-            }
-            .unwrap_or_else(|| {
-                let (v, _, pair) = back_reach(e, v_next, cap);
-                (v, pair)
-            });
+            // With the pairs known valid first: one or two speed changes a line.
+            let (v, pair) = floor
+                .then(|| floor_back_reach(e, v_next, cap))
+                .flatten()
+                .map(|(v, pair)| (v, Some(pair)))
+                .unwrap_or_else(|| {
+                    let (v, _, pair) = back_reach(e, v_next, cap);
+                    (v, pair)
+                });
             memos.push((k, e.reach_memo, e.pass_mark));
             if pair.is_some() {
                 e.reach_memo = pair;
