@@ -69,9 +69,9 @@
 //!   valid, its floor's and the one it kept, the better ([`floor_back_reach`]: one or two
 //!   speed changes a line; the pass's own where that does not come down), and stops where
 //!   the marks of earlier passes show it would come down ([`PassMark`]): on 200 000 spiral
-//!   chords it visits about 110 elements a walk instead of the window's 550. With each line's own curve only, a
-//!   curvature that steps from 0.3 to −0.3 /mm between pieces of 0.3–1.5 mm broke Z's jerk
-//!   by 4.7 % (`tests/planner_limits.rs`,
+//!   chords it visits about 110 elements a walk instead of the window's 550. With each
+//!   line's own curve only, a curvature that steps from 0.3 to −0.3 /mm between pieces of
+//!   0.3–1.5 mm broke Z's jerk by 4.7 % (`tests/planner_limits.rs`,
 //!   `chorded_profiles_of_changing_curvature_keep_every_limit`). The rounding of the written
 //!   coordinates makes the curvature's rate, and with it `qᵢ`, noisy by a factor of two
 //!   from vertex to vertex: the walk back is skipped where the charge taken back last (a
@@ -767,10 +767,11 @@ fn curve_limits(
 
 impl Planner {
     /// Keeps, for the lines of chord runs among the window's last `count` elements (just
-    /// pushed), the pair the look-ahead's backward pass takes from a stop at the window's
-    /// end ([`Pending::reach_memo`]): their bounds then never fall below that as the bound
-    /// after them rises with more elements ([`reach_with`] alone is not monotone in it), so
-    /// that what the walks check against now stays within reach.
+    /// pushed), their floor's pair ([`floor_back_reach`], [`Pending::reach_memo`]) and the
+    /// mark of a backward pass from a stop at the window's end with it: their bounds then
+    /// never fall below that as the bound after them rises with more elements ([`reach_with`]
+    /// alone is not monotone in it), so that what the walks check against now (the floor,
+    /// [`Planner::can_come_down`]) stays within reach.
     pub(super) fn memo_pushed(&mut self, count: usize) {
         let n = self.window.len();
         let mut v_next = 0.0;
@@ -1089,7 +1090,7 @@ impl Planner {
         // bounds after the lines changed may have fallen).
         let mut memos = std::mem::take(&mut self.curve.memos);
         memos.clear();
-        // The floor's pair first (one speed change per line); where that does not come
+        // The pairs known valid first ([`floor_back_reach`]); where that does not come
         // down, the pass's own (the curve's acceleration at each line's speed).
         let mut ok = false;
         for floor in [true, false] {
