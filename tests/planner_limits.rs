@@ -801,3 +801,36 @@ proptest! {
             .map_err(|e| TestCaseError::fail(e.to_string()))?;
     }
 }
+
+/// A line that ends in a stop, after a low junction cap, is not crossed at a crawl. On
+/// LinuxCNC's `performance/line-contouring-xz.ngc` (these vertices are from its lines
+/// 894–905, under its bare `G64`) the chord before the stop at `X-16.345 Z5.668` ran at
+/// 0.11 mm/s for 1.53 s: the look-ahead planned its profile under the cap of the junction at
+/// its start (dipped to 0.11 mm/s), where the acceleration its curve left was valid up to
+/// 10 mm/s. It now rises to about 2.5 mm/s within the line (0.13 s).
+#[test]
+fn a_line_between_a_low_cap_and_a_stop_does_not_crawl() {
+    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("dictionaries/machines/demo-xyz.toml");
+    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
+    machine.planner.period_s = 0.001;
+    machine.planner.profile = ProfileKind::SCurve;
+    let l = canmotion::gateway::limits(&machine);
+    let text = "G90 G21 G64 Q0.03\nG0 X-15.851 Y-8.612 Z6.356\nG1 F100000\n\
+        X-15.856 Z6.35\nZ6.343\nX-16.181 Z5.887\nX-16.253 Z5.802\nX-16.345 Z5.668\n\
+        X-16.352 Z5.648\nX-16.36 Z5.646\nX-16.416 Z5.563\nX-16.427 Z5.55\nX-16.742 Z5.106\n\
+        X-16.755 Z5.102\nX-16.763 Z5.092\nM2\n";
+    let prog = parse_program(text, "contouring.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &machine.planner).unwrap();
+    for s in plan.segments().iter().filter(|s| s.profile.is_some()) {
+        assert!(
+            s.v_peak_mm_s >= 1.0 || s.duration_s() <= 0.1,
+            "line {}: {:.4} mm at most at {:.3} mm/s for {:.3} s",
+            s.line,
+            s.length_mm,
+            s.v_peak_mm_s,
+            s.duration_s()
+        );
+    }
+    limits_and_path_hold(&prog, plan, &l, &machine.planner);
+}
