@@ -688,6 +688,21 @@ fn reach_with(p: &Pending, reach: impl Fn(f64) -> f64) -> (f64, f64, f64) {
         let v2 = reach(a2);
         if fit.valid_at(a2, v2) {
             best = (v2, a2, v2);
+        } else if v1 >= best.0 {
+            // Between the two: the highest speed `v` the acceleration valid up to `v`
+            // reaches (`reach(a(v)) ≥ v`, `a(v)` falling with `v`), by bisection.
+            let (mut lo, mut hi) = (v1, v2);
+            for _ in 0..FIXED_POINT_STEPS {
+                let mid = 0.5 * (lo + hi);
+                if reach(a_static.min(fit.acc_at(mid))) >= mid {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            if lo > v1 {
+                best = (lo, a_static.min(fit.acc_at(lo)), lo);
+            }
         }
     }
     match memo {
@@ -702,6 +717,10 @@ const RATE_ROUNDS: usize = 3;
 
 /// A baseline is shortened again only where the cap shortens it below this share of the last.
 const RATE_SHRINK: f64 = 0.9;
+
+/// Bisection steps of [`reach_with`]'s search for the speed the curve's acceleration reaches
+/// where it is valid.
+const FIXED_POINT_STEPS: usize = 12;
 
 /// [`reach_with`] takes the last pair as it is where it reaches this share of the speed it is
 /// valid to.
