@@ -834,3 +834,57 @@ fn a_line_between_a_low_cap_and_a_stop_does_not_crawl() {
     }
     limits_and_path_hold(&prog, plan, &l, &machine.planner);
 }
+
+/// A chord profile under `G64 P0.1` whose chords the refiner cuts into pieces (vertices from
+/// LinuxCNC's `performance/LHchips4.ngc`, lines 1705–1722) runs through without a stop: the
+/// pieces are fine enough that the junction rules between them hold about the curve's own
+/// speed. With a quarter of `J·T_k²` per vertex (before session 23), the junctions of the
+/// 1 mm chord's pieces were held at 6–13 mm/s against the curve's 15, and their dips
+/// (`A·T_f/4`, 8 mm/s) stopped the motion twice inside that chord.
+#[test]
+fn a_refined_chord_profile_runs_through_without_stops() {
+    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("dictionaries/machines/demo-xyz.toml");
+    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
+    machine.planner.period_s = 0.001;
+    machine.planner.profile = ProfileKind::SCurve;
+    let l = canmotion::gateway::limits(&machine);
+    let vertices = [
+        (6.048, -12.253),
+        (5.819, -12.247),
+        (5.591, -12.258),
+        (5.364, -12.285),
+        (5.139, -12.328),
+        (4.912, -12.389),
+        (4.688, -12.463),
+        (4.469, -12.549),
+        (4.255, -12.647),
+        (3.245, -13.067),
+        (3.044, -13.162),
+        (2.85, -13.271),
+        (2.665, -13.394),
+        (2.488, -13.529),
+        (1.225, -14.611),
+        (1.053, -14.756),
+        (0.89, -14.912),
+    ];
+    let mut text = "G21 G90 G64 P0.1\nG0 X6.275 Z-12.275\nG1 F7500\n".to_string();
+    for (x, z) in vertices {
+        text.push_str(&format!("X{x} Z{z}\n"));
+    }
+    text.push_str("M2\n");
+    let prog = parse_program(&text, "chips.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &machine.planner).unwrap();
+    let moves: Vec<_> = plan
+        .segments()
+        .iter()
+        .filter(|s| s.profile.is_some() && !s.rapid)
+        .collect();
+    let stops: Vec<usize> = moves[..moves.len() - 1]
+        .iter()
+        .filter(|s| s.v_end_mm_s == 0.0)
+        .map(|s| s.line)
+        .collect();
+    assert!(stops.is_empty(), "stops at the end of lines {stops:?}");
+    limits_and_path_hold(&prog, plan, &l, &machine.planner);
+}

@@ -1076,6 +1076,7 @@ impl Planner {
             acc_mm_s2: limits.max_acc_mm_s2.min(),
             jerk_mm_s3: config.max_jerk_mm_s3.min(),
             max_feed_mm_s: limits.max_feed_mm_s,
+            lookahead: config.lookahead,
         });
         Ok(Planner {
             limits: *limits,
