@@ -145,6 +145,10 @@ const WIDEN: f64 = 0.02;
 /// vertex, and a walk back is needed only where a vertex's reach goes beyond the last one's.
 const BACK_MARGIN: f64 = 1.25;
 
+/// [`Planner::hold_on`] splits a line longer than this many times the reach of what is held
+/// ahead of it.
+const SPLIT_BEYOND: f64 = 1.5;
+
 /// Relative step of the grid the caps are rounded down to.
 pub(super) const CAP_STEP: f64 = 0.01;
 
@@ -171,6 +175,9 @@ pub(super) struct CurveState {
     /// The curve of the last vertex taken: the budgets a line within reach of the curves held
     /// ahead plans with ([`Planner::hold_on`]).
     last_fit: Option<CurveFit>,
+    /// The part beyond the reach of what is held ahead of a line [`Planner::hold_on`] split,
+    /// pushed after it.
+    pub(super) held_rest: Option<Pending>,
     /// What [`Planner::merge_back`] changed (kept to reuse its memory).
     undo: Vec<Changed>,
     /// The [`Pending::reach_memo`]s and [`Pending::pass_mark`]s [`Planner::merge_back`]'s
@@ -299,6 +306,15 @@ impl CurveState {
         self.ahead_fits
             .retain(|(until, c)| !(*until <= until_mm && charge.covers(c)));
         self.ahead_fits.push_back((until_mm, charge));
+    }
+
+    /// The farthest path distance up to which a charge is held ahead of `at_mm` (`at_mm`
+    /// where none is).
+    fn fits_until_mm(&self, at_mm: f64) -> f64 {
+        self.ahead_fits
+            .iter()
+            .map(|&(until, _)| until)
+            .fold(at_mm, f64::max)
     }
 
     fn hold_ahead(&mut self, until_mm: f64, cap_mm_s: f64) {
@@ -846,8 +862,26 @@ impl Planner {
         let Some(cap) = self.curve.cap_at(at_mm) else {
             return;
         };
-        if p.seg.length_mm > cap * smoothing.time_law_s(self.config.period_s) {
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        if p.seg.length_mm > cap * t_f {
             return;
+        }
+        // Only the part of the line within the reach of the charges held ahead needs them: a
+        // line that goes well beyond is split where the last of them ends, the rest planned
+        // as any line beyond, within the cap that holds the whole line (a line of 3.2 mm
+        // after a stop crawled at 2 mm/s for 2.8 s on `LHchips4`: a later curve's walk back
+        // took it whole, with the charge of that tight curve).
+        let reach_mm = self.curve.fits_until_mm(at_mm) - at_mm;
+        if reach_mm > 0.0
+            && p.seg.length_mm > SPLIT_BEYOND * reach_mm
+            && let Some((head, mut rest)) = super::split_line(p, reach_mm)
+        {
+            rest.cap_start_mm_s = head.limits.v_max_mm_s();
+            rest.cap_start_limit_mm_s = head.v_limit_mm_s;
+            rest.raw_cap_start_mm_s = rest.cap_start_mm_s;
+            super::cap_speed(&mut rest, cap, cap);
+            *p = head;
+            self.curve.held_rest = Some(rest);
         }
         // The budgets of the curves taken; the line's own charge is its tangent's alone.
         let straight = CurveFit {
@@ -971,7 +1005,7 @@ impl Planner {
         if let Some((back_from_mm, last_until_mm, c)) = covering {
             if until_mm > last_until_mm {
                 self.curve.last_back = Some((back_from_mm, until_mm, c));
-                self.curve.hold_fit_ahead(until_mm, c);
+                self.curve.hold_fit_ahead(until_mm, wide);
             }
         } else {
             // The walk goes a little further back than the reach ([`BACK_MARGIN`]), whose

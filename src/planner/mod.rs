@@ -1264,9 +1264,16 @@ impl Planner {
                 if let Some(rest) = rest.as_mut() {
                     curve::link_floor(&p, rest);
                 }
-                self.curve.pushed_mm +=
-                    p.seg.length_mm + rest.as_ref().map_or(0.0, |r| r.seg.length_mm);
-                let last = rest.as_ref().unwrap_or(&p);
+                // The part of a line beyond the reach of what was held ahead of it
+                // ([`Planner::hold_on`]), after all of `p`.
+                let mut held_rest = self.curve.held_rest.take();
+                if let Some(held) = held_rest.as_mut() {
+                    curve::link_floor(rest.as_ref().unwrap_or(&p), held);
+                }
+                self.curve.pushed_mm += p.seg.length_mm
+                    + rest.as_ref().map_or(0.0, |r| r.seg.length_mm)
+                    + held_rest.as_ref().map_or(0.0, |r| r.seg.length_mm);
+                let last = held_rest.as_ref().or(rest.as_ref()).unwrap_or(&p);
                 self.position_mm = last.seg.end_mm;
                 self.aux_pushed = Some(last.seg.aux.end);
                 p.seq = self.next_seq;
@@ -1275,8 +1282,8 @@ impl Planner {
                     self.provisional.push_back(p.seq);
                 }
                 self.window.push_back(p);
-                let pushed = 1 + usize::from(rest.is_some());
-                if let Some(mut rest) = rest {
+                let pushed = 1 + usize::from(rest.is_some()) + usize::from(held_rest.is_some());
+                for mut rest in rest.into_iter().chain(held_rest) {
                     rest.seq = self.next_seq;
                     self.next_seq += 1;
                     self.window.push_back(rest);
