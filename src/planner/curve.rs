@@ -81,7 +81,13 @@
 //!   charges too, where the caps held ahead hold it whole ([`Planner::hold_on`]): after a
 //!   curve of 0.254 /mm, a chord of a piece of −0.104 /mm decelerated at its own 300 mm/s²
 //!   within `T_f` of the curve's +290, and Z's jerk ran 2.5–5.6 % over (two seeds of
-//!   `chorded_profiles_of_changing_curvature_keep_every_limit`, found at 5000 cases).
+//!   `chorded_profiles_of_changing_curvature_keep_every_limit`, found at 5000 cases). Such a
+//!   line that goes well beyond the last charge held ahead is split where it ends
+//!   ([`SPLIT_BEYOND`]); the rest plans as any line beyond, under the cap that held the whole
+//!   line (a line of 3.2 mm after a stop, taken whole by the walk back of the tight curve
+//!   after it, ran at 2 mm/s for 2.8 s on `LHchips4`). Where the walk back is skipped, the
+//!   vertex's own charge is held ahead, not the one taken back last (each curve's own stays
+//!   held for its reach: `wheels` −2.6 %, `random_lines_0.001in` +1.3 %).
 //!   (Taking the larger of the charges taken back within the last reach walks back
 //!   less often, 15 % faster on 200 000 spiral chords, but plans `LHchips4` 9 % and
 //!   `line-contouring-xz` 16 % slower.)
