@@ -85,9 +85,10 @@
 //!   line that goes well beyond the last charge held ahead is split where it ends
 //!   ([`SPLIT_BEYOND`]); the rest plans as any line beyond, under the cap that held the whole
 //!   line (a line of 3.2 mm after a stop, taken whole by the walk back of the tight curve
-//!   after it, ran at 2 mm/s for 2.8 s on `LHchips4`). Where the walk back is skipped, the
-//!   vertex's own charge is held ahead, not the one taken back last (each curve's own stays
-//!   held for its reach: `wheels` −2.6 %, `random_lines_0.001in` +1.3 %).
+//!   after it, ran at 2 mm/s for 2.8 s on `LHchips4`). (Where the walk back is skipped,
+//!   holding the vertex's own charge ahead instead of the one taken back last is as safe and
+//!   a little faster on the corpus, `wheels` −3.2 %, but more walks back follow: the
+//!   look-ahead 339 → 291 k segments/s on the spiral. Not kept.)
 //!   (Taking the larger of the charges taken back within the last reach walks back
 //!   less often, 15 % faster on 200 000 spiral chords, but plans `LHchips4` 9 % and
 //!   `line-contouring-xz` 16 % slower.)
@@ -1011,7 +1012,7 @@ impl Planner {
         if let Some((back_from_mm, last_until_mm, c)) = covering {
             if until_mm > last_until_mm {
                 self.curve.last_back = Some((back_from_mm, until_mm, c));
-                self.curve.hold_fit_ahead(until_mm, wide);
+                self.curve.hold_fit_ahead(until_mm, c);
             }
         } else {
             // The walk goes a little further back than the reach ([`BACK_MARGIN`]), whose
