@@ -802,6 +802,31 @@ proptest! {
     }
 }
 
+/// The demo machine's limits and planner, jerk-limited at a 1 ms period (`tools/corpus-times.sh`'s
+/// setting).
+fn demo_s_curve() -> (Limits, PlannerConfig) {
+    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("dictionaries/machines/demo-xyz.toml");
+    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
+    machine.planner.period_s = 0.001;
+    machine.planner.profile = ProfileKind::SCurve;
+    (canmotion::gateway::limits(&machine), machine.planner)
+}
+
+/// No move of `plan` holds under `v_mm_s` for longer than `t_s` (a crawl a user sees).
+fn no_crawl(plan: &Plan, v_mm_s: f64, t_s: f64) {
+    for s in plan.segments().iter().filter(|s| s.profile.is_some()) {
+        assert!(
+            s.v_peak_mm_s >= v_mm_s || s.duration_s() <= t_s,
+            "line {}: {:.4} mm at most at {:.3} mm/s for {:.3} s",
+            s.line,
+            s.length_mm,
+            s.v_peak_mm_s,
+            s.duration_s()
+        );
+    }
+}
+
 /// A line that ends in a stop, after a low junction cap, is not crossed at a crawl. On
 /// LinuxCNC's `performance/line-contouring-xz.ngc` (these vertices are from its lines
 /// 894–905, under its bare `G64`) the chord before the stop at `X-16.345 Z5.668` ran at
@@ -810,29 +835,15 @@ proptest! {
 /// 10 mm/s. It now rises to about 2.5 mm/s within the line (0.13 s).
 #[test]
 fn a_line_between_a_low_cap_and_a_stop_does_not_crawl() {
-    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("dictionaries/machines/demo-xyz.toml");
-    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
-    machine.planner.period_s = 0.001;
-    machine.planner.profile = ProfileKind::SCurve;
-    let l = canmotion::gateway::limits(&machine);
+    let (l, cfg) = demo_s_curve();
     let text = "G90 G21 G64 Q0.03\nG0 X-15.851 Y-8.612 Z6.356\nG1 F100000\n\
         X-15.856 Z6.35\nZ6.343\nX-16.181 Z5.887\nX-16.253 Z5.802\nX-16.345 Z5.668\n\
         X-16.352 Z5.648\nX-16.36 Z5.646\nX-16.416 Z5.563\nX-16.427 Z5.55\nX-16.742 Z5.106\n\
         X-16.755 Z5.102\nX-16.763 Z5.092\nM2\n";
     let prog = parse_program(text, "contouring.ngc", Vector3::zeros()).unwrap();
-    let plan = plan_with(&prog, &l, &machine.planner).unwrap();
-    for s in plan.segments().iter().filter(|s| s.profile.is_some()) {
-        assert!(
-            s.v_peak_mm_s >= 1.0 || s.duration_s() <= 0.1,
-            "line {}: {:.4} mm at most at {:.3} mm/s for {:.3} s",
-            s.line,
-            s.length_mm,
-            s.v_peak_mm_s,
-            s.duration_s()
-        );
-    }
-    limits_and_path_hold(&prog, plan, &l, &machine.planner);
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    no_crawl(&plan, 1.0, 0.1);
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
 /// A chord profile under `G64 P0.1` whose chords the refiner cuts into pieces (vertices from
@@ -843,12 +854,7 @@ fn a_line_between_a_low_cap_and_a_stop_does_not_crawl() {
 /// (`A·T_f/4`, 8 mm/s) stopped the motion twice inside that chord.
 #[test]
 fn a_refined_chord_profile_runs_through_without_stops() {
-    let machine_file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("dictionaries/machines/demo-xyz.toml");
-    let mut machine = canmotion::config::Machine::load(&machine_file).unwrap();
-    machine.planner.period_s = 0.001;
-    machine.planner.profile = ProfileKind::SCurve;
-    let l = canmotion::gateway::limits(&machine);
+    let (l, cfg) = demo_s_curve();
     let vertices = [
         (6.048, -12.253),
         (5.819, -12.247),
@@ -874,7 +880,7 @@ fn a_refined_chord_profile_runs_through_without_stops() {
     }
     text.push_str("M2\n");
     let prog = parse_program(&text, "chips.ngc", Vector3::zeros()).unwrap();
-    let plan = plan_with(&prog, &l, &machine.planner).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
     let moves: Vec<_> = plan
         .segments()
         .iter()
@@ -886,5 +892,25 @@ fn a_refined_chord_profile_runs_through_without_stops() {
         .map(|s| s.line)
         .collect();
     assert!(stops.is_empty(), "stops at the end of lines {stops:?}");
-    limits_and_path_hold(&prog, plan, &l, &machine.planner);
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
+/// A line that starts within the reach of the curves before it plans with their charges
+/// (session 22); where it goes well beyond, only its part within reach does. These vertices
+/// are LinuxCNC's `performance/LHchips4.ngc`, lines 6787–6801 (feeds left out): the Z line of
+/// 3.2 mm after the stop at `X11.908 Y6.893` was taken whole by the walk back of the tight
+/// curve after it and ran at 2.04 mm/s for 2.84 s (0.8 mm/s²); split where the charges end,
+/// it takes 0.18 s.
+#[test]
+fn a_line_held_with_the_charges_before_it_does_not_crawl() {
+    let (l, cfg) = demo_s_curve();
+    let text = "G21 G90 G64 P0.1\nG0 X13.496 Y7.289 Z-16.319\nG1 F16663\n\
+        Y7.28 Z-10.885\nY7.261 Z-10.539\nY7.226 Z-10.194\nY7.175 Z-9.851\nY7.108 Z-9.51\n\
+        Y6.781 Z-8.219\nY5.658 Z-7.502\nX11.908 Y6.893\nZ-10.683\nY6.999 Z-11.068\n\
+        Y7.088 Z-11.458\nY7.161 Z-11.85\nY7.217 Z-12.246\nY7.255 Z-12.643\nY7.277 Z-13.042\n\
+        M2\n";
+    let prog = parse_program(text, "held.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    no_crawl(&plan, 5.0, 0.3);
+    limits_and_path_hold(&prog, plan, &l, &cfg);
 }
