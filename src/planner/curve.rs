@@ -674,8 +674,9 @@ pub(super) fn refresh_floor(p: &mut Pending) {
 /// too), then, where it is valid at the speed it reaches, the curve's acceleration at that
 /// lower speed, and where it is not, the highest speed `v` that the acceleration valid up to
 /// `v` reaches (by bisection: where the curve leaves next to nothing at the first speed, a
-/// line of 1.2 mm before a stop on `stellabee1` crawled at 1.9 mm/s for 1.27 s); or the pair the backward pass took last ([`Pending::reach_memo`]) within the
-/// speed it is valid to, whichever reaches higher. With the last pair a candidate, the
+/// line of 1.2 mm before a stop on `stellabee1` crawled at 1.9 mm/s for 1.27 s); or the pair
+/// the backward pass took last ([`Pending::reach_memo`]) within the speed it is valid to,
+/// whichever reaches higher. With the last pair a candidate, the
 /// backward pass's bound at an element never falls as the bound after it rises, so the
 /// speed the plan settled at the window's start stays within it (the odd iterates alone
 /// are not monotone in the speed they start from).
