@@ -78,14 +78,15 @@
 //!   little wider, [`WIDEN`]) covers the vertex's, and takes only the lines whose charge does
 //!   not. A line within reach of the curves held ahead whose own vertex is not taken (the
 //!   run's end, a vertex turning too much or too sparse, a computed vertex) plans with their
-//!   charges too, where the caps held ahead hold it whole ([`Planner::hold_on`]): after a
+//!   charges too ([`Planner::hold_on`]): after a
 //!   curve of 0.254 /mm, a chord of a piece of −0.104 /mm decelerated at its own 300 mm/s²
 //!   within `T_f` of the curve's +290, and Z's jerk ran 2.5–5.6 % over (two seeds of
 //!   `chorded_profiles_of_changing_curvature_keep_every_limit`, found at 5000 cases). Such a
 //!   line that goes well beyond the last charge held ahead is split where it ends
 //!   ([`SPLIT_BEYOND`]); the rest plans as any line beyond, under the cap that held the whole
-//!   line (a line of 3.2 mm after a stop, taken whole by the walk back of the tight curve
-//!   after it, ran at 2 mm/s for 2.8 s on `LHchips4`). (Where the walk back is skipped,
+//!   line where one did (a line of 3.2 mm after a stop, taken whole by the walk back of the
+//!   tight curve after it, ran at 2 mm/s for 2.8 s on `LHchips4`). Before session 23 a line
+//!   longer than the caps' reach kept its own acceleration whole, its start within reach too. (Where the walk back is skipped,
 //!   holding the vertex's own charge ahead instead of the one taken back last is as safe and
 //!   a little faster on the corpus, `wheels` −3.2 %, but more walks back follow: the
 //!   look-ahead 339 → 291 k segments/s on the spiral. Not kept.)
@@ -849,9 +850,12 @@ impl Planner {
     /// turns too much or whose chords are too sparse, a computed one) but that starts within
     /// the time-law filter's reach of the curves held ahead plans its tangential acceleration
     /// with their charges ([`CurveState::worst_ahead`]) as a line of the run does: the filter's
-    /// window mixes its acceleration with theirs. Only where the caps held ahead hold it whole
-    /// ([`Planner::erode_ahead`]); a longer line runs beyond their reach faster than the
-    /// acceleration they leave allows.
+    /// window mixes its acceleration with theirs. A line that goes well beyond the last charge
+    /// held ahead ([`SPLIT_BEYOND`]) is split where it ends, and only the part within takes
+    /// the charges; the rest stays under the cap that held the whole line where one did
+    /// ([`Planner::erode_ahead`]). A line the caps do not hold whole and that cannot be split
+    /// so (the charges reach beyond the caps) keeps its own acceleration, as before session
+    /// 23, when every such line did (no failure seen; splitting them costs the corpus 0.03 %).
     fn hold_on(&mut self, p: &mut Pending) {
         let (Some(smoothing), Some(template)) = (self.smoothing, self.curve.last_fit) else {
             return;
@@ -871,25 +875,28 @@ impl Planner {
             return;
         };
         let t_f = smoothing.time_law_s(self.config.period_s);
-        if p.seg.length_mm > cap * t_f {
-            return;
-        }
         // Only the part of the line within the reach of the charges held ahead needs them: a
         // line that goes well beyond is split where the last of them ends, the rest planned
-        // as any line beyond, within the cap that holds the whole line (a line of 3.2 mm
-        // after a stop crawled at 2 mm/s for 2.8 s on `LHchips4`: a later curve's walk back
-        // took it whole, with the charge of that tight curve).
+        // as any line beyond, within the cap that holds the whole line where one does (a line
+        // of 3.2 mm after a stop crawled at 2 mm/s for 2.8 s on `LHchips4`: a later curve's
+        // walk back took it whole, with the charge of that tight curve).
+        let held_whole = p.seg.length_mm <= cap * t_f;
         let reach_mm = self.curve.fits_until_mm(at_mm) - at_mm;
         if reach_mm > 0.0
+            && reach_mm <= cap * t_f
             && p.seg.length_mm > SPLIT_BEYOND * reach_mm
             && let Some((head, mut rest)) = super::split_line(p, reach_mm)
         {
             rest.cap_start_mm_s = head.limits.v_max_mm_s();
             rest.cap_start_limit_mm_s = head.v_limit_mm_s;
             rest.raw_cap_start_mm_s = rest.cap_start_mm_s;
-            super::cap_speed(&mut rest, cap, cap);
+            if held_whole {
+                super::cap_speed(&mut rest, cap, cap);
+            }
             *p = head;
             self.curve.held_rest = Some(rest);
+        } else if !held_whole {
+            return;
         }
         // The budgets of the curves taken; the line's own charge is its tangent's alone.
         let straight = CurveFit {
