@@ -887,9 +887,6 @@ impl Planner {
             && p.seg.length_mm > SPLIT_BEYOND * reach_mm
             && let Some((head, mut rest)) = super::split_line(p, reach_mm)
         {
-            rest.cap_start_mm_s = head.limits.v_max_mm_s();
-            rest.cap_start_limit_mm_s = head.v_limit_mm_s;
-            rest.raw_cap_start_mm_s = rest.cap_start_mm_s;
             if held_whole {
                 super::cap_speed(&mut rest, cap, cap);
             }

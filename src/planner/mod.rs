@@ -1950,9 +1950,6 @@ impl Planner {
             .flatten()
         {
             Some((head, mut tail)) => {
-                tail.cap_start_mm_s = head.limits.v_max_mm_s();
-                tail.cap_start_limit_mm_s = head.v_limit_mm_s;
-                tail.raw_cap_start_mm_s = tail.cap_start_mm_s;
                 *prev = head;
                 tail.shared_acc_mm_s2 = shared;
                 lower_acceleration(&mut tail, acc);
@@ -1966,10 +1963,7 @@ impl Planner {
             }
         }
         let rest = match split_p.then(|| split_line(p, reach_mm)).flatten() {
-            Some((head, mut rest)) => {
-                rest.cap_start_mm_s = rest.limits.v_max_mm_s();
-                rest.cap_start_limit_mm_s = rest.v_limit_mm_s;
-                rest.raw_cap_start_mm_s = rest.cap_start_mm_s;
+            Some((head, rest)) => {
                 *p = head;
                 Some(rest)
             }
@@ -2726,7 +2720,8 @@ const SPLIT_ACC_GAIN: f64 = 1.2;
 
 /// Line `p` split `at_mm` from its start, into two lines that meet without a turn: the first
 /// keeps `p`'s start and its junction, the second ends where `p` ends, bit for bit. Both keep
-/// `p`'s limits and programmed length; the second starts with no kink and no junction cap yet.
+/// `p`'s limits and programmed length; the second starts with no kink, its junction capped by
+/// those limits alone.
 /// `None` for an arc or outside the line.
 fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
     let SegmentPath::Line { direction } = p.seg.path else {
@@ -2747,6 +2742,10 @@ fn split_line(p: &Pending, at_mm: f64) -> Option<(Pending, Pending)> {
     tail.provisional = None;
     tail.low_cap = false;
     tail.alone = p.alone;
+    // The parts meet without a turn: the junction is capped by their speed limits alone.
+    tail.cap_start_mm_s = p.limits.v_max_mm_s();
+    tail.cap_start_limit_mm_s = p.v_limit_mm_s;
+    tail.raw_cap_start_mm_s = tail.cap_start_mm_s;
     Some((head, tail))
 }
 
