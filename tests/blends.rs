@@ -2,10 +2,10 @@
 //! corners between lines and plane arcs (line–line, line–arc, arc–line, arc–arc) with tangent
 //! arcs within the tolerance, where that is faster than the sharp corner. On random programs
 //! of lines and arcs joined at corners (every other element an arc, so that every corner
-//! has one: line–line corners keep the rule they had before), in both modes: the program time does not grow with P
-//! nor exceed the exact corners' (P0), within the slack of the per-corner estimate that
-//! chooses the blends (`SLACK_EXACT`, `SLACK_SMALLER_P`), and every setpoint keeps every
-//! axis's limits and stays within P of the programmed path.
+//! has one: line–line corners keep the rule they had before), in both modes: the program
+//! time never exceeds the exact corners' (P0) nor grows with P (in the trapezoid mode within
+//! the slack of the per-corner estimate that chooses the blends, `slack_smaller_p`), and
+//! every setpoint keeps every axis's limits and stays within P of the programmed path.
 
 use canmotion::gcode::{Interpreter, Item, Setup, Tool, parse_program};
 use canmotion::planner::{
@@ -133,15 +133,20 @@ fn plan_and_check(template: &str, p_mm: f64, profile: ProfileKind) -> Result<Pla
     Ok(plan)
 }
 
-/// How much slower than the exact corners (P0) a blended plan may be, and than the plan with
-/// the next smaller P. Whether a corner is blended, and with which radius, is chosen per corner
-/// by an estimate of its time (`CornerCost` in `src/planner/blend.rs`); the look-ahead then
-/// plans the profiles exactly, so a blend the estimate favours can cost a little. Seen over
-/// 1000 random programs in each mode (5000 plans): at most 0.9 % slower than P0 or than a
-/// smaller P in the trapezoid mode; in the jerk-limited mode never slower than P0, and 0.07 %
-/// slower than a smaller P.
-const SLACK_EXACT: f64 = 0.02;
-const SLACK_SMALLER_P: f64 = 0.03;
+/// How much slower than the plan with the next smaller P a blended plan may be, per mode.
+/// Whether a corner is blended, and with which radius, is chosen per corner by an estimate
+/// of its time (`CornerCost` in `src/planner/blend.rs`) among a grid of radii that does not
+/// depend on P; the look-ahead then plans the profiles exactly. The estimate cannot see what
+/// follows the corner: in the trapezoid mode a larger blend before a stop (the program's end)
+/// replaces a line's braking by the arc's, weaker under its centripetal share, and costs up to
+/// 2.3 % (seen in 10 × 5000 random programs, session 24). The jerk-limited mode takes a blend
+/// only where it saves the time-law filter's delay too: never slower there.
+fn slack_smaller_p(profile: ProfileKind) -> f64 {
+    match profile {
+        ProfileKind::Trapezoid => 0.03,
+        _ => 0.0,
+    }
+}
 
 /// The tolerances, in increasing order. From 0.02 mm: the jerk-limited mode's axis filters
 /// may take half of P at a corner, and `chord_tol_mm` (0.01 mm here) under P0, so a smaller P
@@ -165,12 +170,9 @@ proptest! {
         }
     }
 
-    /// Issue 11 item 3: a blend never makes a program slower, and the time never grows with
-    /// P. Not met: the choice is an estimate per corner, and a clean-clone CI run (session 13)
-    /// found a jerk-limited plan 8.5 % slower at P0.1 than at P0.05 (four arcs joined at
-    /// corners, the case recorded in `tests/blends.proptest-regressions`), beyond the slack.
+    /// Issue 11 item 3: a blend never makes a program slower than its exact corners (P0), and
+    /// the time never grows with P (in the trapezoid mode within `slack_smaller_p`).
     #[test]
-    #[ignore = "issue 11 item 3: a jerk-limited plan at P0.1 is 8.5 % slower than at P0.05 on a recorded case (session 13); the target is never slower"]
     fn blends_do_not_slow_a_program(
         pairs in prop::collection::vec((a_piece(), an_arc()), 1..4),
         s_curve in any::<bool>(),
@@ -184,11 +186,11 @@ proptest! {
             let t_s = plan_and_check(&template, p_mm, profile)?.duration_s();
             let exact = *exact_s.get_or_insert(t_s);
             prop_assert!(
-                t_s <= exact * (1.0 + SLACK_EXACT) + 1e-9,
+                t_s <= exact + 1e-9,
                 "{profile:?}: P{p_mm} takes {t_s} s, exact corners {exact} s\n{template}"
             );
             prop_assert!(
-                t_s <= last_s * (1.0 + SLACK_SMALLER_P) + 1e-9,
+                t_s <= last_s * (1.0 + slack_smaller_p(profile)) + 1e-9,
                 "{profile:?}: P{p_mm} takes {t_s} s, a smaller P {last_s} s\n{template}"
             );
             last_s = t_s;

@@ -10,9 +10,10 @@
 //! or of two offset circles. Of the solutions, the one nearest the corner whose tangent points
 //! lie on the elements near the corner, with the direction of travel. Its deviation is the
 //! largest distance of the blend from the pieces of the path it replaces (at least
-//! `|corner − c_b| − ρ`, where it passes nearest the corner); `ρ` is the largest within the
-//! tolerance and the room (the radii from 0 up, where both grow with `ρ`), or a smaller one of
-//! a grid where the estimate of the corner's time ([`CornerCost`]) says it is faster. The
+//! `|corner − c_b| − ρ`, where it passes nearest the corner); `ρ` is the one of a grid of radii
+//! (independent of the tolerance) within the tolerance and the room (the radii from 0 up,
+//! where both grow with `ρ`) that the estimate of the corner's time ([`CornerCost`]) says is
+//! fastest, if faster than the sharp corner. The
 //! arcs are trimmed to the tangent points: the same centre, normal and direction, rebuilt with
 //! `Planner::arc_pending` (their limits depend on the radius, not on the sweep, so they stay).
 //! A blend is taken only where the plan can still follow it from its settled speeds
@@ -284,24 +285,19 @@ impl Planner {
         if v_sharp >= feed_mm_s {
             return None;
         }
-        let (widest, widest_k) = corner.largest_within(tol_mm)?;
+        let top = corner.grid_top(tol_mm)?;
         let cost = CornerCost::new(self, a, b, v_sharp);
-        // The radius: the largest within the tolerance, or a smaller one where the estimate
-        // says it is faster (the arc's speed comes from its radius, but it runs at the slower
-        // side's feed and takes more of both sides as it grows). The smaller candidates are
-        // a grid that does not depend on the tolerance, so a larger tolerance only adds
-        // candidates.
-        let top = widest_k.max(0);
-        let grid = (0..=top)
-            .rev()
-            .map(|k| corner.grid_start_mm() * GRID_RATIO.powi(k));
-        let candidates = std::iter::once(widest.radius_mm).chain(grid);
+        // The radius: of a grid that does not depend on the tolerance (ratio 2^¼), the one
+        // the estimate says is fastest (the arc's speed comes from its radius, but it runs at
+        // the slower side's feed and takes more of both sides as it grows). A larger
+        // tolerance only adds candidates, so the estimate's choice never gets worse as P
+        // grows. The largest radius within the tolerance, off the grid, was a candidate too
+        // until session 24: a larger P lost the smaller P's, and a jerk-limited plan was 2.6 %
+        // slower at P0.03 than at P0.02 (`tests/blends.rs`).
+        let candidates = (0..=top).rev().map(|k| corner.grid_radius_mm(k));
         let mut best: Option<(f64, Box<Blend>)> = None;
         for rho in candidates {
-            let Some(circle) = corner
-                .tangent_circle(rho)
-                .filter(|t| t.deviation_mm <= tol_mm)
-            else {
+            let Some(circle) = corner.within(rho, tol_mm) else {
                 continue;
             };
             let Some((arc, a_after, b_after)) = self.blend_pieces(a, b, &circle, feed_mm_s) else {
@@ -319,7 +315,11 @@ impl Planner {
             if v_blend.is_nan() || v_blend <= v_sharp {
                 continue;
             }
-            let cost_s = cost.blended_s(&arc, v_blend, (circle.taken_a_mm, circle.taken_b_mm));
+            let cost_s = cost.blended_s(
+                &arc,
+                (cap_in.0, cap_out.0),
+                (circle.taken_a_mm, circle.taken_b_mm),
+            );
             if best.as_ref().is_none_or(|(c, _)| cost_s < *c) {
                 let blend = Box::new(Blend {
                     arc,
@@ -505,9 +505,11 @@ struct CornerCost {
     /// The speeds the elements reach near the corner, either side.
     pub(super) v_a: f64,
     pub(super) v_b: f64,
-    /// Their acceleration (the lower) and jerk; the acceleration where the sharp corner
-    /// stops in the jerk-limited mode (the moves run alone there, as exact S-curves).
-    acc: f64,
+    /// The accelerations either side: each element's own in the trapezoid mode, the lower of
+    /// the two under the time-law filter (joined elements share it, `share_acceleration`).
+    acc: (f64, f64),
+    /// The acceleration where the sharp corner stops in the jerk-limited mode (the moves run
+    /// alone there, as exact S-curves), and the jerk.
     sharp_acc: f64,
     jerk: f64,
     /// What joining the two through the time-law filter costs (jerk-limited mode).
@@ -521,11 +523,15 @@ impl CornerCost {
     /// The sharp corner from `a` into `b` at `v_sharp`: each side loses against cruising at
     /// the speed it reaches near the corner the time of one way of `corner_cost_s`.
     fn new(planner: &Planner, a: &Pending, b: &Pending, v_sharp: f64) -> CornerCost {
-        let (acc, jerk) = (
-            a.limits.a_max_mm_s2().min(b.limits.a_max_mm_s2()),
-            a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3()),
-        );
-        let reach = |p: &Pending| {
+        let (acc_a, acc_b) = (a.limits.a_max_mm_s2(), b.limits.a_max_mm_s2());
+        let lower = acc_a.min(acc_b);
+        let acc = if planner.smoothing.is_some() {
+            (lower, lower)
+        } else {
+            (acc_a, acc_b)
+        };
+        let jerk = a.limits.j_max_mm_s3().min(b.limits.j_max_mm_s3());
+        let reach = |p: &Pending, acc: f64| {
             p.limits
                 .v_max_mm_s()
                 .min((v_sharp * v_sharp + acc * p.full_length_mm).sqrt())
@@ -539,17 +545,17 @@ impl CornerCost {
         let (joined_s, sharp_acc) = match planner.smoothing {
             Some(smoothing) if v_sharp == 0.0 => {
                 let alone = match (a.alone, b.alone) {
-                    (Some(x), Some(y)) => acc.max(x.a_max_mm_s2().min(y.a_max_mm_s2())),
-                    _ => acc,
+                    (Some(x), Some(y)) => lower.max(x.a_max_mm_s2().min(y.a_max_mm_s2())),
+                    _ => lower,
                 };
                 (2.0 * smoothing.time_law_s(period_s), alone)
             }
-            Some(smoothing) => (smoothing.time_law_s(period_s), acc),
-            None => (0.0, acc),
+            Some(smoothing) => (smoothing.time_law_s(period_s), lower),
+            None => (0.0, lower),
         };
         let mut cost = CornerCost {
-            v_a: reach(a),
-            v_b: reach(b),
+            v_a: reach(a, acc.0),
+            v_b: reach(b, acc.1),
             acc,
             sharp_acc,
             jerk,
@@ -557,41 +563,76 @@ impl CornerCost {
             sharp_s: 0.0,
             smoothing: planner.smoothing.is_some(),
         };
-        cost.sharp_s = cost.corner_s(v_sharp, sharp_acc);
+        let sharp_acc = if cost.smoothing {
+            (sharp_acc, sharp_acc)
+        } else {
+            acc
+        };
+        cost.sharp_s = cost.corner_s((v_sharp, v_sharp), sharp_acc);
         cost
     }
 
-    fn corner_s(&self, v: f64, acc: f64) -> f64 {
-        0.5 * (corner_cost_s(self.v_a, v, acc, self.jerk)
-            + corner_cost_s(self.v_b, v, acc, self.jerk))
+    /// The dips to `v.0` at the end of `a` and to `v.1` at the start of `b`, one way each.
+    fn corner_s(&self, v: (f64, f64), acc: (f64, f64)) -> f64 {
+        0.5 * (corner_cost_s(self.v_a, v.0, acc.0, self.jerk)
+            + corner_cost_s(self.v_b, v.1, acc.1, self.jerk))
     }
 
-    /// The blended corner: `arc` run at `v_blend` instead of `taken_mm` of each element.
-    fn blended_s(&self, arc: &Pending, v_blend: f64, (taken_a_mm, taken_b_mm): (f64, f64)) -> f64 {
+    /// The blended corner: `arc` instead of `taken_mm` of each element, entered under `v_in`
+    /// and left under `v_out`. The speed dips to the lower end of the arc and ramps up along
+    /// it (under its own limit) towards the higher one: charging the whole arc at the lower
+    /// end's speed overstated a blend whose caps differ (a tight arc into a wide one), and
+    /// kept a sharp corner 20 times slower (`tests/blends.rs`'s recorded case).
+    fn blended_s(&self, arc: &Pending, (v_in, v_out): (f64, f64), taken_mm: (f64, f64)) -> f64 {
         // Under the time-law filter, elements joined at speed share the lower of their
         // accelerations (`share_acceleration`): a tight arc slows its neighbours' ramps, at
         // the corner and at their other ends, `v/2·(1/a' − 1/a)` each against cruising.
-        let (acc, ramps_s) = if self.smoothing {
-            let acc = self.acc.min(arc.limits.a_max_mm_s2());
+        let arc_acc = arc.limits.a_max_mm_s2();
+        let (acc, arc_acc, ramps_s) = if self.smoothing {
+            let acc = self.acc.0.min(arc_acc);
             let ramps_s = 0.5 * (self.v_a + self.v_b) * (1.0 / acc - 1.0 / self.sharp_acc);
-            (acc, ramps_s)
+            ((acc, acc), acc, ramps_s)
         } else {
-            (self.acc, 0.0)
+            (self.acc, arc_acc, 0.0)
         };
-        self.joined_s + ramps_s + self.corner_s(v_blend, acc) + arc.seg.length_mm / v_blend
-            - taken_a_mm / self.v_a
-            - taken_b_mm / self.v_b
+        let (len_mm, v_arc) = (arc.seg.length_mm, arc.limits.v_max_mm_s());
+        // The speeds at the arc's ends: each reachable from the other along the arc.
+        let v_in = v_in.min(v_arc);
+        let v_out = v_out.min(v_arc);
+        let v0 = v_in.min((v_out * v_out + 2.0 * arc_acc * len_mm).sqrt());
+        let v1 = v_out.min((v0 * v0 + 2.0 * arc_acc * len_mm).sqrt());
+        // The ramps from either end meet where their speeds are equal.
+        let meet_mm =
+            ((v1 * v1 - v0 * v0 + 2.0 * arc_acc * len_mm) / (4.0 * arc_acc)).clamp(0.0, len_mm);
+        let arc_s =
+            ramp_s(v0, arc_acc, v_arc, meet_mm) + ramp_s(v1, arc_acc, v_arc, len_mm - meet_mm);
+        self.joined_s + ramps_s + self.corner_s((v0, v1), acc) + arc_s
+            - taken_mm.0 / self.v_a
+            - taken_mm.1 / self.v_b
     }
 }
 
-/// The ratio of consecutive radii on the grid of candidate blends (`Planner::blend_curves`).
-const GRID_RATIO: f64 = std::f64::consts::SQRT_2;
+/// The time to run `dist_mm` from `v0`, accelerating at `acc` up to `v_max`.
+fn ramp_s(v0: f64, acc: f64, v_max: f64, dist_mm: f64) -> f64 {
+    let v0 = v0.min(v_max);
+    let ramp_mm = (v_max * v_max - v0 * v0) / (2.0 * acc);
+    if dist_mm <= ramp_mm {
+        ((v0 * v0 + 2.0 * acc * dist_mm).sqrt() - v0) / acc
+    } else {
+        (v_max - v0) / acc + (dist_mm - ramp_mm) / v_max
+    }
+}
+
+/// The ratio of consecutive radii on the grid of candidate blends (`Planner::blend_curves`):
+/// 2^¼, so that the largest radius of the grid within a tolerance is at most 19 % under the
+/// largest within it.
+const GRID_RATIO: f64 = 1.189_207_115_002_721;
 
 /// The grid's first radius, per millimetre of the path the blend may take (both rooms).
 const GRID_START: f64 = 1e-4;
 
-/// The grid's last radius: `GRID_START·√2^GRID_MAX_STEPS` is `MAX_RADIUS_PER_ROOM`.
-const GRID_MAX_STEPS: i32 = 47;
+/// The grid's last radius: `GRID_START·GRID_RATIO^GRID_MAX_STEPS` is `MAX_RADIUS_PER_ROOM`.
+const GRID_MAX_STEPS: i32 = 94;
 
 /// An element's path near a corner, as the blend sees it: a line, or the circle of a plane arc.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -922,41 +963,59 @@ impl Corner {
         GRID_START * self.max_radius_mm / MAX_RADIUS_PER_ROOM
     }
 
-    /// The largest tangent circle within `tol_mm` of the corner and the rooms, and the index
-    /// `k` of the largest radius of the grid `grid_start_mm·√2^k` within them too, or `None`.
+    /// The grid's `k`-th radius, `grid_start_mm·GRID_RATIO^k`.
+    pub(super) fn grid_radius_mm(&self, k: i32) -> f64 {
+        self.grid_start_mm() * GRID_RATIO.powi(k)
+    }
+
+    /// The circle of radius `rho` touching both elements, if it keeps within `tol_mm`.
+    fn within(&self, rho: f64, tol_mm: f64) -> Option<TangentCircle> {
+        self.tangent_circle(rho)
+            .filter(|t| t.deviation_mm <= tol_mm)
+    }
+
+    /// The index `k` of the largest radius of the grid within `tol_mm` of the corner and the
+    /// rooms, or `None` where not even its first is.
     ///
     /// The radii that fit need not be one interval: where an element curves away from the
     /// blend, much larger circles may touch both elements again within the tolerance (with a
     /// vanishing sweep). The blend keeps to the interval from 0, where the deviation and the
     /// lengths taken grow with the radius: the grid is climbed from its start until a radius
-    /// no longer fits, then bisected.
-    pub(super) fn largest_within(&self, tol_mm: f64) -> Option<(TangentCircle, i32)> {
+    /// no longer fits.
+    pub(super) fn grid_top(&self, tol_mm: f64) -> Option<i32> {
         if !(tol_mm > 0.0 && tol_mm.is_finite()) {
             return None;
         }
-        let fits = |rho: f64| {
-            self.tangent_circle(rho)
-                .filter(|t| t.deviation_mm <= tol_mm)
-        };
-        let start = self.grid_start_mm();
-        let (mut lo, mut hi, mut k) = (0.0, start, -1);
-        while k < GRID_MAX_STEPS && fits(hi).is_some() {
-            lo = hi;
-            hi *= GRID_RATIO;
+        let mut k = -1;
+        while k < GRID_MAX_STEPS && self.within(self.grid_radius_mm(k + 1), tol_mm).is_some() {
             k += 1;
         }
+        (k >= 0).then_some(k)
+    }
+
+    /// The largest tangent circle within `tol_mm` of the corner and the rooms (in the
+    /// interval from 0, as [`grid_top`](Self::grid_top)): the grid's top, bisected up to the
+    /// next radius.
+    #[cfg(test)]
+    fn largest_within(&self, tol_mm: f64) -> Option<TangentCircle> {
+        let k = self.grid_top(tol_mm);
+        let (mut lo, mut hi) = match k {
+            Some(k) => (self.grid_radius_mm(k), self.grid_radius_mm(k + 1)),
+            None if tol_mm > 0.0 && tol_mm.is_finite() => (0.0, self.grid_start_mm()),
+            None => return None,
+        };
         for _ in 0..64 {
             let mid = 0.5 * (lo + hi);
             if mid <= lo || mid >= hi {
                 break;
             }
-            if fits(mid).is_some() {
+            if self.within(mid, tol_mm).is_some() {
                 lo = mid;
             } else {
                 hi = mid;
             }
         }
-        fits(lo).map(|t| (t, k))
+        self.within(lo, tol_mm)
     }
 }
 
@@ -1067,7 +1126,7 @@ mod tests {
     fn the_largest_blend_keeps_to_the_tolerance() {
         for (k, c) in corners().iter().enumerate() {
             for tol in [1e-3, 0.01, 0.05] {
-                let t = c.largest_within(tol).unwrap().0;
+                let t = c.largest_within(tol).unwrap();
                 check_tangency(c, &t);
                 assert!(t.deviation_mm <= tol, "corner {k}: {}", t.deviation_mm);
                 // The largest: a little more deviates too much (the rooms are ample).
@@ -1096,7 +1155,7 @@ mod tests {
         )
         .unwrap();
         let tol = 0.01;
-        let t = c.largest_within(tol).unwrap().0;
+        let t = c.largest_within(tol).unwrap();
         let h = (0.5 * theta).cos();
         assert!((t.radius_mm / (tol * h / (1.0 - h)) - 1.0).abs() < 1e-9);
         check_tangency(&c, &t);
@@ -1117,7 +1176,7 @@ mod tests {
             ),
         )
         .unwrap();
-        let t = c.largest_within(1.0).unwrap().0;
+        let t = c.largest_within(1.0).unwrap();
         assert!(t.taken_a <= 0.05 && t.taken_b <= 0.02);
         assert!(t.deviation_mm < 1.0);
         assert!(c.tangent_circle(t.radius_mm * 1.01).is_none());
