@@ -185,7 +185,11 @@
 //! raise the bound from the window's end, never beyond such a limit). Settled elements leave
 //! the window as segments and are never planned again, so the work per element is bounded; if
 //! too few are settled (a ramp longer than the window), the first quarter of the window is
-//! settled with the speeds it has, which are always safe.
+//! settled with the speeds it has, which are always safe. Where the forward pass stops short
+//! of the window's end, the last `lookahead / 16` of the elements it would settle stay in the
+//! window too (a reserve): the elements left otherwise brake just enough for a stop at its end
+//! from the settled speed, and the next vertex of a chord run taken as a curve, whose curve
+//! lowers the accelerations within its reach (`curve.rs`), could not be planned from there.
 
 use std::collections::VecDeque;
 
@@ -966,6 +970,10 @@ struct Provisional {
 /// span: it bounds the work per element.
 const MAX_PLATEAU_ELEMENTS: usize = 256;
 
+/// The look-ahead keeps a reserve of `lookahead / RESERVE_PER_LOOKAHEAD` elements it could
+/// settle before those braking for the stop at its end (`Planner::replan`).
+const RESERVE_PER_LOOKAHEAD: usize = 16;
+
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
 /// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
 /// bounded by the look-ahead window, whatever the program's length (see the module
@@ -995,6 +1003,9 @@ pub struct Planner {
     /// whose lengths bind) rather than from the stop at the window's end: such a speed no
     /// longer changes as elements come. Scratch, like `back_mm_s`.
     back_anchored: Vec<bool>,
+    /// The forward pass's start and end speed of each element it would settle, and the
+    /// curve's pair (`Planner::settle`), before the reserve is kept back. Scratch.
+    forward: Vec<(f64, f64, (f64, f64))>,
     ready: VecDeque<Segment>,
     finished: bool,
     /// Elements that could not be stretched to whole periods (see
@@ -1090,6 +1101,7 @@ impl Planner {
             back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             back_acc: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             back_anchored: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
+            forward: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             ready: VecDeque::new(),
             finished: false,
             off_grid: 0,
@@ -1498,6 +1510,7 @@ impl Planner {
         let quarter = (n / 4).max(1);
         let mut v0 = self.v_settled_mm_s;
         let mut settled = 0;
+        self.forward.clear();
         while settled < n {
             let i = settled;
             // By reference: an element is large, and `settle` copies only its segment.
@@ -1532,9 +1545,33 @@ impl Planner {
             // On a chord run taken as a curve, the acceleration of the pass that bounds the
             // speed change, and the speed up to which it is valid.
             let curve = if v1 >= v0 { fwd_acc } else { self.back_acc[i] };
-            self.settle(i, v0, v1, curve)?;
+            self.forward.push((v0, v1, curve));
             v0 = v1;
             settled += 1;
+        }
+        // The reserve: where the pass stops short of the window's end (the elements left
+        // brake for a stop at its end), the last `RESERVE` of the elements it would settle
+        // stay too. Otherwise the window kept just what a stop from the settled speed needs,
+        // and the next element's curve, lowering the accelerations within its reach, could
+        // no longer be planned from it: the vertex fell back to its own junction rules, a dip
+        // to 18 mm/s on a 2 mm chorded circle at 50 mm/s, at every lap (`curve.rs`).
+        if !all && settled < n {
+            let forced = if n >= self.config.lookahead {
+                quarter
+            } else {
+                0
+            };
+            let reserve = self.config.lookahead / RESERVE_PER_LOOKAHEAD;
+            settled = settled.saturating_sub(reserve).max(forced.min(settled));
+        }
+        for i in 0..settled {
+            let (v0, v1, curve) = self.forward[i];
+            self.settle(i, v0, v1, curve)?;
+        }
+        if settled > 0 {
+            v0 = self.forward[settled - 1].1;
+        } else {
+            v0 = self.v_settled_mm_s;
         }
         self.window.drain(..settled);
         self.v_settled_mm_s = v0;
