@@ -186,7 +186,7 @@
 //! the window as segments and are never planned again, so the work per element is bounded; if
 //! too few are settled (a ramp longer than the window), the first quarter of the window is
 //! settled with the speeds it has, which are always safe. Where the forward pass stops short
-//! of the window's end, the last `lookahead / 16` of the elements it would settle stay in the
+//! of the window's end, the last `lookahead / 8` of the elements it would settle stay in the
 //! window too (a reserve): the elements left otherwise brake just enough for a stop at its end
 //! from the settled speed, and the next vertex of a chord run taken as a curve, whose curve
 //! lowers the accelerations within its reach (`curve.rs`), could not be planned from there.
@@ -972,7 +972,7 @@ const MAX_PLATEAU_ELEMENTS: usize = 256;
 
 /// The look-ahead keeps a reserve of `lookahead / RESERVE_PER_LOOKAHEAD` elements it could
 /// settle before those braking for the stop at its end (`Planner::replan`).
-const RESERVE_PER_LOOKAHEAD: usize = 16;
+const RESERVE_PER_LOOKAHEAD: usize = 8;
 
 /// The streaming planner: items in with [`push`](Planner::push), settled segments out with
 /// [`pop`](Planner::pop), [`finish`](Planner::finish) at the end of the program. Memory is
