@@ -1550,8 +1550,8 @@ impl Planner {
             settled += 1;
         }
         // The reserve: where the pass stops short of the window's end (the elements left
-        // brake for a stop at its end), the last `RESERVE` of the elements it would settle
-        // stay too. Otherwise the window kept just what a stop from the settled speed needs,
+        // brake for a stop at its end), the last `lookahead / RESERVE_PER_LOOKAHEAD` of the
+        // elements it would settle stay too. Otherwise the window kept just what a stop from the settled speed needs,
         // and the next element's curve, lowering the accelerations within its reach, could
         // no longer be planned from it: the vertex fell back to its own junction rules, a dip
         // to 18 mm/s on a 2 mm chorded circle at 50 mm/s, at every lap (`curve.rs`).
@@ -1568,13 +1568,10 @@ impl Planner {
             let (v0, v1, curve) = self.forward[i];
             self.settle(i, v0, v1, curve)?;
         }
-        if settled > 0 {
-            v0 = self.forward[settled - 1].1;
-        } else {
-            v0 = self.v_settled_mm_s;
+        if let Some(&(_, v1, _)) = settled.checked_sub(1).map(|i| &self.forward[i]) {
+            self.v_settled_mm_s = v1;
         }
         self.window.drain(..settled);
-        self.v_settled_mm_s = v0;
         // A provisional junction settled by force keeps its lowered caps.
         let front = self.window.front().map_or(u64::MAX, |p| p.seq);
         while self.provisional.front().is_some_and(|&seq| seq < front) {
