@@ -86,10 +86,11 @@
 //!   ([`SPLIT_BEYOND`]); the rest plans as any line beyond, under the cap that held the whole
 //!   line where one did (a line of 3.2 mm after a stop, taken whole by the walk back of the
 //!   tight curve after it, ran at 2 mm/s for 2.8 s on `LHchips4`). Before session 23 a line
-//!   longer than the caps' reach kept its own acceleration whole, its start within reach too. (Where the walk back is skipped,
-//!   holding the vertex's own charge ahead instead of the one taken back last is as safe and
-//!   a little faster on the corpus, `wheels` −3.2 %, but more walks back follow: the
-//!   look-ahead 339 → 291 k segments/s on the spiral. Not kept.)
+//!   longer than the caps' reach kept its own acceleration whole, its start within reach
+//!   too. (Where the walk back is skipped, holding the vertex's own charge ahead instead of
+//!   the one taken back last is as safe and a little faster on the corpus, `wheels` −3.2 %,
+//!   but more walks back follow: the look-ahead 339 → 291 k segments/s on the spiral. Not
+//!   kept.)
 //!   (Taking the larger of the charges taken back within the last reach walks back
 //!   less often, 15 % faster on 200 000 spiral chords, but plans `LHchips4` 9 % and
 //!   `line-contouring-xz` 16 % slower.)
