@@ -896,7 +896,14 @@ impl Interpolator {
             self.k_profile = quiet;
             return;
         }
-        if self.k_profile.quiet && !now.done {
+        // A quiet ramp whose `k` already stands at its end (clamped there, its rate a rounding
+        // or at most one period's change of the ramp's own) has ended: a target above 1 that
+        // came then waited a sample for nothing (a proptest seed of
+        // `k_stays_within_0_and_2_and_its_rate_within_the_ramp`).
+        let ended = now.done
+            || (now.k == self.k_profile.k_end
+                && now.rate.abs() <= ramp.max_rate_change_per_s2 * self.period_s);
+        if self.k_profile.quiet && !ended {
             // `k'` may be beyond the ramp's own rate: the quiet ramp runs to its end first.
             self.deferred = true;
             return;
