@@ -895,6 +895,50 @@ fn a_refined_chord_profile_runs_through_without_stops() {
     limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
+/// The charge of a curve is held ahead over the time-law filter's reach at the speed the
+/// plan may run there, which is never above the max feed. A gentle curve's cap is far above
+/// it (here 30 mm of a 2 m radius, whose cap is some 5 m/s): held over `cap·T_f/2`, its
+/// charge reached a 7 mm Z line after the corner, which the walk back of the tight curve
+/// after it then slowed whole (1.03 s at 12 mm/s instead of 0.27 s; on LinuxCNC's
+/// `performance/3D_Chips.ngc` a 6.8 mm Z line ran at 6 mm/s for 2 s).
+#[test]
+fn a_line_beyond_the_reach_of_a_gentle_curve_does_not_crawl() {
+    let (l, cfg) = demo_s_curve();
+    let r_mm = 2000.0;
+    let mut text = String::from("G21 G90 G64 P0.1\nG1 F12000\n");
+    let arc = |k: u32| {
+        let th = f64::from(k) * 0.05 / r_mm;
+        (r_mm * th.sin(), r_mm * (1.0 - th.cos()))
+    };
+    for k in 1..=600 {
+        let (x, y) = arc(k);
+        text += &format!("X{x:.6} Y{y:.6}\n");
+    }
+    let y = arc(600).1;
+    // A 7 mm Z line, then a quarter circle of 0.5 mm in 10 µm chords turning it to +Y.
+    text += "Z7\n";
+    let (r, n) = (0.5, 78);
+    for k in 1..=n {
+        let ph = f64::from(k) / f64::from(n) * std::f64::consts::FRAC_PI_2;
+        text += &format!(
+            "Y{:.4} Z{:.4}\n",
+            y + r * (1.0 - ph.cos()),
+            7.0 + r * ph.sin()
+        );
+    }
+    text += &format!("Y{:.4}\nM2\n", y + r + 3.0);
+    let prog = parse_program(&text, "gentle.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let z_line_s: f64 = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 603)
+        .map(|s| s.duration_s())
+        .sum();
+    assert!(z_line_s < 0.4, "the Z line takes {z_line_s:.3} s");
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
 /// A line that starts within the reach of the curves before it plans with their charges
 /// (session 22); where it goes well beyond, only its part within reach does. These vertices
 /// are LinuxCNC's `performance/LHchips4.ngc`, lines 6787–6801 (feeds left out): the Z line of
