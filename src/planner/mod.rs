@@ -121,8 +121,11 @@
 //!   junction share the jerk budget its elements leave in halves, since steps of neighbouring
 //!   junctions may meet in the filters' output, except where a step is alone: between two
 //!   elements each at least `2·T_k` long at its top speed (whatever blends may still take of
-//!   them), a turn of the tangent between two lines, or a curvature step at a tangent
-//!   junction, meets no other and takes all of it.
+//!   them), or long enough that the plan, passing the junction at most at `v` and
+//!   accelerating at most at four times its acceleration (a feed override up to 200 %),
+//!   needs `2·T_k` to cross them (`L ≥ 2·T_k·v + 8·a·T_k²`, for `v` up to there), a turn of
+//!   the tangent between two lines, or a curvature step at a tangent junction, meets no
+//!   other and takes all of it.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //! - **Chord smoothing.** Before any of this, a dense run of G64 lines (chords of 0.1 mm at
@@ -2176,6 +2179,40 @@ impl Planner {
                 .smoothed_junction_limit_mm_s(&passed, b, smoothing)
                 .min(self.smoothed_junction_limit_mm_s(&stopped, b, smoothing));
         }
+        // A step alone in its filter time: both elements long enough that no other
+        // junction's step reaches the filters' output while this one's does (`2·T_k` apart
+        // in time). It then adds only to the elements' own jerk, and may take all the budget
+        // they leave, not half of it (`alone` in [`Planner::junction_rules_mm_s`]). Long
+        // enough at any speed they may run (`2·T_k` at their top speed, whatever blends may
+        // still take of them); or only up to a speed `v_alone`: from the junction at most at
+        // `v`, with at most `4·a` (the acceleration under a feed override up to 200 %),
+        // the plan covers `L` no sooner than `2·T_k` where `L ≥ 2·T_k·v + 8·a·T_k²`. Only the
+        // first counted until session 25: a polyline of 2 mm chords turning 4.5° each
+        // (`sam-circle_lines.ngc`) was held to half the budget whatever its speed.
+        let tk = smoothing.axis_s(self.config.period_s);
+        let (a_mm, b_mm) = self.shortest_mm(a, b);
+        if a_mm >= 2.0 * tk * a.v_limit_mm_s && b_mm >= 2.0 * tk * b.v_limit_mm_s {
+            return self.junction_rules_mm_s(a, b, smoothing, true);
+        }
+        let v = self.junction_rules_mm_s(a, b, smoothing, false);
+        let acc = a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2());
+        let v_alone = (a_mm.min(b_mm) - 8.0 * acc * tk * tk) / (2.0 * tk);
+        if v_alone > v {
+            v.max(v_alone.min(self.junction_rules_mm_s(a, b, smoothing, true)))
+        } else {
+            v
+        }
+    }
+
+    /// The rules of [`Planner::smoothed_junction_limit_mm_s`], with the junction's steps alone
+    /// in their filter time (`alone`) or not.
+    fn junction_rules_mm_s(
+        &self,
+        a: &Pending,
+        b: &Pending,
+        smoothing: &Smoothing,
+        alone: bool,
+    ) -> f64 {
         let cfg = &self.config;
         let tk = smoothing.axis_s(cfg.period_s);
         let mut v = f64::INFINITY;
@@ -2217,16 +2254,11 @@ impl Planner {
         let kink_mean_norm = kink_mean.norm();
         let mean_mm = 0.5 * (a.seg.length_mm + b.seg.length_mm);
         let l_mm = a.seg.length_mm.min(b.seg.length_mm);
-        // A step alone in its filter time: both elements long enough (`2·T_k` at their top
-        // speed, whatever blends may still take of them) that no other junction's step
-        // reaches the filters' output while this one's does, and only one kind of step here:
-        // a turn of the tangent between elements of equal curvature (two lines), or a
-        // curvature step without a turn ([`ISOLATED_TURN`]). Its jerk then adds only to the
-        // elements' own, and may take all the budget they leave, not half of it.
-        let (a_mm, b_mm) = self.shortest_mm(a, b);
-        let long = a_mm >= 2.0 * tk * a.v_limit_mm_s && b_mm >= 2.0 * tk * b.v_limit_mm_s;
-        let turn_alone = long && dk_norm == 0.0;
-        let curvature_alone = long && du_norm <= ISOLATED_TURN;
+        // A step alone in its filter time, and only one kind of step here: a turn of the
+        // tangent between elements of equal curvature (two lines), or a curvature step
+        // without a turn ([`ISOLATED_TURN`]).
+        let turn_alone = alone && dk_norm == 0.0;
+        let curvature_alone = alone && du_norm <= ISOLATED_TURN;
         // The allowance below for the rounding of written vertices does not hold where they
         // were computed ([`refine`]): there a curvature that changes over a few short pieces,
         // each within the allowance, is the curve's own (it broke Z's jerk by up to 89 %).
