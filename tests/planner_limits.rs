@@ -895,6 +895,26 @@ fn a_refined_chord_profile_runs_through_without_stops() {
     limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
+/// A programmed arc that runs mostly at its cap takes more of the jerk budget for the curve
+/// and less for its tangential acceleration (`ArcSplit` in `src/planner/mod.rs`): three turns
+/// of a 10 mm circle run at its centripetal limit, 114 mm/s, in 1.89 s, where the split of
+/// every arc (`v³κ² ≤ J/4`) held them to 97.9 mm/s, 2.10 s; within every limit.
+#[test]
+fn a_long_arc_runs_at_its_centripetal_limit() {
+    let (l, cfg) = demo_s_curve();
+    let text = "G21 G90 G64 P0.01\nG0 X10 Y0\nG2 X10 Y0 I-10 J0 P3 F12000\nM2\n";
+    let prog = parse_program(text, "turns.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let peak = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 3)
+        .map(|s| s.v_peak_mm_s)
+        .fold(0.0, f64::max);
+    assert!(peak > 110.0, "peak {peak:.2} mm/s");
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
 /// A vertex whose neighbours are long enough at the speed it is passed that no other
 /// vertex's step meets its own in the axis filters' output takes the whole jerk budget the
 /// elements leave, not half of it: a polygon of 2 mm chords turning 4.5° each (LinuxCNC's

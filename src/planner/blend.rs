@@ -207,6 +207,7 @@ impl Planner {
                 feed_mm_s,
                 a.blend,
                 &AuxMove::default(),
+                false,
             )?;
             Ok(Some((arc, tangent_mm)))
         };
@@ -365,6 +366,7 @@ impl Planner {
                 feed_mm_s,
                 a.blend,
                 &AuxMove::default(),
+                false,
             )
             .ok()?;
         arc.is_blend_arc = true;
@@ -428,6 +430,7 @@ impl Planner {
             p.limits.v_max_mm_s(),
             p.blend,
             &AuxMove::still(p.seg.aux.end),
+            !p.is_blend_arc,
         )
         .ok()
     }
