@@ -1030,7 +1030,8 @@ impl Planner {
         // Ahead, no element with X/Y/Z motion runs above the max feed: a gentle curve's cap
         // far above it held its charge up to 147 mm ahead, over a 6.8 mm Z line after a stop
         // that then crawled at 6 mm/s for 2 s (`3D_Chips`, session 25).
-        let hold_until_mm = self.curve.pushed_mm + 0.5 * cap.min(self.limits.max_feed_mm_s) * t_f;
+        let held_cap = cap.min(self.limits.max_feed_mm_s);
+        let hold_until_mm = self.curve.pushed_mm + 0.5 * held_cap * t_f;
         let covering = self
             .curve
             .last_back
@@ -1058,7 +1059,7 @@ impl Planner {
             self.curve.last_back = Some((back_from_mm, until_mm, wide));
             self.curve.hold_fit_ahead(hold_until_mm, wide);
         }
-        let reach_mm = cap.min(self.limits.max_feed_mm_s) * t_f;
+        let reach_mm = held_cap * t_f;
         self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
         // The element after the vertex plans with the tangential acceleration the curve
         // leaves at its speed ([`Pending::curve_acc`]), and that of every curve held ahead
