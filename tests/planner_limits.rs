@@ -543,9 +543,13 @@ fn dense_low_caps_are_a_plateau_not_stops() {
 /// the centre, which the axis filters spread over `2·T_k` (jerk `v²/(r·T_k)`). Each of a
 /// junction's rules took half of the jerk budget its elements leave, for steps that may meet
 /// in the filters' output; an isolated step (no turn of the tangent, both elements longer than
-/// `2·T_k` at their top speed) now takes all of it: the line runs into the arc at
-/// `√(T_k·(J − used)·r/1.05)` less the time-law filter's dip (`√2` times the old cap), and
-/// every axis keeps its limits and the path its tolerance.
+/// `2·T_k` at their top speed) takes all of it (session 13: `√2` times the old cap). What the
+/// arc leaves is taken at the junction's speed (session 26): along an axis it uses
+/// `(2·a/T_f + v³/r²)·(|Tᵢ| + θ) + 3·v·a/r·(|Nᵢ| + θ)` (`θ = 2·v·T_k/r`, the turn within
+/// the filters' span), its whole budget only at its cap. The line runs into the arc at the
+/// speed where `1.05·v²/r ≤ T_k·(J_y − use_y(v))`, more than 1.5 times the cap with the arc's
+/// use at its cap (20.1 mm/s, after the time-law filter's dip), and every axis keeps its
+/// limits and the path its tolerance.
 #[test]
 fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
     let l = limits();
@@ -566,19 +570,38 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         .iter()
         .rfind(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
         .unwrap();
+    let arc_acc = plan
+        .segments()
+        .iter()
+        .find(|s| s.line == 3 && matches!(s.path, SegmentPath::Arc(_)))
+        .and_then(|s| s.profile)
+        .unwrap()
+        .limits()
+        .a_max_mm_s2();
     let (t_k, t_f) = filter_times_s();
-    // The arc takes the share of Y's jerk that its own motion may use; the line none of Y's.
     let share = cfg.path_acc_share;
-    let arc_jerk = share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y);
-    let left = cfg.max_jerk_mm_s3.y - arc_jerk;
-    let cap = |budget: f64| (t_k * budget * r / 1.05).sqrt();
     // The line's tangential acceleration under the time-law filter rounds the dip by A·T_f/4.
     let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
     let dip = 0.25 * acc * t_f;
-    let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
+    // With the arc's use of Y at its cap (the share of Y's jerk its motion may use).
+    let at_cap =
+        (t_k * (cfg.max_jerk_mm_s3.y - share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y)) * r
+            / 1.05)
+            .sqrt()
+            - dip;
+    // The junction's cap before the dip keeps the rule with the arc's use at that speed.
+    let v = line.v_end_mm_s + dip;
+    let turn = (2.0 * v * t_k / r).min(1.0);
+    let use_y = (2.0 * arc_acc / t_f + v.powi(3) / (r * r)) * turn + 3.0 * v * arc_acc / r;
     assert!(
-        line.v_end_mm_s > 0.99 * now && line.v_end_mm_s <= now * (1.0 + 1e-9),
-        "junction {} mm/s, expected {now} (before: {before})",
+        1.05 * v * v / r <= t_k * (cfg.max_jerk_mm_s3.y - use_y) * (1.0 + 1e-9),
+        "junction {v} mm/s before the dip: 1.05·v²/r = {} over T_k·(J − use) = {}",
+        1.05 * v * v / r,
+        t_k * (cfg.max_jerk_mm_s3.y - use_y)
+    );
+    assert!(
+        line.v_end_mm_s > 1.5 * at_cap,
+        "junction {} mm/s, with the arc's use at its cap {at_cap}",
         line.v_end_mm_s
     );
     limits_and_path_hold(&prog, plan, &l, &cfg);

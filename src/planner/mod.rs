@@ -129,7 +129,12 @@
 //!   accelerating at most at four times its acceleration (a feed override up to 200 %),
 //!   needs `2·T_k` to cross them (`L ≥ 2·T_k·v + 8·a·T_k²`, for `v` up to there), a turn of
 //!   the tangent between two lines, or a curvature step at a tangent junction, meets no
-//!   other and takes all of it.
+//!   other and takes all of it. What a programmed plane arc leaves a curvature step at its
+//!   end is taken at the junction's speed: its jerk along an axis,
+//!   `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|`, is its whole budget only at its cap
+//!   (`Planner::step_cap_at_speed`; a line into a 6.35 mm arc, `sam-tail-slowdown.ngc`:
+//!   17 → 36 mm/s). Blend arcs, and every junction while a corner's blend is chosen, keep the
+//!   use at the cap that the blend's estimate was made for.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //! - **Chord smoothing.** Before any of this, a dense run of G64 lines (chords of 0.1 mm at
@@ -1036,6 +1041,9 @@ pub struct Planner {
     smoother: smooth::ChordSmoother,
     /// The chord refiner after it ([`refine`]).
     refiner: refine::ChordRefiner,
+    /// While a corner's blend is chosen: curvature steps with the arcs' uses of the axes at
+    /// their caps, as the blend's estimate was made for ([`Planner::step_cap_at_speed`]).
+    steps_at_caps: std::cell::Cell<bool>,
     /// Collinear lines after them, merged ([`merge`]).
     merger: merge::CollinearMerger,
 }
@@ -1124,6 +1132,7 @@ impl Planner {
             })),
             smoother: smooth::ChordSmoother::default(),
             refiner,
+            steps_at_caps: std::cell::Cell::new(false),
         })
     }
 
@@ -1197,10 +1206,17 @@ impl Planner {
                     return Ok(());
                 };
                 p.refined = refined;
+                // The blend is chosen with the curvature steps' rule at the arcs' caps, which
+                // its estimate of the time was made for: at the junction's speed, blend arcs
+                // that ran slower than the sharp corner were taken (two lines of 30 mm turning
+                // 4°: 0.78 s sharp, 1.01 s blended).
+                self.steps_at_caps.set(true);
                 let blend = match self.window.back() {
-                    Some(prev) => self.blend_arc(prev, &p)?,
-                    None => None,
+                    Some(prev) => self.blend_arc(prev, &p),
+                    None => Ok(None),
                 };
+                self.steps_at_caps.set(false);
+                let blend = blend?;
                 // What is left of `p` beyond the time-law filter's reach of its start, where
                 // `p` was split there ([`Planner::share_at_junction`]).
                 let mut rest = None;
@@ -2316,12 +2332,15 @@ impl Planner {
             }
             let k = dk[i].abs();
             if k > 0.0 {
-                let budget = if curvature_alone {
-                    isolated_step_budget(jerk_budget, self.limits.max_feed_mm_s * d, tk)
-                } else {
-                    jerk_budget
+                let step_budget = |half: f64| {
+                    if curvature_alone {
+                        isolated_step_budget(half, self.limits.max_feed_mm_s * d, tk)
+                    } else {
+                        half
+                    }
                 };
-                v = v.min((tk * budget / (PRECOMP_JERK * k)).sqrt());
+                let cap = (tk * step_budget(jerk_budget) / (PRECOMP_JERK * k)).sqrt();
+                v = v.min(self.step_cap_at_speed(a, b, i, k, cap, v, &step_budget, smoothing));
             }
             let k = dk_vertex[i].abs();
             if k > 0.0 && (exact || noise_mm_s3(k) > jerk_budget) {
@@ -2330,6 +2349,92 @@ impl Planner {
         }
         v = v.min(aux_axes::junction_cap(cfg, a, b, tk, true));
         v.max(0.0)
+    }
+
+    /// The curvature-step rule of axis `i` ([`Planner::junction_rules_mm_s`]) with a plane
+    /// arc's use of the axis taken at the junction's speed rather than at its cap: `cap`, the
+    /// rule with the elements' uses at their caps, raised as far as (at most) `ceiling` where
+    /// `PRECOMP_JERK·v²·|Δκᵢ| ≤ T_k·budget(v)`, `budget` the step's share
+    /// (`step_budget`) of what the elements leave at `v`.
+    ///
+    /// An arc's jerk along an axis is at most `(j_t + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` (the
+    /// tangential jerk, under the time-law filter within `2·a_t/T_f`, and the jerk of
+    /// following the curve along the tangent; the normal part), `T` and `N` within the turn
+    /// the arc makes within the axis filters' span either side of the junction. At its cap
+    /// that is its whole budget (its split's parts add up to it in quadrature); at the lower
+    /// speed a curvature step holds a junction to, the curve's part is far smaller, and the
+    /// step may have what it leaves. Lines, helices and blend arcs keep their use at the cap,
+    /// and every junction while a blend is chosen ([`Planner::steps_at_caps`]).
+    #[allow(clippy::too_many_arguments)]
+    fn step_cap_at_speed(
+        &self,
+        a: &Pending,
+        b: &Pending,
+        i: usize,
+        k: f64,
+        cap: f64,
+        ceiling: f64,
+        step_budget: &dyn Fn(f64) -> f64,
+        smoothing: &Smoothing,
+    ) -> f64 {
+        let cfg = &self.config;
+        let (tk, t_f) = (
+            smoothing.axis_s(cfg.period_s),
+            smoothing.time_law_s(cfg.period_s),
+        );
+        let used = |v: f64| {
+            let a_use = plane_arc_jerk_use(a, true, i, v, t_f, tk).unwrap_or(a.jerk_used_mm_s3[i]);
+            let b_use = plane_arc_jerk_use(b, false, i, v, t_f, tk).unwrap_or(b.jerk_used_mm_s3[i]);
+            // Never more than at the caps (the arcs' parts add up to their budget there).
+            a_use
+                .max(b_use)
+                .min(a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
+        };
+        let arcs = plane_arc_jerk_use(a, true, i, 0.0, t_f, tk).is_some()
+            || plane_arc_jerk_use(b, false, i, 0.0, t_f, tk).is_some();
+        if !arcs
+            || ceiling <= cap
+            || ceiling.is_nan()
+            || !ceiling.is_finite()
+            || self.steps_at_caps.get()
+        {
+            return cap;
+        }
+        let holds = |v: f64| {
+            let half = 0.5 * (cfg.max_jerk_mm_s3[i] - used(v)).max(0.0);
+            PRECOMP_JERK * v * v * k <= tk * step_budget(half)
+        };
+        let raised = if holds(ceiling) {
+            ceiling
+        } else if !holds(cap) {
+            cap
+        } else {
+            let (mut lo, mut hi) = (cap, ceiling);
+            // To the root itself, whatever the bracket: plans with different brackets around
+            // one junction (another P's blends) must meet the same cap.
+            for _ in 0..STEP_CAP_ITERATIONS {
+                if hi - lo <= 1e-13 * hi {
+                    break;
+                }
+                let mid = 0.5 * (lo + hi);
+                if holds(mid) {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            lo
+        };
+        // A junction the dip made a stop stays one unless the plan would pass it clearly
+        // faster than not at all: barely above the dip, the moves either side join the
+        // time-law filter at the lower of their accelerations instead of running alone
+        // (`arc_parabolic_blend.ngc`, a 0.25 mm full circle between two lines: 0.854 s →
+        // 1.144 s passing at 0.11 mm/s).
+        let delta = self.dip_depth_mm_s(a.limits.a_max_mm_s2(), b.limits.a_max_mm_s2());
+        if cap <= delta && raised < (1.0 + STEP_CAP_MIN_PASS) * delta {
+            return cap;
+        }
+        raised
     }
 
     /// The shortest `a` and `b`, either side of a junction, may still become: a line or an arc
@@ -2788,6 +2893,47 @@ fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
 /// may meet in the filters' output), less the jerk `v·|Δuᵢ|/T_k²` of the junction's tiny turn
 /// at any speed up to the max feed (`jump_mm_s`: the max feed times `|Δuᵢ|`); never below
 /// the half budget.
+/// Most bisection steps of [`Planner::step_cap_at_speed`].
+const STEP_CAP_ITERATIONS: usize = 64;
+
+/// [`Planner::step_cap_at_speed`] turns a stop into a junction passed at speed only where its
+/// dipped cap is at least this share of the dip's depth.
+const STEP_CAP_MIN_PASS: f64 = 0.5;
+
+/// A plane arc's use of axis `i`'s jerk near its end (`at_end`) or start, at the speed
+/// `v_mm_s` ([`Planner::step_cap_at_speed`]); `None` for anything else.
+fn plane_arc_jerk_use(
+    p: &Pending,
+    at_end: bool,
+    i: usize,
+    v_mm_s: f64,
+    t_f: f64,
+    tk: f64,
+) -> Option<f64> {
+    let SegmentPath::Arc(g) = p.seg.path else {
+        return None;
+    };
+    if g.helix_mm != 0.0 || p.seg.aux.moves() || p.curve_fit.is_some() || p.is_blend_arc {
+        return None;
+    }
+    let (t, kv) = if at_end {
+        (p.tangent_end, p.curvature_end)
+    } else {
+        (p.tangent_start, p.curvature_start)
+    };
+    let kappa = kv.norm();
+    if kappa <= 0.0 || kappa.is_nan() {
+        return None;
+    }
+    let n = kv / kappa;
+    // Within the filters' span either side the tangent and the normal turn by `2·v·T_k·κ`.
+    let turn = (2.0 * v_mm_s * tk * kappa).min(1.0);
+    let (t_i, n_i) = ((t[i].abs() + turn).min(1.0), (n[i].abs() + turn).min(1.0));
+    let acc = p.limits.a_max_mm_s2();
+    let v = v_mm_s;
+    Some((2.0 * acc / t_f + v * v * v * kappa * kappa) * t_i + 3.0 * v * kappa * acc * n_i)
+}
+
 fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
     (2.0 * half_budget - jump_mm_s / (tk * tk)).max(half_budget)
 }
