@@ -2392,12 +2392,7 @@ impl Planner {
         };
         let arcs = plane_arc_jerk_use(a, true, i, 0.0, t_f, tk).is_some()
             || plane_arc_jerk_use(b, false, i, 0.0, t_f, tk).is_some();
-        if !arcs
-            || ceiling <= cap
-            || ceiling.is_nan()
-            || !ceiling.is_finite()
-            || self.steps_at_caps.get()
-        {
+        if !arcs || !ceiling.is_finite() || ceiling <= cap || self.steps_at_caps.get() {
             return cap;
         }
         let holds = |v: f64| {
@@ -2888,11 +2883,6 @@ fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
     }
 }
 
-/// The jerk budget of an isolated curvature step ([`ISOLATED_TURN`]): all that the elements
-/// leave, `2·half_budget` (the rules of a junction each take half of it where several steps
-/// may meet in the filters' output), less the jerk `v·|Δuᵢ|/T_k²` of the junction's tiny turn
-/// at any speed up to the max feed (`jump_mm_s`: the max feed times `|Δuᵢ|`); never below
-/// the half budget.
 /// Most bisection steps of [`Planner::step_cap_at_speed`].
 const STEP_CAP_ITERATIONS: usize = 64;
 
@@ -2934,6 +2924,11 @@ fn plane_arc_jerk_use(
     Some((2.0 * acc / t_f + v * v * v * kappa * kappa) * t_i + 3.0 * v * kappa * acc * n_i)
 }
 
+/// The jerk budget of an isolated curvature step ([`ISOLATED_TURN`]): all that the elements
+/// leave, `2·half_budget` (the rules of a junction each take half of it where several steps
+/// may meet in the filters' output), less the jerk `v·|Δuᵢ|/T_k²` of the junction's tiny turn
+/// at any speed up to the max feed (`jump_mm_s`: the max feed times `|Δuᵢ|`); never below
+/// the half budget.
 fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
     (2.0 * half_budget - jump_mm_s / (tk * tk)).max(half_budget)
 }
