@@ -607,6 +607,50 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
     limits_and_path_hold(&prog, plan, &l, &cfg);
 }
 
+/// The same for a line into a helix it is tangent to (a quarter turn of radius 10 mm rising
+/// at `sin α = 0.2`): the helix uses Y's jerk at the junction's speed, its torsion's part
+/// along the binormal included, not its whole budget (`0.75·J_y` there); the junction is passed
+/// more than 1.5 times as fast, within every limit.
+#[test]
+fn a_curvature_step_into_a_helix_takes_what_the_helix_leaves_at_its_speed() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let (r, sin_a) = (10.0f64, 0.2f64);
+    let cos_a = (1.0 - sin_a * sin_a).sqrt();
+    // The helix from (30, 0, 0), CCW about +Z (centre at y = r): its tangent there is
+    // (cos α, 0, sin α); the line before runs along it.
+    let rise = 0.5 * std::f64::consts::PI * r * sin_a / cos_a;
+    let (x0, z0) = (30.0 - 30.0 * cos_a, -30.0 * sin_a);
+    let text = format!(
+        "G21 G90 G17 G64 P0.05\nG0 X{x0:.9} Y0 Z{z0:.9}\nG1 X30 Y0 Z0 F9000\n\
+         G3 X{x} Y{r} Z{rise:.9} I0 J{r}\nG1 Y{y}\nM2\n",
+        x = 30.0 + r,
+        y = r + 30.0
+    );
+    let prog = parse_program(&text, "helix.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let line = plan
+        .segments()
+        .iter()
+        .rfind(|s| s.line == 3 && matches!(s.path, SegmentPath::Line { .. }))
+        .unwrap();
+    let (t_k, t_f) = filter_times_s();
+    let share = cfg.path_acc_share;
+    // The helix's budget: Z takes `min(2·sin α, 1)` of its jerk, X and Y all of theirs.
+    let budget = (share * cfg.max_jerk_mm_s3.x)
+        .min(share * cfg.max_jerk_mm_s3.y)
+        .min(share * cfg.max_jerk_mm_s3.z / (2.0 * sin_a).min(1.0));
+    let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
+    let dip = 0.25 * acc * t_f;
+    let at_cap = (t_k * (cfg.max_jerk_mm_s3.y - budget) * r / 1.05).sqrt() - dip;
+    assert!(
+        line.v_end_mm_s > 1.5 * at_cap,
+        "junction {} mm/s, with the helix's use at its cap {at_cap}",
+        line.v_end_mm_s
+    );
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
 /// Issue 11: where a move planned through the time-law filter stops (a sharp corner), the plan
 /// stood still until both the time-law filter and the axis filters had settled before the next
 /// move started. Only the time-law filter must (the time law switches at rest); the axis

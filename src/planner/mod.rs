@@ -129,9 +129,10 @@
 //!   accelerating at most at four times its acceleration (a feed override up to 200 %),
 //!   needs `2·T_k` to cross them (`L ≥ 2·T_k·v + 8·a·T_k²`, for `v` up to there), a turn of
 //!   the tangent between two lines, or a curvature step at a tangent junction, meets no
-//!   other and takes all of it. What a programmed plane arc leaves a curvature step at its
-//!   end is taken at the junction's speed: its jerk along an axis,
-//!   `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|`, is its whole budget only at its cap
+//!   other and takes all of it. What a programmed arc leaves a curvature step at its end is
+//!   taken at the junction's speed: its jerk along an axis,
+//!   `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` (and a helix's `v³κτ·|Bᵢ|`), is its whole
+//!   budget only at its cap
 //!   (`Planner::step_cap_at_speed`; a line into a 6.35 mm arc, `sam-tail-slowdown.ngc`:
 //!   17 → 36 mm/s). Blend arcs, and every junction while a corner's blend is chosen, keep the
 //!   use at the cap that the blend's estimate was made for.
@@ -2351,8 +2352,8 @@ impl Planner {
         v.max(0.0)
     }
 
-    /// The curvature-step rule of axis `i` ([`Planner::junction_rules_mm_s`]) with a plane
-    /// arc's use of the axis taken at the junction's speed rather than at its cap: `cap`, the
+    /// The curvature-step rule of axis `i` ([`Planner::junction_rules_mm_s`]) with a
+    /// programmed arc's use of the axis taken at the junction's speed rather than at its cap: `cap`, the
     /// rule with the elements' uses at their caps, raised as far as (at most) `ceiling` where
     /// `PRECOMP_JERK·v²·|Δκᵢ| ≤ T_k·budget(v)`, `budget` the step's share
     /// (`step_budget`) of what the elements leave at `v`.
@@ -2363,8 +2364,9 @@ impl Planner {
     /// the arc makes within the axis filters' span either side of the junction. At its cap
     /// that is its whole budget (its split's parts add up to it in quadrature); at the lower
     /// speed a curvature step holds a junction to, the curve's part is far smaller, and the
-    /// step may have what it leaves. Lines, helices and blend arcs keep their use at the cap,
-    /// and every junction while a blend is chosen ([`Planner::steps_at_caps`]).
+    /// step may have what it leaves. A helix adds `v³κτ·|Bᵢ|` (its torsion, along the
+    /// binormal). Lines and blend arcs keep their use at the cap, and so does every junction
+    /// while a blend is chosen ([`Planner::steps_at_caps`]).
     #[allow(clippy::too_many_arguments)]
     fn step_cap_at_speed(
         &self,
@@ -2383,15 +2385,15 @@ impl Planner {
             smoothing.time_law_s(cfg.period_s),
         );
         let used = |v: f64| {
-            let a_use = plane_arc_jerk_use(a, true, i, v, t_f, tk).unwrap_or(a.jerk_used_mm_s3[i]);
-            let b_use = plane_arc_jerk_use(b, false, i, v, t_f, tk).unwrap_or(b.jerk_used_mm_s3[i]);
+            let a_use = arc_jerk_use_at(a, true, i, v, t_f, tk).unwrap_or(a.jerk_used_mm_s3[i]);
+            let b_use = arc_jerk_use_at(b, false, i, v, t_f, tk).unwrap_or(b.jerk_used_mm_s3[i]);
             // Never more than at the caps (the arcs' parts add up to their budget there).
             a_use
                 .max(b_use)
                 .min(a.jerk_used_mm_s3[i].max(b.jerk_used_mm_s3[i]))
         };
-        let arcs = plane_arc_jerk_use(a, true, i, 0.0, t_f, tk).is_some()
-            || plane_arc_jerk_use(b, false, i, 0.0, t_f, tk).is_some();
+        let arcs = arc_jerk_use_at(a, true, i, 0.0, t_f, tk).is_some()
+            || arc_jerk_use_at(b, false, i, 0.0, t_f, tk).is_some();
         if !arcs || !ceiling.is_finite() || ceiling <= cap || self.steps_at_caps.get() {
             return cap;
         }
@@ -2890,9 +2892,9 @@ const STEP_CAP_ITERATIONS: usize = 64;
 /// dipped cap is at least this share of the dip's depth.
 const STEP_CAP_MIN_PASS: f64 = 0.5;
 
-/// A plane arc's use of axis `i`'s jerk near its end (`at_end`) or start, at the speed
-/// `v_mm_s` ([`Planner::step_cap_at_speed`]); `None` for anything else.
-fn plane_arc_jerk_use(
+/// A programmed arc's or helix's use of axis `i`'s jerk near its end (`at_end`) or start, at
+/// the speed `v_mm_s` ([`Planner::step_cap_at_speed`]); `None` for anything else.
+fn arc_jerk_use_at(
     p: &Pending,
     at_end: bool,
     i: usize,
@@ -2903,7 +2905,7 @@ fn plane_arc_jerk_use(
     let SegmentPath::Arc(g) = p.seg.path else {
         return None;
     };
-    if g.helix_mm != 0.0 || p.seg.aux.moves() || p.curve_fit.is_some() || p.is_blend_arc {
+    if p.seg.aux.moves() || p.curve_fit.is_some() || p.is_blend_arc {
         return None;
     }
     let (t, kv) = if at_end {
@@ -2919,9 +2921,16 @@ fn plane_arc_jerk_use(
     // Within the filters' span either side the tangent and the normal turn by `2·v·T_k·κ`.
     let turn = (2.0 * v_mm_s * tk * kappa).min(1.0);
     let (t_i, n_i) = ((t[i].abs() + turn).min(1.0), (n[i].abs() + turn).min(1.0));
-    let acc = p.limits.a_max_mm_s2();
-    let v = v_mm_s;
-    Some((2.0 * acc / t_f + v * v * v * kappa * kappa) * t_i + 3.0 * v * kappa * acc * n_i)
+    // A helix's torsion `τ = sin α·cos α/r` adds `v³κτ` along the binormal; its curvature
+    // `cos²α/r` is at most the projected circle's `1/r` taken here.
+    let b_i = (t.cross(&n)[i].abs() + turn).min(1.0);
+    let tau = g.helix_sin() * kappa;
+    let (acc, v) = (p.limits.a_max_mm_s2(), v_mm_s);
+    Some(
+        (2.0 * acc / t_f + v * v * v * kappa * kappa) * t_i
+            + 3.0 * v * kappa * acc * n_i
+            + v * v * v * kappa * tau * b_i,
+    )
 }
 
 /// The jerk budget of an isolated curvature step ([`ISOLATED_TURN`]): all that the elements
