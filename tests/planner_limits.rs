@@ -41,6 +41,29 @@ fn filter_times_s() -> (f64, f64) {
     )
 }
 
+/// The plan of `text` (jerk-limited, the random programs' limits), and the speed at the end
+/// of line `line`'s last straight segment (the part of a line within the time-law filter's
+/// reach of the next element may be split off).
+fn plan_to_line_end(text: &str, line: usize) -> (Program, Plan, f64) {
+    let cfg = config(ProfileKind::SCurve);
+    let prog = parse_program(text, "junction.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let v_end = plan
+        .segments()
+        .iter()
+        .rfind(|s| s.line == line && matches!(s.path, SegmentPath::Line { .. }))
+        .unwrap()
+        .v_end_mm_s;
+    (prog, plan, v_end)
+}
+
+/// How much lower than its cap the time-law filter's rounding plans a V-shaped dip between
+/// two lines along X: `A·T_f/4` at their acceleration `J_x·share·T_f/2`.
+fn line_dip_mm_s(cfg: &PlannerConfig) -> f64 {
+    let (_, t_f) = filter_times_s();
+    0.25 * (0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f) * t_f
+}
+
 /// Plans `text` and checks its setpoints (see `common::setpoints`).
 fn check(text: &str, profile: ProfileKind) -> Result<(), TestCaseError> {
     check_with(text, config(profile))
@@ -561,15 +584,7 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         "G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG3 X{x} Y{r} I0 J{r}\nG1 Y40\nM2\n",
         x = 30.0 + r
     );
-    let prog = parse_program(&text, "tangent.ngc", Vector3::zeros()).unwrap();
-    let plan = plan_with(&prog, &l, &cfg).unwrap();
-    // The line's last segment (the part within the time-law filter's reach of the arc may be
-    // split off).
-    let line = plan
-        .segments()
-        .iter()
-        .rfind(|s| s.line == 2 && matches!(s.path, SegmentPath::Line { .. }))
-        .unwrap();
+    let (prog, plan, v_end) = plan_to_line_end(&text, 2);
     let arc_acc = plan
         .segments()
         .iter()
@@ -580,9 +595,7 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         .a_max_mm_s2();
     let (t_k, t_f) = filter_times_s();
     let share = cfg.path_acc_share;
-    // The line's tangential acceleration under the time-law filter rounds the dip by A·T_f/4.
-    let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
-    let dip = 0.25 * acc * t_f;
+    let dip = line_dip_mm_s(&cfg);
     // With the arc's use of Y at its cap (the share of Y's jerk its motion may use).
     let at_cap =
         (t_k * (cfg.max_jerk_mm_s3.y - share * cfg.max_jerk_mm_s3.x.min(cfg.max_jerk_mm_s3.y)) * r
@@ -590,7 +603,7 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
             .sqrt()
             - dip;
     // The junction's cap before the dip keeps the rule with the arc's use at that speed.
-    let v = line.v_end_mm_s + dip;
+    let v = v_end + dip;
     let turn = (2.0 * v * t_k / r).min(1.0);
     let use_y = (2.0 * arc_acc / t_f + v.powi(3) / (r * r)) * turn + 3.0 * v * arc_acc / r;
     assert!(
@@ -600,9 +613,8 @@ fn an_isolated_curvature_step_takes_the_whole_jerk_budget() {
         t_k * (cfg.max_jerk_mm_s3.y - use_y)
     );
     assert!(
-        line.v_end_mm_s > 1.5 * at_cap,
-        "junction {} mm/s, with the arc's use at its cap {at_cap}",
-        line.v_end_mm_s
+        v_end > 1.5 * at_cap,
+        "junction {v_end} mm/s, with the arc's use at its cap {at_cap}"
     );
     limits_and_path_hold(&prog, plan, &l, &cfg);
 }
@@ -627,26 +639,17 @@ fn a_curvature_step_into_a_helix_takes_what_the_helix_leaves_at_its_speed() {
         x = 30.0 + r,
         y = r + 30.0
     );
-    let prog = parse_program(&text, "helix.ngc", Vector3::zeros()).unwrap();
-    let plan = plan_with(&prog, &l, &cfg).unwrap();
-    let line = plan
-        .segments()
-        .iter()
-        .rfind(|s| s.line == 3 && matches!(s.path, SegmentPath::Line { .. }))
-        .unwrap();
-    let (t_k, t_f) = filter_times_s();
+    let (prog, plan, v_end) = plan_to_line_end(&text, 3);
+    let (t_k, _) = filter_times_s();
     let share = cfg.path_acc_share;
     // The helix's budget: Z takes `min(2·sin α, 1)` of its jerk, X and Y all of theirs.
     let budget = (share * cfg.max_jerk_mm_s3.x)
         .min(share * cfg.max_jerk_mm_s3.y)
         .min(share * cfg.max_jerk_mm_s3.z / (2.0 * sin_a).min(1.0));
-    let acc = 0.5 * share * cfg.max_jerk_mm_s3.x * t_f;
-    let dip = 0.25 * acc * t_f;
-    let at_cap = (t_k * (cfg.max_jerk_mm_s3.y - budget) * r / 1.05).sqrt() - dip;
+    let at_cap = (t_k * (cfg.max_jerk_mm_s3.y - budget) * r / 1.05).sqrt() - line_dip_mm_s(&cfg);
     assert!(
-        line.v_end_mm_s > 1.5 * at_cap,
-        "junction {} mm/s, with the helix's use at its cap {at_cap}",
-        line.v_end_mm_s
+        v_end > 1.5 * at_cap,
+        "junction {v_end} mm/s, with the helix's use at its cap {at_cap}"
     );
     limits_and_path_hold(&prog, plan, &l, &cfg);
 }
@@ -717,9 +720,8 @@ fn a_turn_alone_takes_the_whole_jerk_budget() {
     let jerk_t = (cfg.path_acc_share * cfg.max_jerk_mm_s3.x / u2.x.abs())
         .min(cfg.path_acc_share * cfg.max_jerk_mm_s3.y / u2.y.abs());
     let left = cfg.max_jerk_mm_s3.y - du_y * jerk_t;
-    let (t_k, t_f) = filter_times_s();
-    let acc = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
-    let dip = 0.25 * acc * t_f;
+    let (t_k, _) = filter_times_s();
+    let dip = line_dip_mm_s(&cfg);
     let cap = |budget: f64| t_k * t_k * budget / du_y;
     let (now, before) = (cap(left) - dip, cap(0.5 * left) - dip);
     assert!(
