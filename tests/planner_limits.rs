@@ -871,6 +871,47 @@ proptest! {
     }
 }
 
+/// A chorded profile whose curvature flips from −0.16 to +0.14 /mm within one chord of
+/// 0.45 mm, which the refiner cuts into pieces of 27 µm: at about 30 mm/s a span of the axis
+/// filters (`v·T_k`, 0.24 mm) holds nine of their vertices, whose curvature steps add up
+/// within it. Its look-ahead window (64 elements) is too short to take them as a curve, and
+/// the vertices' own rules, each step alone, let Y's jerk reach 41 314 mm/s³ against 40 000
+/// (a seed `chorded_profiles_of_changing_curvature_keep_every_limit` found at 1500 cases).
+/// The sum of the steps within a span is now held (`Planner::span_cap_mm_s`).
+#[test]
+fn a_curvature_that_flips_within_a_refined_chord_keeps_every_limit() {
+    let pieces = [
+        (-0.25781813621075955, 0.3),
+        (0.21392483863064107, 0.8138178885031598),
+        (0.09209629668220308, 0.40618634341300835),
+        (0.057539940342513494, 1.4774325186736423),
+        (-0.12538674812940365, 0.8380012180803494),
+        (-0.2956162037509016, 1.4256647380079257),
+        (-0.2223453606242931, 0.921663343090673),
+        (-0.07379639557647312, 0.6356714631503861),
+        (-0.1555596995820181, 0.3),
+        (0.14277706249132888, 0.3),
+        (0.1921955582050216, 1.3540391602950699),
+        (0.23430198383492323, 0.9533922109843574),
+        (0.21674612551369016, 1.3083974616889793),
+        (-0.11898435049946975, 0.6768609810291666),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+    ];
+    let text = chorded_profile(&pieces, 0.44503909190064816, false);
+    let prog = parse_program(&text, "profile.ngc", Vector3::zeros()).unwrap();
+    let cfg = PlannerConfig {
+        period_s: 0.001,
+        ..config(ProfileKind::SCurve)
+    };
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+}
+
 /// The demo machine's limits and planner, jerk-limited at a 1 ms period (`tools/corpus-times.sh`'s
 /// setting).
 fn demo_s_curve() -> (Limits, PlannerConfig) {

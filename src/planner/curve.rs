@@ -100,6 +100,12 @@
 //!   again; and the curve's use of each axis at the speed through the junction, which is
 //!   lower than at the cap where the vertex's own rules bind
 //!   ([`Planner::curve_junction_mm_s`]).
+//! - **Vertices not taken, on refined pieces.** Where a vertex between pieces of a refined
+//!   chord is not taken (the window too short to erode back, the plan settled), its own
+//!   rules take each of its steps alone; the steps of a curvature that turns within the axis
+//!   filters' span add up there. The sum within a span, the second difference of the
+//!   directions `u(s) − 2·u(s − v·T_k) + u(s − 2·v·T_k)`, is held within what the elements
+//!   leave of each axis's jerk ([`Planner::span_cap_mm_s`]).
 //! - **Erosion instead of dips.** The time-law filter's output at a point is the mean speed of
 //!   the plan over one filter time `T_f` around it. A cap `c` that holds for the plan over
 //!   `c·T_f` on either side of an element holds for that mean too (the plan cannot leave that
@@ -167,6 +173,9 @@ pub(super) struct CurveState {
     /// The recent lines of the run: direction and the path distance of their midpoint (from
     /// [`CurveState::pushed_mm`]'s origin).
     chords: VecDeque<(Vector3<f64>, f64)>,
+    /// Half the length of each of [`CurveState::chords`] (their extents, for
+    /// [`Planner::span_cap_mm_s`]).
+    chord_half_mm: VecDeque<f64>,
     /// The curvature vectors of the run's vertices taken, with their path distances.
     kappas: VecDeque<(Vector3<f64>, f64)>,
     /// Caps that hold ahead: `(until_mm, cap_mm_s)`, every element starting before `until_mm`
@@ -276,7 +285,19 @@ impl CurveState {
     /// Ends the run of chords (a corner blended).
     pub(super) fn end_run(&mut self) {
         self.chords.clear();
+        self.chord_half_mm.clear();
         self.kappas.clear();
+    }
+
+    /// Adds a line of `length_mm` with the direction `u` whose midpoint lies at `mid_mm` to
+    /// the run's chords, forgetting the oldest beyond [`CHORD_HISTORY`].
+    fn push_chord(&mut self, u: Vector3<f64>, mid_mm: f64, length_mm: f64) {
+        if self.chords.len() >= CHORD_HISTORY {
+            self.chords.pop_front();
+            self.chord_half_mm.pop_front();
+        }
+        self.chords.push_back((u, mid_mm));
+        self.chord_half_mm.push_back(0.5 * length_mm);
     }
 
     /// The lowest cap that holds at `at_mm` (`None`: none), forgetting those that ended.
@@ -956,18 +977,18 @@ impl Planner {
         if !vertex {
             self.curve.end_run();
             if chord(p) {
-                self.curve.chords.push_back((p.tangent_start, p_mid));
+                self.curve
+                    .push_chord(p.tangent_start, p_mid, p.seg.length_mm);
             }
             return None;
         }
         if self.curve.chords.is_empty() {
             let mid = self.curve.pushed_mm - 0.5 * prev.seg.length_mm;
-            self.curve.chords.push_back((prev.tangent_end, mid));
+            self.curve
+                .push_chord(prev.tangent_end, mid, prev.seg.length_mm);
         }
-        if self.curve.chords.len() >= CHORD_HISTORY {
-            self.curve.chords.pop_front();
-        }
-        self.curve.chords.push_back((p.tangent_start, p_mid));
+        self.curve
+            .push_chord(p.tangent_start, p_mid, p.seg.length_mm);
         let (estimate, s_vertex_mm) = self.curve_estimate(prev, &smoothing)?;
         // Every estimate goes into the record the curvature's rate is taken from, the vertex
         // taken or not: a rate over a baseline that skipped the vertices not taken reached
@@ -1395,6 +1416,105 @@ impl Planner {
         lo
     }
 
+    /// The cap the axis filters put on the vertex from the window's last line `a` into `p`,
+    /// both lines of a run of chords, one a piece of a refined chord, where the vertex is not
+    /// taken as a point of the curve (`∞` elsewhere).
+    ///
+    /// A vertex steps the axis velocity by `v·Δu`. Through two moving averages of `T_k` each,
+    /// at a constant speed `v`, the jerk is `v·(Σ_{W₁}Δu − Σ_{W₂}Δu)/T_k²`, `W₁` and `W₂` the
+    /// last two spans `B = v·T_k` of the path before the output point `s`; the turns within a
+    /// span add up to the difference of the directions at its ends, so the jerk is
+    /// `v·|u(s) − 2·u(s − B) + u(s − 2B)|/T_k²`. The vertex's own rules take each vertex's
+    /// velocity step (`v·|Δuᵢ|/T_k²`), curvature step (`v²·|Δκᵢ|/T_k`) and the curve's
+    /// following (`v³·κ²·|Tᵢ|`) one by one, each within half of what the elements leave of
+    /// the axis's jerk: where a computed curvature turns over a few pieces (a refined chord
+    /// whose curve changes sign within the span), the steps within one span add up (Y's jerk
+    /// 3–5 % over on random chorded profiles, where the look-ahead's window was too short to
+    /// take the vertices as a curve). This holds their sum, the second difference, within
+    /// all of it, for every `s` from the vertex to the end of `p` (the next vertex's check
+    /// takes those after) and every span up to `v·T_k` (a larger speed's spans do not cover
+    /// a lower one's): the pairs of chords `s − B` and `s − 2B` meet, each from the smallest
+    /// span at which they do ([`smallest_span_mm`]). A run longer than the chords kept
+    /// ([`CHORD_HISTORY`]) holds the speed so that the spans stay within them.
+    pub(super) fn span_cap_mm_s(&self, a: &Pending, p: &Pending, smoothing: &Smoothing) -> f64 {
+        let chords = &self.curve.chords;
+        let halves = &self.curve.chord_half_mm;
+        let n = chords.len();
+        let x = self.curve.pushed_mm;
+        let l_b = p.seg.length_mm;
+        if !(a.refined || p.refined)
+            || !chord(a)
+            || !chord(p)
+            || n < 2
+            || (chords[n - 1].1 - (x + 0.5 * l_b)).abs() > 1e-9 * (1.0 + x.abs())
+        {
+            return f64::INFINITY;
+        }
+        let tk = smoothing.axis_s(self.config.period_s);
+        // Chord `k`'s extent; the first reaches back without end (the run before the history
+        // kept is taken as its direction; see `within` below).
+        let extent = |k: usize| {
+            let (mid, half) = (chords[k].1, halves[k]);
+            let start = if k == 0 {
+                f64::NEG_INFINITY
+            } else {
+                mid - half
+            };
+            (start, mid + half)
+        };
+        let u_b = chords[n - 1].0;
+        // Every pair of chords (`j₁` at `s − B`, `j₂` at `s − 2B`) that some `s` in
+        // `[x, x + L_b]` meets at some span up to `B`, with the smallest such span `B*`
+        // ([`smallest_span_mm`]) and what it adds to the jerk, `|u_b − 2·u_j₁ + u_j₂|`.
+        let mut pairs: Vec<(f64, Vector3<f64>)> = Vec::new();
+        for j1 in (0..n).rev() {
+            let r1 = extent(j1);
+            // `p₂ ≤ p₁`, and `2·p₁ − p₂` lies in `[x, x + L_b]`: `p₂ ≥ 2·a₁ − x − L_b`.
+            let lowest = 2.0 * r1.0 - x - l_b;
+            for j2 in (0..=j1).rev() {
+                let r2 = extent(j2);
+                if r2.1 < lowest {
+                    break;
+                }
+                if let Some(b_mm) = smallest_span_mm(r1, r2, x, l_b) {
+                    let w = (u_b - 2.0 * chords[j1].0 + chords[j2].0).abs();
+                    pairs.push((b_mm, w));
+                }
+            }
+        }
+        pairs.sort_by(|p, q| p.0.total_cmp(&q.0));
+        let budget = Vector3::from_fn(|i, _| {
+            (self.config.max_jerk_mm_s3[i] - a.jerk_used_mm_s3[i].max(p.jerk_used_mm_s3[i]))
+                .max(0.0)
+        });
+        let cap_with = |env: &Vector3<f64>| {
+            (0..3)
+                .filter(|&i| env[i] > 0.0)
+                .map(|i| tk * tk * budget[i] / env[i])
+                .fold(f64::INFINITY, f64::min)
+        };
+        // The history's reach: where it was cut, no span reaches beyond it.
+        let within = if n >= CHORD_HISTORY {
+            (x - (chords[0].1 - halves[0])) / (2.0 * tk)
+        } else {
+            f64::INFINITY
+        };
+        // The spans up to `v·T_k`: the largest `v` whose pairs within keep the rule.
+        let mut env = Vector3::zeros();
+        let mut below_mm = 0.0;
+        for (b_mm, w) in pairs {
+            if b_mm > below_mm {
+                let cap = cap_with(&env);
+                if cap * tk < b_mm {
+                    return cap.max(below_mm / tk).min(within);
+                }
+                below_mm = b_mm;
+            }
+            env = env.sup(&w);
+        }
+        cap_with(&env).max(below_mm / tk).min(within)
+    }
+
     /// The curve's limits at the element `prev`, from the longest valid window of chords
     /// ending at the newest one (see the module documentation).
     fn curve_estimate(&self, prev: &Pending, smoothing: &Smoothing) -> Option<(CurveFit, f64)> {
@@ -1526,9 +1646,10 @@ impl Planner {
         let (p_short, ahead_mm_s) = self.erode_ahead(p, ahead);
         let prev = self.window.back()?;
         let own = self.junction_limit_mm_s(prev, p);
-        let own = match taken {
-            Some(_) => self.curve_junction_mm_s(p, own),
-            None => own,
+        let own = match (taken, self.smoothing) {
+            (Some(_), _) => self.curve_junction_mm_s(p, own),
+            (None, Some(smoothing)) => own.min(self.span_cap_mm_s(prev, p, &smoothing)),
+            (None, None) => own,
         };
         let prev = self.window.back()?;
         let in_run = prev.curve_fit.is_some() && p_short;
@@ -1671,6 +1792,17 @@ impl Planner {
     }
 }
 
+/// The smallest span `B` at which the axis filters' spans ending at some `s` in
+/// `[x, x + l_b]` have `s − B` in `r1` and `s − 2B` in `r2` (extents `(start, end)`), `None`
+/// where none do. Such an `s` exists where the three intervals `r1 + B`, `r2 + 2B` and
+/// `[x, x + l_b]` meet, which holds, pair by pair, on an interval of `B ≥ 0`.
+fn smallest_span_mm(r1: (f64, f64), r2: (f64, f64), x: f64, l_b: f64) -> Option<f64> {
+    let ((a1, b1), (a2, b2)) = (r1, r2);
+    let lo = (a1 - b2).max(x - b1).max(0.5 * (x - b2)).max(0.0);
+    let hi = (b1 - a2).min(x + l_b - a1).min(0.5 * (x + l_b - a2));
+    (lo <= hi).then_some(lo)
+}
+
 /// Links `p`'s [`Pending::floor_reach_mm`] to the element before it.
 pub(super) fn link_floor(prev: &Pending, p: &mut Pending) {
     p.floor_reach_mm = if prev.v_limit_mm_s <= p.v_limit_mm_s {
@@ -1735,6 +1867,42 @@ mod tests {
     }
 
     proptest! {
+        /// The smallest span at which two chords meet the axis filters' spans ending on the
+        /// next line is what a fine search over the end points and spans finds.
+        #[test]
+        fn the_smallest_span_is_a_search_s(
+            a1 in -3.0..0.0f64,
+            l1 in 0.0..1.5f64,
+            a2 in -4.0..0.0f64,
+            l2 in 0.0..1.5f64,
+            l_b in 0.0..0.5f64,
+        ) {
+            let (r1, r2) = ((a1, a1 + l1), (a2, a2 + l2));
+            let found = smallest_span_mm(r1, r2, 0.0, l_b);
+            let inside = |q: f64, r: (f64, f64)| q >= r.0 - 1e-12 && q <= r.1 + 1e-12;
+            let meets = |b: f64| {
+                (0..=400).any(|k| {
+                    let s = l_b * k as f64 / 400.0;
+                    inside(s - b, r1) && inside(s - 2.0 * b, r2)
+                })
+            };
+            let step = 1e-3;
+            let searched = (0..=6000).map(|k| k as f64 * step).find(|&b| meets(b));
+            match (found, searched) {
+                (Some(b), Some(c)) => {
+                    // The search's grids miss a meeting by at most their steps.
+                    prop_assert!(c + 2.0 * step >= b && c <= b + 2.0 * step, "{b} vs {c}");
+                    prop_assert!(meets(b) || l_b > 0.0, "{b} does not meet");
+                }
+                (None, Some(c)) => prop_assert!(false, "none, the search found {c}"),
+                (Some(b), None) => prop_assert!(
+                    l1.min(l2) < 4.0 * step || l_b < 4.0 * step,
+                    "{b}, the search found none"
+                ),
+                (None, None) => {}
+            }
+        }
+
         /// The bisection finds the chord a scan of every chord finds (the first of equally
         /// near ones), midpoints repeated and the point outside the run included.
         #[test]
