@@ -912,6 +912,47 @@ fn a_curvature_that_flips_within_a_refined_chord_keeps_every_limit() {
     limits_and_path_hold(&prog, plan, &limits(), &cfg);
 }
 
+/// A chorded profile whose look-ahead split a line where the time-law filter's reach ends:
+/// the junction inside it kept the feed as its cap (100 mm/s), above the first part's limit
+/// (17.6 mm/s, its curve's), and the backward pass, finding no profile from a bound above that
+/// limit, came down to rest there: the element before could no longer come down from the
+/// speed already settled, and planning failed (`NoProfile`, line 21; a seed
+/// `chorded_profiles_of_changing_curvature_keep_every_limit` found at 1500 cases). The pass
+/// now takes the bound at the element's limit (`curve::back_reach`).
+#[test]
+fn a_line_split_under_a_curve_s_cap_plans_and_keeps_every_limit() {
+    let pieces = [
+        (0.26246285051865326, 1.0553800058687504),
+        (0.1761342843793399, 0.9847699270092057),
+        (-0.24423827895854888, 0.3),
+        (-0.2511972526975261, 1.0234734942491526),
+        (-0.18853323120289803, 0.3),
+        (-0.23014830303339406, 1.2365818098779813),
+        (-0.23314033823545932, 1.4060707903671863),
+        (-0.24605654081478187, 0.6873362214865476),
+        (0.0, 0.3),
+        (-0.06700862883411707, 0.6745951903638271),
+        (-0.11287961599719025, 0.5718117976132093),
+        (-0.1432327995742675, 1.4816808490205058),
+        (0.2590582946411056, 1.2323885710681721),
+        (-0.18984732881539776, 0.8498172676438337),
+        (0.2068264872926902, 0.8017690568596364),
+        (0.11283693454041231, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+        (0.0, 0.3),
+    ];
+    let text = chorded_profile(&pieces, 0.4990572801386788, true);
+    let prog = parse_program(&text, "profile.ngc", Vector3::zeros()).unwrap();
+    let cfg = PlannerConfig {
+        period_s: 0.001,
+        ..config(ProfileKind::SCurve)
+    };
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+}
+
 /// The demo machine's limits and planner, jerk-limited at a 1 ms period (`tools/corpus-times.sh`'s
 /// setting).
 fn demo_s_curve() -> (Limits, PlannerConfig) {

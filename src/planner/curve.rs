@@ -612,14 +612,20 @@ pub(super) fn reach_mm_s(p: &Pending, v_from_mm_s: f64, vmax_mm_s: f64) -> Optio
 }
 
 /// One step of the look-ahead's backward pass: the highest start speed of `p`, within its
-/// start's cap `cap_mm_s`, from which it can end at `v_next_mm_s`; on a line of a chord run,
-/// with the acceleration it takes (NaN elsewhere) and the pair it keeps
-/// ([`Pending::reach_memo`]; `None` where there is none to keep).
+/// start's cap `cap_mm_s`, from which it can end at `v_next_mm_s`, or at its own speed limit
+/// where that is lower (the bound after it holds for every lower speed too); on a line of a
+/// chord run, with the acceleration it takes (NaN elsewhere) and the pair it keeps
+/// ([`Pending::reach_memo`]; `None` where there is none to keep). A bound above the limit
+/// found no profile, and the pass came down to rest there: a line split in two keeps its
+/// feed as the cap of the junction inside it, above its first part's limit where a curve
+/// lowered that, and the plan could no longer come down to the first part from the speed
+/// it had settled (`NoProfile` on a random chorded profile, seen at 1500 cases).
 pub(super) fn back_reach(
     p: &Pending,
     v_next_mm_s: f64,
     cap_mm_s: f64,
 ) -> (f64, f64, Option<(f64, f64)>) {
+    let v_next_mm_s = v_next_mm_s.min(p.limits.v_max_mm_s());
     if p.curve_acc.is_none() {
         let v = super::start_reach_mm_s(p.seg.length_mm, v_next_mm_s, cap_mm_s, &p.limits);
         return (v, f64::NAN, None);
