@@ -953,6 +953,43 @@ fn a_line_split_under_a_curve_s_cap_plans_and_keeps_every_limit() {
     limits_and_path_hold(&prog, plan, &limits(), &cfg);
 }
 
+/// A junction among short lines whose cap the time-law filter's dip would take to nothing is
+/// passed on a plateau (the elements within `c·T_f` either side capped at `c`), not a stop,
+/// also where no other junction within reach stops. These vertices are LinuxCNC's
+/// `performance/random_lines_0.001in.ngc`, lines 50–70 (a random walk of 1 µm steps, in mm):
+/// the junction at the end of line 22 here stopped (the plan came down to rest from
+/// 0.49 mm/s and the filter settled, 53 ms); it is now passed at 0.20 mm/s within a plateau at
+/// 0.31 mm/s.
+#[test]
+fn a_lone_low_cap_among_short_lines_is_passed_on_a_plateau() {
+    let (l, cfg) = demo_s_curve();
+    let text = "G21 G90 G64 Q0.0002\nG0 X0.024109 Y0.021846 Z0.003172\nG1 F999\n\
+        X0.023950 Y0.022778 Z0.002587\nX0.023681 Y0.023543 Z0.001979\n\
+        X0.023350 Y0.024265 Z0.001541\nX0.022803 Y0.024978 Z0.000897\n\
+        X0.022343 Y0.025590 Z0.000100\nX0.022104 Y0.026144 Z-0.000795\n\
+        X0.022004 Y0.026579 Z-0.001534\nX0.022063 Y0.027250 Z-0.002244\n\
+        X0.022431 Y0.027850 Z-0.003163\nX0.022356 Y0.028239 Z-0.004140\n\
+        X0.022562 Y0.028290 Z-0.005109\nX0.022386 Y0.028121 Z-0.006096\n\
+        X0.022227 Y0.028169 Z-0.006993\nX0.022433 Y0.028560 Z-0.007883\n\
+        X0.022883 Y0.028628 Z-0.008876\nX0.022987 Y0.028684 Z-0.009822\n\
+        X0.023312 Y0.028663 Z-0.010719\nX0.023752 Y0.028624 Z-0.011648\n\
+        X0.024061 Y0.028419 Z-0.012436\nX0.024211 Y0.027822 Z-0.013217\n\
+        M2\n";
+    let prog = parse_program(text, "random_lines.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let line_22 = plan
+        .segments()
+        .iter()
+        .rfind(|s| s.line == 22 && s.profile.is_some())
+        .unwrap();
+    assert!(
+        line_22.v_end_mm_s > 0.1,
+        "the motion stops at the end of line 22 ({} mm/s)",
+        line_22.v_end_mm_s
+    );
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
 /// The demo machine's limits and planner, jerk-limited at a 1 ms period (`tools/corpus-times.sh`'s
 /// setting).
 fn demo_s_curve() -> (Limits, PlannerConfig) {
