@@ -554,12 +554,7 @@ fn dense_low_caps_are_a_plateau_not_stops() {
     );
     limits_and_path_hold(&prog, plan, &limits(), &cfg);
     // With the random programs' window, more stops, within every limit still.
-    let cfg = PlannerConfig {
-        period_s: 0.001,
-        ..config(ProfileKind::SCurve)
-    };
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+    holds_jerk_limited_at_1_ms(&prog);
 }
 
 /// Issue 11: where a line meets an arc tangentially, the acceleration steps by `v²/r` towards
@@ -902,14 +897,7 @@ fn a_curvature_that_flips_within_a_refined_chord_keeps_every_limit() {
         (0.0, 0.3),
         (0.0, 0.3),
     ];
-    let text = chorded_profile(&pieces, 0.44503909190064816, false);
-    let prog = parse_program(&text, "profile.ngc", Vector3::zeros()).unwrap();
-    let cfg = PlannerConfig {
-        period_s: 0.001,
-        ..config(ProfileKind::SCurve)
-    };
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+    chorded_profile_holds(&pieces, 0.44503909190064816, false);
 }
 
 /// A chorded profile whose look-ahead split a line where the time-law filter's reach ends:
@@ -943,14 +931,26 @@ fn a_line_split_under_a_curve_s_cap_plans_and_keeps_every_limit() {
         (0.0, 0.3),
         (0.0, 0.3),
     ];
-    let text = chorded_profile(&pieces, 0.4990572801386788, true);
+    chorded_profile_holds(&pieces, 0.4990572801386788, true);
+}
+
+/// The jerk-limited plan of [`chorded_profile`] at a 1 ms period keeps every limit and stays
+/// within the tolerance of the programmed path.
+fn chorded_profile_holds(pieces: &[(f64, f64)], chord_mm: f64, xz: bool) {
+    let text = chorded_profile(pieces, chord_mm, xz);
     let prog = parse_program(&text, "profile.ngc", Vector3::zeros()).unwrap();
+    holds_jerk_limited_at_1_ms(&prog);
+}
+
+/// The jerk-limited plan of `prog` with the random programs' limits and planner at a 1 ms
+/// period keeps every limit and stays within the tolerance of the programmed path.
+fn holds_jerk_limited_at_1_ms(prog: &Program) {
     let cfg = PlannerConfig {
         period_s: 0.001,
         ..config(ProfileKind::SCurve)
     };
-    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
-    limits_and_path_hold(&prog, plan, &limits(), &cfg);
+    let plan = plan_with(prog, &limits(), &cfg).unwrap();
+    limits_and_path_hold(prog, plan, &limits(), &cfg);
 }
 
 /// A junction among short lines whose cap the time-law filter's dip would take to nothing is
