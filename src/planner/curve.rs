@@ -1462,8 +1462,9 @@ impl Planner {
             return f64::INFINITY;
         }
         let tk = smoothing.axis_s(self.config.period_s);
-        // Chord `k`'s extent; the first reaches back without end (the run before the history
-        // kept is taken as its direction; see `within` below).
+        // Chord `k`'s extent; the first reaches back without end: before the first chord kept
+        // the path is taken as its direction (a corner that began the run is its own
+        // junction's rules'; where the history was cut, see `within` below).
         let extent = |k: usize| {
             let (mid, half) = (chords[k].1, halves[k]);
             let start = if k == 0 {
