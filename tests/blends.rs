@@ -3,8 +3,8 @@
 //! arcs within the tolerance, where that is faster than the sharp corner. On random programs
 //! of lines and arcs joined at corners (every other element an arc, so that every corner
 //! has one: line–line corners keep the rule they had before), in both modes: the program
-//! time never exceeds the exact corners' (P0) nor grows with P (in the trapezoid mode within
-//! the slack of the per-corner estimate that chooses the blends, `slack_smaller_p`), and
+//! time never exceeds the exact corners' (P0) nor grows with P (within the slack of the
+//! per-corner estimate that chooses the blends, `slack_smaller_p`), and
 //! every setpoint keeps every axis's limits and stays within P of the programmed path.
 
 use canmotion::gcode::{Interpreter, Item, Setup, Tool, parse_program};
@@ -140,11 +140,17 @@ fn plan_and_check(template: &str, p_mm: f64, profile: ProfileKind) -> Result<Pla
 /// follows the corner: in the trapezoid mode a larger blend before a stop (the program's end)
 /// replaces a line's braking by the arc's, weaker under its centripetal share, and costs up to
 /// 2.3 % (seen in 10 × 5000 random programs, session 24). The jerk-limited mode takes a blend
-/// only where it saves the time-law filter's delay too: never slower there.
+/// only where it saves the time-law filter's delay too; it was never slower until session 28,
+/// when settling began to run the long speed changes of filtered elements at their whole
+/// acceleration (`Planner::split_for_acceleration`), which the estimate does not see: a larger
+/// blend moves length between the elements it joins and the arc. Up to 0.064 % seen in
+/// 5 × 3000 random programs (5 cases slower than with the smaller P, none slower than P0);
+/// 0.8 % while blend arcs were not split, 7.7 % with a first form of the split that needed a
+/// cruise at each peak.
 fn slack_smaller_p(profile: ProfileKind) -> f64 {
     match profile {
         ProfileKind::Trapezoid => 0.03,
-        _ => 0.0,
+        _ => 0.005,
     }
 }
 
@@ -171,7 +177,7 @@ proptest! {
     }
 
     /// Issue 11 item 3: a blend never makes a program slower than its exact corners (P0), and
-    /// the time never grows with P (in the trapezoid mode within `slack_smaller_p`).
+    /// the time never grows with P (within `slack_smaller_p`).
     #[test]
     fn blends_do_not_slow_a_program(
         pairs in prop::collection::vec((a_piece(), an_arc()), 1..4),

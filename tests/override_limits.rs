@@ -18,7 +18,7 @@ mod setpoints;
 #[path = "common/random_programs.rs"]
 mod random_programs;
 
-use random_programs::{T, a_move, config, limits, program};
+use random_programs::{T, a_move, a_run_joined_at_speed, config, limits, program};
 
 /// The plan of `text` on the test machine in `profile`, its planner configuration, and the
 /// override ramp the machine allows.
@@ -156,6 +156,17 @@ proptest! {
         final_override in 0.2..=2.0f64,
     ) {
         check(&program(&moves), ProfileKind::SCurve, &schedule, final_override)?;
+    }
+
+    /// Long moves joined at speed: the middles of long elements planned at their whole
+    /// acceleration (`Planner::split_for_acceleration`), under override, hold and resume.
+    #[test]
+    fn s_curve_runs_joined_at_speed_keep_the_limits_under_override_and_hold(
+        text in a_run_joined_at_speed(),
+        schedule in a_schedule(),
+        final_override in 0.2..=2.0f64,
+    ) {
+        check(&text, ProfileKind::SCurve, &schedule, final_override)?;
     }
 
     #[test]

@@ -19,7 +19,7 @@ mod random_programs;
 #[path = "common/path_deviation.rs"]
 mod path_deviation;
 
-use random_programs::{T, a_move, config, limits, program};
+use random_programs::{T, a_move, a_run_joined_at_speed, config, limits, program};
 
 /// The setpoints of `plan` (of `prog`) keep every axis's limits (`common::setpoints`) and
 /// stay within the tolerance of the programmed path (`common::path_deviation`).
@@ -708,7 +708,8 @@ fn a_turn_alone_takes_the_whole_jerk_budget() {
     let text = format!("G21 G90 G17 G64 P0.05\nG1 X30 F9000\nG1 X{x:.6} Y{y:.6}\nM2\n");
     let prog = parse_program(&text, "turn.ngc", Vector3::zeros()).unwrap();
     let plan = plan_with(&prog, &l, &cfg).unwrap();
-    let first = plan.segments().iter().find(|s| s.line == 2).unwrap();
+    // The line's last segment (a long line may be planned in pieces) ends at the junction.
+    let first = plan.segments().iter().rfind(|s| s.line == 2).unwrap();
     let u2 = Vector3::new(x - 30.0, y, 0.0).normalize();
     let du_y = u2.y.abs();
     // The second line's tangential jerk on Y, `|u_y|·share·min_i J_i/|u_i|`.
@@ -764,10 +765,11 @@ fn a_stop_between_filtered_moves_stands_only_until_the_corner_is_within_its_cap(
                 G1 X20.05 Y30\nG1 X20.05 Y40\nM2\n";
     let prog = parse_program(text, "corner.ngc", Vector3::zeros()).unwrap();
     let plan = plan_with(&prog, &l, &cfg).unwrap();
+    // A line's last moving segment (a long line may be planned in parts) ends at its end.
     let seg = |line: usize| {
         plan.segments()
             .iter()
-            .find(|s| s.line == line && s.length_mm > 0.0)
+            .rfind(|s| s.line == line && s.length_mm > 0.0)
             .unwrap()
     };
     assert!(seg(3).time_law && seg(3).v_end_mm_s == 0.0, "{:?}", seg(3));
@@ -832,6 +834,118 @@ fn a_long_line_keeps_its_acceleration_beyond_the_filter_s_reach_of_a_small_arc()
         );
     }
     limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
+/// Issue 11: the time-law filter's jerk is the range of the plan's acceleration over one
+/// filter length, so a filtered run plans at `J·T_f/2`, half of what its axes allow, wherever
+/// its acceleration may reverse within `T_f`. A long line passed at speed at both ends (a kink
+/// in the middle of a long move, LinuxCNC's `long-kink.ngc`) keeps that acceleration only
+/// within `T_f` (plus two periods) of its ends, where its neighbours' accelerations meet it in
+/// the filter (at the program's start none does), and either side of its peak, and changes
+/// speed with the whole `J·T_f` between: the line takes less time than its plain trapezoid
+/// from the same end speeds, and every axis keeps its limits at the 4 ms period.
+#[test]
+fn a_long_filtered_line_accelerates_at_its_whole_acceleration_between_its_ends() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    let text = "G21 G90 G17 G64 P0.05\nG1 X40 F12000\nG1 X40.5 Y0.05\nG1 X80 Y0.05\nM2\n";
+    let prog = parse_program(text, "long_kink.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let (_, t_f) = filter_times_s();
+    let half = 0.5 * cfg.path_acc_share * cfg.max_jerk_mm_s3.x * t_f;
+    let whole = (cfg.path_acc_share * l.max_acc_mm_s2.x).min(2.0 * half);
+    for line in [2, 4] {
+        let segs: Vec<_> = plan
+            .segments()
+            .iter()
+            .filter(|s| s.line == line && s.profile.is_some())
+            .collect();
+        let acc = |s: &canmotion::planner::Segment| s.profile.unwrap().limits().a_max_mm_s2();
+        let (first, last) = (segs[0], segs[segs.len() - 1]);
+        assert!(
+            segs.iter().any(|s| acc(s) == whole),
+            "line {line}: no part at {whole} mm/s²: {segs:#?}"
+        );
+        // The parts that end at its junctions keep the filtered run's acceleration for the
+        // filter's length and two periods; the program's start (from rest, with nothing
+        // before it in the filter) needs none.
+        let ends = if line == 2 {
+            vec![last]
+        } else {
+            vec![first, last]
+        };
+        assert_eq!(acc(first) == whole, line == 2, "{first:?}");
+        for s in ends {
+            assert!(acc(s) <= half * (1.0 + 1e-12), "line {line}: {s:?}");
+            assert!(
+                s.duration_s() >= t_f + 2.0 * T,
+                "line {line}: {} s at an end",
+                s.duration_s()
+            );
+        }
+        let length_mm: f64 = segs.iter().map(|s| s.length_mm).sum();
+        let time_s: f64 = segs.iter().map(|s| s.duration_s()).sum();
+        let plain = canmotion::planner::profile::ProfileLimits::trapezoid(first.v_limit_mm_s, half)
+            .and_then(|lim| {
+                canmotion::planner::profile::plan(
+                    length_mm,
+                    first.v_start_mm_s,
+                    last.v_end_mm_s,
+                    &lim,
+                )
+            })
+            .unwrap()
+            .duration_s();
+        assert!(
+            time_s < 0.9 * plain,
+            "line {line}: {time_s} s, its trapezoid at {half} mm/s² {plain} s"
+        );
+    }
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
+/// The same for a helix between tangent lines: its middle part is an arc of the same helix
+/// at its whole tangential acceleration, its ends keep the filtered run's, and the setpoints
+/// keep every limit and the path (a part's helix must start where the last ended: its centre
+/// moves up with it).
+#[test]
+fn a_long_filtered_helix_accelerates_at_its_whole_acceleration_between_its_ends() {
+    let l = limits();
+    let cfg = config(ProfileKind::SCurve);
+    // The lines rise as the helix does (8 mm over half a turn of 20 mm: 0.1273 mm/mm).
+    let text = "G21 G90 G17 G64 P0.05\nG0 Z-2.546\nG1 X20 Z0 F6000\nG3 X20 Y40 Z8 I0 J20\n\
+                G1 X0 Y40 Z10.546\nM2\n";
+    let prog = parse_program(text, "helix.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let segs: Vec<_> = plan
+        .segments()
+        .iter()
+        .filter(|s| s.line == 4 && s.profile.is_some())
+        .collect();
+    let acc = |s: &canmotion::planner::Segment| s.profile.unwrap().limits().a_max_mm_s2();
+    assert!(
+        segs.len() >= 2 && segs.iter().all(|s| matches!(s.path, SegmentPath::Arc(_))),
+        "{segs:#?}"
+    );
+    let (first, last) = (segs[0], segs[segs.len() - 1]);
+    assert!(
+        segs.iter()
+            .any(|s| acc(s) > 1.5 * acc(first).max(acc(last))),
+        "{segs:#?}"
+    );
+    limits_and_path_hold(&prog, plan, &l, &cfg);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Long moves joined at speed keep every axis's limits in the jerk-limited mode, their
+    /// middles at the whole acceleration, and stay within the tolerance.
+    #[test]
+    fn a_run_joined_at_speed_keeps_every_limit(text in a_run_joined_at_speed()) {
+        check(&text, ProfileKind::SCurve)?;
+        check_tolerance(&text, ProfileKind::SCurve)?;
+    }
 }
 
 /// A CAM surface's profile written as chords: tangent arcs whose curvature changes from one to

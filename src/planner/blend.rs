@@ -481,7 +481,7 @@ fn curve_near(p: &Pending, at_end: bool) -> Option<(Curve, f64, f64)> {
 
 /// The arc of `arc`'s circle (centre, normal, direction) between `ends`, turning by `sweep_rad`
 /// (full turns included), or `None` if the geometry does not come out so.
-fn trimmed_arc(
+pub(super) fn trimmed_arc(
     (start_mm, end_mm): (Vector3<f64>, Vector3<f64>),
     arc: &ArcGeometry,
     sweep_rad: f64,

@@ -83,6 +83,19 @@
 //!   lower of their two accelerations, since the filter's window spans the junction; but only
 //!   within the filter's reach of it: a line with the higher acceleration and long enough is
 //!   split where the reach ends and keeps its own beyond (`Planner::share_at_junction`).
+//! - **Whole acceleration in long speed changes.** `J·T_f/2` is needed only where the plan's
+//!   acceleration may reverse within `T_f`. Each speed change of a line, arc or helix of a
+//!   filtered run that lasts more than two zones of `T_f` (and two periods: the samples' jerk is
+//!   a third difference) keeps `J·T_f/2` in a zone at either end and runs at the whole `J·T_f`
+//!   (within its axes' share and the element's own rules) between: the element keeps the
+//!   look-ahead's acceleration within `T_f` of its ends, where its neighbours' accelerations
+//!   meet it in the filter, and either side of its peak, so the whole acceleration never
+//!   meets one of the other sign within `T_f`. The look-ahead plans as before; settling splits
+//!   such an element into parts where that is faster, its peak as high as the shorter speed
+//!   changes allow (`Planner::split_for_acceleration`; LinuxCNC's `long-kink.ngc` 0.79 →
+//!   0.66 s against 0.52 s in trapezoid mode; an arc's parts are arcs of its circle or
+//!   helix). The lines of chord runs (their acceleration is their curve's) and moves of the
+//!   auxiliary axes keep one profile.
 //! - **Dips.** The filtered speed rounds every dip of the plan: through a V-shaped dip to `c`
 //!   with the acceleration `A` on both sides it passes the dip's position at `c + A·T_f/4`. So a
 //!   junction whose cap is below either neighbour's speed is planned `A·T_f/4` lower, and one
@@ -1033,6 +1046,11 @@ pub struct Planner {
     /// A filtered move stopped here at a junction its time-law filter may pass slowly, and the
     /// plan stood still only part of that filter's settling time.
     time_law_unsettled: Option<TimeLawUnsettled>,
+    /// Plan time at which the plan last decelerated, or ran a move alone (whose last
+    /// acceleration the time-law filter did not see): [`Planner::split_for_acceleration`]
+    /// lets an element start at its whole acceleration where this lies at least the filter's
+    /// length (and two periods) behind it.
+    decel_until_s: f64,
     /// The sequence number of the next element pushed ([`Pending::seq`]).
     next_seq: u64,
     /// The elements of the window whose start junction is provisional, in order.
@@ -1125,6 +1143,7 @@ impl Planner {
             smoothing,
             axes_unsettled: None,
             time_law_unsettled: None,
+            decel_until_s: f64::NEG_INFINITY,
             next_seq: 0,
             provisional: VecDeque::new(),
             curve: curve::CurveState::default(),
@@ -1809,6 +1828,18 @@ impl Planner {
         let limits = alone.unwrap_or(limits);
         let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
         seg.time_law = self.smoothing.is_some() && alone.is_none();
+        // A filtered line long enough plans its middle at its whole acceleration, in parts
+        // (whole periods keep the element in one piece).
+        let parts = if seg.time_law && !self.config.integer_periods {
+            self.split_for_acceleration(i, &seg, v0, v1, &profile)
+        } else {
+            None
+        };
+        let mut v0 = v0;
+        if let Some(parts) = &parts {
+            // What follows up to the segment's push looks at the element's start.
+            profile = parts[0].1;
+        }
         if self.config.integer_periods {
             // Where the boundary speeds leave no slack (a pure acceleration that fills the
             // element), the element keeps its time-optimal duration and the next starts off the
@@ -1851,10 +1882,39 @@ impl Planner {
                 self.axes_unsettled = None;
             }
         }
-        seg.v_start_mm_s = v0;
-        seg.v_end_mm_s = v1;
         seg.v_limit_mm_s = self.window[i].v_limit_mm_s;
         seg.v_start_limit_mm_s = self.window[i].cap_start_limit_mm_s;
+        if let Some(mut parts) = parts {
+            // Every part but the last goes out here; the last is the segment from here on.
+            let tail = parts.pop().expect("a split has a tail");
+            for (k, (mut piece, p)) in parts.into_iter().enumerate() {
+                // The junctions between the parts do not turn: the line's own limit.
+                piece.v_limit_mm_s = seg.v_limit_mm_s;
+                piece.v_start_limit_mm_s = if k == 0 {
+                    seg.v_start_limit_mm_s
+                } else {
+                    seg.v_limit_mm_s
+                };
+                piece.v_start_mm_s = p.v_start_mm_s();
+                piece.v_end_mm_s = p.v_end_mm_s();
+                piece.v_peak_mm_s = p
+                    .v_cruise_mm_s()
+                    .max(piece.v_start_mm_s)
+                    .max(piece.v_end_mm_s);
+                piece.profile = Some(p);
+                piece.start_time_s = self.time_s;
+                self.time_s = piece.end_time_s();
+                self.note_decel(&piece);
+                self.ready.push_back(piece);
+            }
+            let v_limit = seg.v_limit_mm_s;
+            (seg, profile) = tail;
+            seg.v_limit_mm_s = v_limit;
+            seg.v_start_limit_mm_s = v_limit;
+            v0 = profile.v_start_mm_s();
+        }
+        seg.v_start_mm_s = v0;
+        seg.v_end_mm_s = v1;
         seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
         seg.profile = Some(profile);
         seg.start_time_s = self.time_s;
@@ -1864,6 +1924,7 @@ impl Planner {
         }
         self.time_s = end_s;
         self.aux_settled = Some(seg.aux.end);
+        self.note_decel(&seg);
         self.ready.push_back(seg);
         if alone.is_some() {
             let duration_s = profile.duration_s();
@@ -1931,6 +1992,193 @@ impl Planner {
             }
         }
         Ok(())
+    }
+
+    /// Keeps [`Planner::decel_until_s`] with the moving segment `seg` settled.
+    fn note_decel(&mut self, seg: &Segment) {
+        if !seg.time_law || seg.v_end_mm_s < seg.v_peak_mm_s {
+            self.decel_until_s = seg.end_time_s();
+        }
+    }
+
+    /// The filtered line or arc `i` (settled from `v0` to `v1`, its plain trapezoid `plain`) in
+    /// parts whose speed changes run at its whole acceleration in their middles (`J·T_f`,
+    /// within what its axes' share and, on an arc, its own rules allow: the limits of its move
+    /// alone), where that is faster: `None` where it is not, or the element is a line of a
+    /// chord run or moves an auxiliary axis.
+    ///
+    /// The time-law filter's jerk is the range of the plan's acceleration over one filter
+    /// length `T_f`, over `T_f`: a run of trapezoids at `a = J·T_f/2`, as the look-ahead plans
+    /// them, keeps it within `J` even where the acceleration reverses at once (a peak, a dip).
+    /// The whole `J·T_f` may be used where no acceleration of the other sign lies within `T_f`:
+    /// each speed change of the element longer than two zones of `T_f` keeps `a` for a zone at
+    /// either end and runs at the whole acceleration between. The element then keeps `a` within
+    /// `T_f` of its ends, where its neighbours' accelerations meet it in the filter (whatever
+    /// they plan), and either side of its peak, where it reverses; the whole acceleration only
+    /// ever meets `a` of the same sign or 0. Each `T_f` counts two periods more: the jerk of
+    /// the samples, a third difference, sees the plan's acceleration over `T_f` and two
+    /// periods. The peak is the highest the element's length then allows (the speed changes
+    /// take less of it), within its cap. Where nothing decelerated within that before the
+    /// element ([`Planner::decel_until_s`]) and it starts at rest (the program's start, after a
+    /// dwell), its first zone is not needed. The end speeds stay those the look-ahead settled,
+    /// and the parts within its end zones keep the acceleration the rules at its junctions (the
+    /// time-law filter's dip, a stand's length, the axis filters' turn) were planned with. The
+    /// gain grows continuously with the speed changes' length (a blend that shortens an
+    /// element loses it gradually).
+    fn split_for_acceleration(
+        &self,
+        i: usize,
+        seg: &Segment,
+        v0: f64,
+        v1: f64,
+        plain: &SpeedProfile,
+    ) -> Option<Vec<(Segment, SpeedProfile)>> {
+        let p = &self.window[i];
+        let smoothing = self.smoothing?;
+        if !matches!(seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
+            || p.curve_acc.is_some()
+            || seg.aux.moves()
+        {
+            return None;
+        }
+        let alone = p.alone?;
+        let period_s = self.config.period_s;
+        let t_f = smoothing.time_law_s(period_s);
+        let t_z = (t_f + 2.0 * period_s) * (1.0 + 1e-9);
+        let (v_max, a_e) = (p.limits.v_max_mm_s(), p.limits.a_max_mm_s2());
+        let acc = alone.a_max_mm_s2().min(alone.j_max_mm_s3() * t_f);
+        // (NaN-safe: a limit that is not a number splits nothing.)
+        if acc.is_nan() || acc <= a_e * 1.01 || v0 > v_max || v1 > v_max {
+            return None;
+        }
+        // The first zone is not needed where the plan starts at rest and has not decelerated
+        // within the time-law filter's length (and two periods) before.
+        let free_head = v0 == 0.0 && self.time_s - self.decel_until_s >= t_f + 2.0 * period_s;
+        let dv_z = a_e * t_z;
+        // A speed change from `v` up to `w`: whether it runs at `acc` in its middle (its zones,
+        // `zones` of them at its ends, take `dv_z` each), and its length.
+        let ramp = |v: f64, w: f64, zones: f64| {
+            let fast = w - v > zones * dv_z;
+            let len = if fast {
+                let (lo, hi) = (v + (zones - 1.0) * dv_z, w - dv_z);
+                // The zones at `a_e` (at `v`'s end only where there is one) and the middle.
+                (zones - 1.0) * (v * t_z + 0.5 * dv_z * t_z)
+                    + ((w - dv_z) * t_z + 0.5 * dv_z * t_z)
+                    + (hi * hi - lo * lo) / (2.0 * acc)
+            } else {
+                (w * w - v * v) / (2.0 * a_e)
+            };
+            (fast, len)
+        };
+        let zones0 = if free_head { 1.0 } else { 2.0 };
+        let need = |w: f64| ramp(v0, w, zones0).1 + ramp(v1, w, 2.0).1;
+        let floor = v0.max(v1);
+        if need(floor) > seg.length_mm {
+            return None;
+        }
+        // The highest peak the length allows (the length needed rises with it).
+        let v_p = if need(v_max) <= seg.length_mm {
+            v_max
+        } else {
+            let (mut lo, mut hi) = (floor, v_max);
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if need(mid) <= seg.length_mm {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            lo * (1.0 - 1e-9)
+        }
+        .max(floor);
+        let (fast0, fast1) = (ramp(v0, v_p, zones0).0, ramp(v1, v_p, 2.0).0);
+        if !(fast0 || fast1) {
+            return None;
+        }
+        let lim_e = ProfileLimits::trapezoid(v_max, a_e)?;
+        let lim_a = ProfileLimits::trapezoid(v_max, acc)?;
+        // The pieces before the middle trapezoid (at `a_e`, with the peak), forwards from `v0`,
+        // and after it, backwards from `v1`: `(length, profile)` each.
+        let mut head: Vec<(f64, SpeedProfile)> = Vec::with_capacity(2);
+        let mut tail: Vec<(f64, SpeedProfile)> = Vec::with_capacity(2);
+        let mut x0 = v0;
+        if fast0 {
+            if !free_head {
+                let len = v0 * t_z + 0.5 * dv_z * t_z;
+                let u = profile::max_end_speed(len, v0, &lim_e)?;
+                head.push((len, profile::plan(len, v0, u, &lim_e)?));
+                x0 = u;
+            }
+            let w = v_p - dv_z;
+            let len = (w * w - x0 * x0) / (2.0 * acc);
+            if len > 0.0 {
+                let u = profile::max_end_speed(len, x0, &lim_a)?;
+                head.push((len, profile::plan(len, x0, u, &lim_a)?));
+                x0 = u;
+            }
+        }
+        let mut x1 = v1;
+        if fast1 {
+            let len = v1 * t_z + 0.5 * dv_z * t_z;
+            let u = profile::max_end_speed(len, v1, &lim_e)?;
+            tail.push((len, profile::plan(len, u, v1, &lim_e)?));
+            x1 = u;
+            let w = v_p - dv_z;
+            let len = (w * w - x1 * x1) / (2.0 * acc);
+            if len > 0.0 {
+                let u = profile::max_end_speed(len, x1, &lim_a)?;
+                tail.push((len, profile::plan(len, u, x1, &lim_a)?));
+                x1 = u;
+            }
+        }
+        tail.reverse();
+        let taken: f64 = head.iter().chain(&tail).map(|&(len, _)| len).sum();
+        let len_m = seg.length_mm - taken;
+        let lim_m = ProfileLimits::trapezoid(v_p.max(x0).max(x1), a_e)?;
+        let middle = profile::plan(len_m, x0, x1, &lim_m)?;
+        let mut parts = head;
+        parts.push((len_m, middle));
+        parts.extend(tail);
+        // The split must pay for itself.
+        let total: f64 = parts.iter().map(|(_, p)| p.duration_s()).sum();
+        if total.is_nan() || total >= plain.duration_s() - 1e-6 {
+            return None;
+        }
+        // The parts' ends on the path (a line's second half measured back from its end, as
+        // `Segment::point_at_distance` does), and their paths: an arc's parts are arcs of its
+        // circle (or helix) through them.
+        let path = |from: Vector3<f64>, to: Vector3<f64>, share: f64| match seg.path {
+            SegmentPath::Arc(arc) => {
+                // A helix's centre lies in the plane of its part's start.
+                let rise = (from - arc.center_mm).dot(&arc.normal);
+                let arc = ArcGeometry {
+                    center_mm: arc.center_mm + arc.normal * rise,
+                    ..arc
+                };
+                blend::trimmed_arc((from, to), &arc, share * arc.sweep_rad).map(SegmentPath::Arc)
+            }
+            other => Some(other),
+        };
+        let mut pieces = Vec::with_capacity(parts.len());
+        let (mut at_mm, mut from) = (0.0, seg.start_mm);
+        let last = parts.len() - 1;
+        for (k, (len, profile)) in parts.into_iter().enumerate() {
+            at_mm += len;
+            let to = if k == last {
+                seg.end_mm
+            } else {
+                seg.point_at_distance(at_mm)
+            };
+            let mut s = *seg;
+            s.start_mm = from;
+            s.end_mm = to;
+            s.length_mm = len;
+            s.path = path(from, to, len / seg.length_mm)?;
+            pieces.push((s, profile));
+            from = to;
+        }
+        Some(pieces)
     }
 
     /// Where the filtered element `i` stops at a junction that the motion could pass at its

@@ -118,3 +118,64 @@ pub fn program(moves: &[Move]) -> String {
     text.push_str("M2\n");
     text
 }
+
+/// A run of long moves joined at speed, for the parts a long move is planned in
+/// (`planner_limits`' `a_long_filtered_line_accelerates_at_its_whole_acceleration_between_its_ends`): lines
+/// of 3–40 mm turning by up to about 14° at each vertex (a slight rise or fall in Z too), and
+/// arcs and helices tangent to them, at random feeds, under `G64 P0.05`.
+#[allow(dead_code)] // not every test binary runs these
+pub fn a_run_joined_at_speed() -> impl Strategy<Value = String> {
+    let step = (
+        0.0..1.0f64,
+        -0.25..0.25f64,
+        3.0..40.0f64,
+        -0.1..0.1f64,
+        20.0..200.0f64,
+        (2.0..15.0f64, 0.3..3.0f64, any::<bool>(), -1.5..1.5f64),
+    );
+    prop::collection::vec(step, 2..9).prop_map(|steps| {
+        let mut text = String::from("G21 G90 G17 G64 P0.05\n");
+        let (mut at, mut heading) = (Vector3::zeros(), 0.0f64);
+        for (kind, turn, len, slope, feed, (r, sweep, left, dz)) in steps {
+            let u = Vector3::new(heading.cos(), heading.sin(), 0.0);
+            if kind < 0.7 {
+                heading += turn;
+                let u = Vector3::new(heading.cos(), heading.sin(), slope);
+                at += u * len;
+                text.push_str(&format!(
+                    "G1 X{:.6} Y{:.6} Z{:.6} F{:.1}\n",
+                    at.x,
+                    at.y,
+                    at.z,
+                    feed * 60.0
+                ));
+            } else {
+                // Tangent to the last direction: the centre on its left (G3) or right (G2).
+                let side = if left { 1.0 } else { -1.0 };
+                let n = Vector3::new(-u.y, u.x, 0.0) * side;
+                let centre = at + n * r;
+                let a0 = (-n.y).atan2(-n.x);
+                let a1 = a0 + side * sweep;
+                let end = Vector3::new(centre.x + r * a1.cos(), centre.y + r * a1.sin(), at.z + dz);
+                text.push_str(&format!(
+                    "{} X{:.6} Y{:.6} Z{:.6} I{:.6} J{:.6} F{:.1}\n",
+                    if left { "G3" } else { "G2" },
+                    end.x,
+                    end.y,
+                    end.z,
+                    n.x * r,
+                    n.y * r,
+                    feed * 60.0
+                ));
+                at = Vector3::new(
+                    format!("{:.6}", end.x).parse().unwrap(),
+                    format!("{:.6}", end.y).parse().unwrap(),
+                    format!("{:.6}", end.z).parse().unwrap(),
+                );
+                heading += side * sweep;
+            }
+        }
+        text.push_str("M2\n");
+        text
+    })
+}
