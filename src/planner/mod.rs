@@ -2098,40 +2098,46 @@ impl Planner {
         }
         let lim_e = ProfileLimits::trapezoid(v_max, a_e)?;
         let lim_a = ProfileLimits::trapezoid(v_max, acc)?;
-        // The pieces before the middle trapezoid (at `a_e`, with the peak), forwards from `v0`,
-        // and after it, backwards from `v1`: `(length, profile)` each.
-        let mut head: Vec<(f64, SpeedProfile)> = Vec::with_capacity(2);
-        let mut tail: Vec<(f64, SpeedProfile)> = Vec::with_capacity(2);
-        let mut x0 = v0;
-        if fast0 {
-            if !free_head {
-                let len = v0 * t_z + 0.5 * dv_z * t_z;
-                let u = profile::max_end_speed(len, v0, &lim_e)?;
-                head.push((len, profile::plan(len, v0, u, &lim_e)?));
-                x0 = u;
+        // The parts of a fast speed change from `v` to the middle trapezoid (at `a_e`, with the
+        // peak): its zone at `a_e` (where it has one) and its part at the whole acceleration,
+        // each `(length, profile)` and run up from `v` (`up`) or down to it; and the speed
+        // they reach.
+        let ramp_parts = |v: f64, zone: bool, up: bool| {
+            let step = |len: f64, from: f64, lim: &ProfileLimits| {
+                let u = profile::max_end_speed(len, from, lim)?;
+                let p = if up {
+                    profile::plan(len, from, u, lim)?
+                } else {
+                    profile::plan(len, u, from, lim)?
+                };
+                Some((u, (len, p)))
+            };
+            let mut parts: Vec<(f64, SpeedProfile)> = Vec::with_capacity(2);
+            let mut x = v;
+            if zone {
+                let (u, part) = step(v * t_z + 0.5 * dv_z * t_z, x, &lim_e)?;
+                parts.push(part);
+                x = u;
             }
             let w = v_p - dv_z;
-            let len = (w * w - x0 * x0) / (2.0 * acc);
+            let len = (w * w - x * x) / (2.0 * acc);
             if len > 0.0 {
-                let u = profile::max_end_speed(len, x0, &lim_a)?;
-                head.push((len, profile::plan(len, x0, u, &lim_a)?));
-                x0 = u;
+                let (u, part) = step(len, x, &lim_a)?;
+                parts.push(part);
+                x = u;
             }
-        }
-        let mut x1 = v1;
-        if fast1 {
-            let len = v1 * t_z + 0.5 * dv_z * t_z;
-            let u = profile::max_end_speed(len, v1, &lim_e)?;
-            tail.push((len, profile::plan(len, u, v1, &lim_e)?));
-            x1 = u;
-            let w = v_p - dv_z;
-            let len = (w * w - x1 * x1) / (2.0 * acc);
-            if len > 0.0 {
-                let u = profile::max_end_speed(len, x1, &lim_a)?;
-                tail.push((len, profile::plan(len, u, x1, &lim_a)?));
-                x1 = u;
-            }
-        }
+            Some((parts, x))
+        };
+        let (head, x0) = if fast0 {
+            ramp_parts(v0, !free_head, true)?
+        } else {
+            (Vec::new(), v0)
+        };
+        let (mut tail, x1) = if fast1 {
+            ramp_parts(v1, true, false)?
+        } else {
+            (Vec::new(), v1)
+        };
         tail.reverse();
         let taken: f64 = head.iter().chain(&tail).map(|&(len, _)| len).sum();
         let len_m = seg.length_mm - taken;
