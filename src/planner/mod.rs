@@ -2055,6 +2055,12 @@ impl Planner {
         // within the time-law filter's length (and two periods) before.
         let free_head = v0 == 0.0 && self.time_s - self.decel_until_s >= t_f + 2.0 * period_s;
         let dv_z = a_e * t_z;
+        // A speed change runs at `acc` only past a zone at its top (`(w − dv_z + dv_z/2)·t_z`
+        // long, `w > dv_z`): shorter elements (the tiny chords of CAM output) keep their
+        // profile without the search below.
+        if seg.length_mm < 0.5 * dv_z * t_z {
+            return None;
+        }
         // A speed change from `v` up to `w`: whether it runs at `acc` in its middle (its zones,
         // `zones` of them at its ends, take `dv_z` each), and its length.
         let ramp = |v: f64, w: f64, zones: f64| {
