@@ -1828,14 +1828,13 @@ impl Planner {
         let limits = alone.unwrap_or(limits);
         let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
         seg.time_law = self.smoothing.is_some() && alone.is_none();
-        // A filtered line long enough plans its middle at its whole acceleration, in parts
-        // (whole periods keep the element in one piece).
+        // A filtered line or arc runs its long speed changes at its whole acceleration, in
+        // parts (whole periods keep the element in one piece).
         let parts = if seg.time_law && !self.config.integer_periods {
             self.split_for_acceleration(i, &seg, v0, v1, &profile)
         } else {
             None
         };
-        let mut v0 = v0;
         if let Some(parts) = &parts {
             // What follows up to the segment's push looks at the element's start.
             profile = parts[0].1;
@@ -1895,37 +1894,15 @@ impl Planner {
                 } else {
                     seg.v_limit_mm_s
                 };
-                piece.v_start_mm_s = p.v_start_mm_s();
-                piece.v_end_mm_s = p.v_end_mm_s();
-                piece.v_peak_mm_s = p
-                    .v_cruise_mm_s()
-                    .max(piece.v_start_mm_s)
-                    .max(piece.v_end_mm_s);
-                piece.profile = Some(p);
-                piece.start_time_s = self.time_s;
-                self.time_s = piece.end_time_s();
-                self.note_decel(&piece);
-                self.ready.push_back(piece);
+                self.put_out(&mut piece, p)?;
             }
             let v_limit = seg.v_limit_mm_s;
             (seg, profile) = tail;
             seg.v_limit_mm_s = v_limit;
             seg.v_start_limit_mm_s = v_limit;
-            v0 = profile.v_start_mm_s();
         }
-        seg.v_start_mm_s = v0;
-        seg.v_end_mm_s = v1;
-        seg.v_peak_mm_s = profile.v_cruise_mm_s().max(v0).max(v1);
-        seg.profile = Some(profile);
-        seg.start_time_s = self.time_s;
-        let end_s = seg.end_time_s();
-        if !end_s.is_finite() {
-            return Err(PlanError::Overflow { line });
-        }
-        self.time_s = end_s;
+        self.put_out(&mut seg, profile)?;
         self.aux_settled = Some(seg.aux.end);
-        self.note_decel(&seg);
-        self.ready.push_back(seg);
         if alone.is_some() {
             let duration_s = profile.duration_s();
             let mut behind_mm = [0.0; MAX_FILTER_TAPS];
@@ -1991,6 +1968,27 @@ impl Planner {
                 None => self.axes_unsettled = axes,
             }
         }
+        Ok(())
+    }
+
+    /// Stamps the moving segment `seg` with `profile` (its speeds, peak and start time) and puts
+    /// it out: the plan's time moves on to its end.
+    fn put_out(&mut self, seg: &mut Segment, profile: SpeedProfile) -> Result<(), PlanError> {
+        seg.v_start_mm_s = profile.v_start_mm_s();
+        seg.v_end_mm_s = profile.v_end_mm_s();
+        seg.v_peak_mm_s = profile
+            .v_cruise_mm_s()
+            .max(seg.v_start_mm_s)
+            .max(seg.v_end_mm_s);
+        seg.profile = Some(profile);
+        seg.start_time_s = self.time_s;
+        let end_s = seg.end_time_s();
+        if !end_s.is_finite() {
+            return Err(PlanError::Overflow { line: seg.line });
+        }
+        self.time_s = end_s;
+        self.note_decel(seg);
+        self.ready.push_back(*seg);
         Ok(())
     }
 
