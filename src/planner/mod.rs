@@ -110,6 +110,18 @@
 //!   (`Planner::finalize_junction`). A plateau takes `2·T_f` at `c`; a stop there costs more
 //!   (the plan comes down to rest and the filter settles), so every such junction among short
 //!   elements gets one. An isolated sharp corner between longer elements still stops.
+//! - **Kinked runs.** A line's time-law acceleration reaches each axis as the jerk
+//!   `2·a/T_f·|uᵢ|` wherever it reverses (at every dip), and a vertex passed at speed keeps
+//!   half of what its lines leave: with `a = J·T_f/2` an eighth of each axis's jerk, which
+//!   holds the dips of a polygon whose vertices turn a little each (CAM chords too sparse to
+//!   run as a curve) to a crawl. Such a line, joined at speed to the line before with a kink,
+//!   plans with three quarters or half of its acceleration (and of that jerk) where an
+//!   estimate of both lines' times says so: half leaves the vertex 2.5 times as much and
+//!   makes its dip half as deep (`Planner::choose_kink_share`). The line before is lowered
+//!   with it where the filter's window at the vertex stays within it, or where it starts
+//!   from a stop (after a partial stand its use of the axes counts the deceleration before
+//!   the stand); otherwise it keeps its acceleration and the vertex its use
+//!   (LinuxCNC's `sam-circle_lines.ngc` 22.6 → 18.8 s).
 //! - **Stops.** Where the plan stops after a filtered move, it stands still until the time-law
 //!   filter has settled (`T_f`), so that the filtered time law reaches the stop exactly before
 //!   anything else moves; before dwells, program stops and the program's end the axis filters
@@ -980,6 +992,13 @@ struct Pending {
     /// How far before its start every element's ceiling (`v_limit_mm_s`) is within its own:
     /// the erosion of curve caps stops walking back there (`curve::erode_back`).
     floor_reach_mm: f64,
+    /// The share of its time-law acceleration (and of the jerk that makes) the element plans
+    /// with ([`Planner::choose_kink_share`]); 1 unless a kinked run took less.
+    time_law_share: f64,
+    /// With a smaller `time_law_share`: how far back from the element's end the plan's
+    /// accelerations are all within that share (the run of lines that took it, infinite from
+    /// a stop where the filter settles whole); 0 otherwise.
+    lowered_run_mm: f64,
 }
 
 /// A junction whose cap is below its neighbours' speeds, in the jerk-limited mode, while the
@@ -1227,6 +1246,7 @@ impl Planner {
                     return Ok(());
                 };
                 p.refined = refined;
+                self.choose_kink_share(&mut p);
                 // The blend is chosen with the curvature steps' rule at the arcs' caps, which
                 // its estimate of the time was made for: at the junction's speed, blend arcs
                 // that ran slower than the sharp corner were taken (two lines of 30 mm turning
@@ -2211,6 +2231,141 @@ impl Planner {
         periods.is_finite().then_some(periods as usize)
     }
 
+    /// The share of their time-law acceleration `p`, a line joined at speed to the last line
+    /// of the window with a kink, and that line plan with: a smaller one ([`KINK_SHARES`])
+    /// where that is estimated faster over both. Under the time-law filter a line's
+    /// acceleration `a` reaches each axis as the jerk `2·a/T_f·|uᵢ|` (where the plan's
+    /// acceleration reverses, as at every dip), and the vertex rules share what the elements
+    /// leave of each axis's jerk: with `a = J·T_f/2` a vertex keeps an eighth of it, and a
+    /// polyline whose vertices turn a little each (CAM chords of a few tenths of a millimetre
+    /// and more, too sparse to be taken as a curve) runs its dips at the speed that eighth
+    /// allows. Half the acceleration leaves the vertices 2.5 times as much, and the dips
+    /// (`a·T_f/4`) are half as deep. The estimate ([`sawtooth_s`]) takes `p`'s next junction
+    /// as this one, and a junction whose dip leaves nothing as a stop, `p` then run alone. The
+    /// last line is lowered as a whole (its earlier junction keeps the caps it has, planned
+    /// with its higher use) where the filter's window at the vertex cannot reach the element
+    /// before it, and only where the plan can still stop at the window's end with it
+    /// ([`Planner::can_stop_with`]); otherwise `p` keeps its acceleration too. In a run the
+    /// lines after the first find the line before already lowered.
+    fn choose_kink_share(&mut self, p: &mut Pending) {
+        let Some(smoothing) = self.smoothing else {
+            return;
+        };
+        let Some(prev) = self.window.back() else {
+            return;
+        };
+        let line = |q: &Pending| {
+            matches!(q.seg.path, SegmentPath::Line { .. })
+                && !q.seg.aux.moves()
+                && q.alone.is_some()
+        };
+        // Chords as short as the chord smoother's ([`smooth::DENSE_MM`]) are points of a curve
+        // where they run as one ([`curve`]), whose lines take their acceleration from the
+        // curve's budget; the pieces of a refined chord are not written chords.
+        let dense = !(p.refined && prev.refined)
+            && p.full_length_mm.min(prev.full_length_mm) <= smooth::DENSE_MM;
+        if dense
+            || !(line(prev) && line(p))
+            || prev.curve_fit.is_some()
+            || prev.provisional.is_some()
+            || !matches!(p.blend, BlendMode::Blend { .. })
+            || !matches!(prev.blend, BlendMode::Blend { .. })
+            || (p.tangent_start - prev.tangent_end).norm() == 0.0
+        {
+            return;
+        }
+        let t_f = smoothing.time_law_s(self.config.period_s);
+        // The junction's cap and the bottom of its dip.
+        let caps = |a: &Pending, b: &Pending| {
+            let cap = self.junction_limit_mm_s(a, b).min(b.limits.v_max_mm_s());
+            let depth = self.dip_depth_mm_s(a.limits.a_max_mm_s2(), b.limits.a_max_mm_s2());
+            (cap, cap - depth)
+        };
+        // Both lines' time with the junction's dip at `bottom` (`p`'s next junction as this
+        // one) or, where the dip stops the motion, `p` run alone, time-optimal at its whole
+        // acceleration, after the filter settles.
+        let time_s = |a: &Pending, b: &Pending, bottom: f64| {
+            let t_a = sawtooth_s(a, a.cap_start_mm_s, bottom.max(0.0));
+            if bottom > 0.0 {
+                Some(t_a + sawtooth_s(b, bottom, bottom))
+            } else {
+                let alone = b
+                    .alone
+                    .and_then(|l| profile::plan(b.full_length_mm, 0.0, 0.0, &l))?;
+                Some(t_a + t_f + alone.duration_s())
+            }
+        };
+        let (cap, bottom) = caps(prev, p);
+        if cap >= p.limits.v_max_mm_s() {
+            return;
+        }
+        let Some(now_s) = time_s(prev, p, bottom) else {
+            return;
+        };
+        let mut best = (now_s * (1.0 - KINK_SHARE_GAIN), None);
+        for alpha in KINK_SHARES {
+            let (Some(mut a), Some(mut b)) = (
+                with_time_law_share(prev, alpha, t_f),
+                with_time_law_share(p, alpha, t_f),
+            ) else {
+                continue;
+            };
+            // The last line is lowered as a whole only where the filter's window at the
+            // vertex (`reach_mm` back, as [`Planner::share_at_junction`] has it) does not reach
+            // the element before it, which planned with the line's higher acceleration, or
+            // where the line starts from a stop. Where the filter settles whole there, nothing
+            // before the stop is in the window; after a partial stand
+            // ([`Planner::partial_hold_periods`]) the deceleration before it may be, and the
+            // line's use of each axis counts it: at most the mean of the two elements' uses
+            // (the filter's jerk is the range of the plan's acceleration over `T_f`).
+            let lowers_prev = a.time_law_share < prev.time_law_share;
+            let from_stop = a.cap_start_mm_s == 0.0;
+            let partial_stand = from_stop && a.raw_cap_start_mm_s > 0.0;
+            if lowers_prev && partial_stand {
+                let n = self.window.len();
+                let Some(before) = n.checked_sub(2).map(|i| &self.window[i]) else {
+                    continue;
+                };
+                a.jerk_used_mm_s3 = a
+                    .jerk_used_mm_s3
+                    .zip_map(&before.jerk_used_mm_s3, |own, other| {
+                        own.max(0.5 * (own + other))
+                    });
+            }
+            let (cap_b, bottom_b) = caps(&a, &b);
+            // Passed barely above its dip, a junction is slower than a stop
+            // ([`STEP_CAP_MIN_PASS`], as [`Planner::step_cap_at_speed`]).
+            if bottom_b <= bottom.max(STEP_CAP_MIN_PASS * (cap_b - bottom_b)) {
+                continue;
+            }
+            let acc = a.limits.a_max_mm_s2().max(b.limits.a_max_mm_s2());
+            let reach_mm = t_f * (acc * t_f + ((acc * t_f).powi(2) + cap_b * cap_b).sqrt());
+            if lowers_prev {
+                a.lowered_run_mm = if from_stop && !partial_stand {
+                    f64::INFINITY
+                } else {
+                    a.seg.length_mm
+                };
+                if !((from_stop || reach_mm <= a.lowered_run_mm) && self.can_stop_with(&a)) {
+                    continue;
+                }
+            } else if reach_mm > a.lowered_run_mm {
+                // The window would reach back beyond the lines that took the share.
+                continue;
+            }
+            b.lowered_run_mm = a.lowered_run_mm + b.seg.length_mm;
+            if let Some(t_s) = time_s(&a, &b, bottom_b)
+                && t_s < best.0
+            {
+                best = (t_s, Some((a, b)));
+            }
+        }
+        if let Some((a, b)) = best.1 {
+            *p = b;
+            *self.window.back_mut().expect("checked above") = a;
+        }
+    }
+
     /// Joins `p` at speed to the window's last element under the time-law filter. The
     /// filter's window spans the junction, so its output near it mixes both elements'
     /// accelerations: within its reach both plan with the lower of the two
@@ -2850,6 +3005,8 @@ impl Planner {
             pass_mark: None,
             acc_floor_mm_s2: f64::INFINITY,
             floor_reach_mm: 0.0,
+            time_law_share: 1.0,
+            lowered_run_mm: 0.0,
         })
         .map(|mut p| {
             p.shared_acc_mm_s2 = p.limits.a_max_mm_s2();
@@ -2980,6 +3137,8 @@ impl Planner {
                     pass_mark: None,
                     acc_floor_mm_s2: f64::INFINITY,
                     floor_reach_mm: 0.0,
+                    time_law_share: 1.0,
+                    lowered_run_mm: 0.0,
                 }
             }
             ElementKind::Arc { .. } => {
@@ -3231,6 +3390,46 @@ fn lower_acceleration(p: &mut Pending, acc_mm_s2: f64) {
 /// [`Planner::share_at_junction`] splits a line only where its own acceleration is above
 /// this many times the lower one.
 const SPLIT_ACC_GAIN: f64 = 1.2;
+
+/// The shares of its tangential acceleration (and of the jerk the time-law filter makes of
+/// it) a line joined at speed to a kinked vertex may plan with, leaving the rest of each
+/// axis's jerk to the vertices ([`Planner::with_kink_share`]).
+const KINK_SHARES: [f64; 2] = [0.75, 0.5];
+
+/// A line takes a smaller share ([`KINK_SHARES`]) only where the estimate of its time is at
+/// least this much shorter.
+const KINK_SHARE_GAIN: f64 = 0.02;
+
+/// The line `p` with the share `alpha` of its time-law acceleration (of its own limits,
+/// `min(a, j·T_f/2)` from its move alone's) and of the jerk that makes of each axis, where
+/// it plans with more; `None` if the limits do not come out.
+fn with_time_law_share(p: &Pending, alpha: f64, t_f: f64) -> Option<Pending> {
+    if p.time_law_share <= alpha {
+        return Some(*p);
+    }
+    let own = p.alone?;
+    let acc = alpha * own.a_max_mm_s2().min(0.5 * own.j_max_mm_s3() * t_f);
+    let mut q = *p;
+    q.limits = ProfileLimits::trapezoid(p.limits.v_max_mm_s(), acc.min(p.limits.a_max_mm_s2()))?;
+    q.jerk_used_mm_s3 = p.jerk_used_mm_s3 * (alpha / p.time_law_share);
+    q.shared_acc_mm_s2 = p.shared_acc_mm_s2.min(q.limits.a_max_mm_s2());
+    q.time_law_share = alpha;
+    Some(q)
+}
+
+/// Estimated time of the element `p` from a junction passed at `v0_mm_s` to one passed at
+/// `v1_mm_s`, accelerating at its acceleration up to its top speed between them.
+fn sawtooth_s(p: &Pending, v0_mm_s: f64, v1_mm_s: f64) -> f64 {
+    let (length_mm, acc, v_max) = (
+        p.full_length_mm,
+        p.limits.a_max_mm_s2(),
+        p.limits.v_max_mm_s(),
+    );
+    let (v0, v1) = (v0_mm_s.min(v_max), v1_mm_s.min(v_max));
+    let peak = v_max.min((0.5 * (v0 * v0 + v1 * v1) + acc * length_mm).sqrt());
+    let ramps_mm = (2.0 * peak * peak - v0 * v0 - v1 * v1) / (2.0 * acc);
+    (2.0 * peak - v0 - v1) / acc + (length_mm - ramps_mm).max(0.0) / peak
+}
 
 /// Line `p` split `at_mm` from its start, into two lines that meet without a turn: the first
 /// keeps `p`'s start and its junction, the second ends where `p` ends, bit for bit. Both keep
