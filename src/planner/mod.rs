@@ -115,13 +115,13 @@
 //!   half of what its lines leave: with `a = J·T_f/2` an eighth of each axis's jerk, which
 //!   holds the dips of a polygon whose vertices turn a little each (CAM chords too sparse to
 //!   run as a curve) to a crawl. Such a line, joined at speed to the line before with a kink,
-//!   plans with three quarters or half of its acceleration (and of that jerk) where an
+//!   plans with three quarters, half or 0.35 of its acceleration (and of that jerk) where an
 //!   estimate of both lines' times says so: half leaves the vertex 2.5 times as much and
 //!   makes its dip half as deep (`Planner::choose_kink_share`). The line before is lowered
 //!   with it where the filter's window at the vertex stays within it, or where it starts
 //!   from a stop (after a partial stand its use of the axes counts the deceleration before
 //!   the stand); otherwise it keeps its acceleration and the vertex its use
-//!   (LinuxCNC's `sam-circle_lines.ngc` 22.6 → 18.8 s).
+//!   (LinuxCNC's `sam-circle_lines.ngc` 22.6 → 16.1 s).
 //! - **Stops.** Where the plan stops after a filtered move, it stands still until the time-law
 //!   filter has settled (`T_f`), so that the filtered time law reaches the stop exactly before
 //!   anything else moves; before dwells, program stops and the program's end the axis filters
@@ -3393,8 +3393,8 @@ const SPLIT_ACC_GAIN: f64 = 1.2;
 
 /// The shares of its tangential acceleration (and of the jerk the time-law filter makes of
 /// it) a line joined at speed to a kinked vertex may plan with, leaving the rest of each
-/// axis's jerk to the vertices ([`Planner::with_kink_share`]).
-const KINK_SHARES: [f64; 2] = [0.75, 0.5];
+/// axis's jerk to the vertices ([`Planner::choose_kink_share`]).
+const KINK_SHARES: [f64; 3] = [0.75, 0.5, 0.35];
 
 /// A line takes a smaller share ([`KINK_SHARES`]) only where the estimate of its time is at
 /// least this much shorter.
