@@ -179,3 +179,54 @@ pub fn a_run_joined_at_speed() -> impl Strategy<Value = String> {
         text
     })
 }
+
+/// A polyline whose vertices turn a little each (`planner_limits`'
+/// `a_polygon_of_slight_kinks_trades_acceleration_for_its_vertices`): chords of 0.15–4 mm
+/// turning by up to about 12° each, mostly one way (a CAM curve written as sparse chords) and
+/// now and then the other, a slight rise or fall in Z, at random feeds, under a bare `G64` or
+/// `G64 P0.005`–`P0.05`, with now and then a sharp corner (a stop) among them.
+#[allow(dead_code)] // not every test binary runs these
+pub fn a_kinked_polyline() -> impl Strategy<Value = String> {
+    let step = (
+        0.15..4.0f64,
+        0.0..0.21f64,
+        0.0..1.0f64,
+        -0.05..0.05f64,
+        20.0..200.0f64,
+    );
+    (
+        prop::option::of(0.005..0.05f64),
+        prop::collection::vec(step, 3..40),
+    )
+        .prop_map(|(tolerance, steps)| {
+            let mut text = match tolerance {
+                Some(p) => format!("G21 G90 G17 G64 P{p:.4}\n"),
+                None => String::from("G21 G90 G17 G64\n"),
+            };
+            let (mut at, mut heading) = (Vector3::zeros(), 0.0f64);
+            for (len, turn, kind, slope, feed) in steps {
+                heading += if kind < 0.85 {
+                    turn
+                } else if kind < 0.95 {
+                    -turn
+                } else {
+                    1.5
+                };
+                at += Vector3::new(heading.cos(), heading.sin(), slope) * len;
+                text.push_str(&format!(
+                    "G1 X{:.4} Y{:.4} Z{:.4} F{:.1}\n",
+                    at.x,
+                    at.y,
+                    at.z,
+                    feed * 60.0
+                ));
+                at = Vector3::new(
+                    format!("{:.4}", at.x).parse().unwrap(),
+                    format!("{:.4}", at.y).parse().unwrap(),
+                    format!("{:.4}", at.z).parse().unwrap(),
+                );
+            }
+            text.push_str("M2\n");
+            text
+        })
+}
