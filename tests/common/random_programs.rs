@@ -107,11 +107,7 @@ pub fn program(moves: &[Move]) -> String {
                     f * 60.0
                 ));
                 // The interpreter ends the arc on the written end point.
-                at = Vector3::new(
-                    format!("{:.6}", end.x).parse().unwrap(),
-                    format!("{:.6}", end.y).parse().unwrap(),
-                    format!("{:.6}", end.z).parse().unwrap(),
-                );
+                at = as_written(end, 6);
             }
         }
     }
@@ -167,11 +163,7 @@ pub fn a_run_joined_at_speed() -> impl Strategy<Value = String> {
                     n.y * r,
                     feed * 60.0
                 ));
-                at = Vector3::new(
-                    format!("{:.6}", end.x).parse().unwrap(),
-                    format!("{:.6}", end.y).parse().unwrap(),
-                    format!("{:.6}", end.z).parse().unwrap(),
-                );
+                at = as_written(end, 6);
                 heading += side * sweep;
             }
         }
@@ -220,13 +212,15 @@ pub fn a_kinked_polyline() -> impl Strategy<Value = String> {
                     at.z,
                     feed * 60.0
                 ));
-                at = Vector3::new(
-                    format!("{:.4}", at.x).parse().unwrap(),
-                    format!("{:.4}", at.y).parse().unwrap(),
-                    format!("{:.4}", at.z).parse().unwrap(),
-                );
+                at = as_written(at, 4);
             }
             text.push_str("M2\n");
             text
         })
+}
+
+/// `at` as a program writes it with `decimals` decimals (where the interpreter puts it).
+#[allow(dead_code)] // not every test binary runs the generators that use it
+fn as_written(at: Vector3<f64>, decimals: usize) -> Vector3<f64> {
+    at.map(|c| format!("{c:.decimals$}").parse().unwrap())
 }
