@@ -464,6 +464,55 @@ fn moves_alone_keep_their_corners_within_a_tiny_tolerance() {
     setpoints::limits_hold(plan, &limits(), &cfg).unwrap();
 }
 
+/// Issue 11: consecutive moves alone (sharp corners between short lines under a tiny
+/// tolerance, as CAM writes engraving) need none of the axis filters: each exact S-curve
+/// keeps the limits and its path on its own. Where the filters have settled a move alone
+/// bypasses them, so it leaves nothing in them: the next starts at once, nothing stands
+/// between them or at the end, and every setpoint lies on the polyline (LinuxCNC's
+/// `546_simplfied.ngc` 1.305 → 1.123 s at 1 ms: each corner waited 14 ms for the filters).
+#[test]
+fn moves_alone_run_back_to_back_on_their_exact_path() {
+    let corners = [
+        Vector3::new(0.724, 12.368, 0.0),
+        Vector3::new(0.678, 12.278, 0.0),
+        Vector3::new(0.557, 12.351, 0.0),
+        Vector3::new(0.564, 12.384, 0.0),
+        Vector3::new(0.707, 12.315, 0.0),
+        Vector3::new(0.608, 12.398, 0.0),
+    ];
+    let mut text = String::from("G21 G90 G17 G64 P0.0001 F800\n");
+    for p in &corners[1..] {
+        text.push_str(&format!("G1 X{:.3} Y{:.3}\n", p.x, p.y));
+    }
+    text.push_str("M2\n");
+    let prog = parse_program(&text, "zigzag.ngc", corners[0]).unwrap();
+    let cfg = config(ProfileKind::SCurve);
+    let plan = plan_with(&prog, &limits(), &cfg).unwrap();
+    let segs = plan.segments();
+    assert_eq!(
+        segs.len(),
+        corners.len() - 1,
+        "stands between the moves: {segs:#?}"
+    );
+    for s in segs {
+        assert!(
+            s.length_mm > 0.0 && !s.time_law && !s.axis_filters,
+            "line {}: a move alone through the filters",
+            s.line
+        );
+    }
+    let mut interp = Interpolator::new(plan.clone(), T).unwrap();
+    let mut q = Vector3::zeros();
+    let mut worst: f64 = 0.0;
+    while !interp.is_finished() {
+        interp.update(&mut q);
+        worst = worst.max(distance_to_polyline(q, &corners));
+    }
+    assert!(worst <= 1e-9, "{worst} mm off the zigzag");
+    assert_eq!(q, corners[corners.len() - 1]);
+    setpoints::limits_hold(plan, &limits(), &cfg).unwrap();
+}
+
 /// Issue 11: on an arc the jerk of the motion is `(j_t − v³κ²)·T + 3·v·κ·a_t·N`, two
 /// orthogonal parts, so with `|j_t| ≤ J/2` and `v³κ² ≤ J/4` the path acceleration may take
 /// `3·v·κ·a_t ≤ (√7/4)·J` (`(3/4)² + (√7/4)² = 1`), not the `J/4` a plain sum of the three

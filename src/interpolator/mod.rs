@@ -1072,6 +1072,9 @@ impl Interpolator {
                     if seg.length_mm > 0.0 && seg.time_law != smoother.time_law() {
                         smoother.set_time_law(seg.time_law, self.starts_mm[self.raw]);
                     }
+                    if seg.length_mm > 0.0 && seg.axis_filters != smoother.axis_filters() {
+                        smoother.set_axis_filters(seg.axis_filters, self.last_mm);
+                    }
                     smoother.note_plan_time(t_s);
                     let raw_mm = self.starts_mm[self.raw] + seg.distance_at(local_s);
                     self.smooth(raw_mm)
@@ -1163,7 +1166,7 @@ impl Interpolator {
         };
         self.behind = self.behind.clamp(self.floor, self.geo);
         self.ahead = self.ahead.max(self.geo);
-        let offset = if reach_mm > 0.0 && !self.queue.is_empty() {
+        let offset = if reach_mm > 0.0 && !self.queue.is_empty() && smoother.axis_filters() {
             let behind = self.window_behind(s_mm - reach_mm);
             let ahead = self.window_ahead(s_mm + reach_mm);
             precompensation(behind - point, ahead - point, v_mm_s, n_k, period_s)

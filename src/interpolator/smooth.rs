@@ -11,7 +11,9 @@
 //!   value itself, bit for bit.
 //! - **Geometry.** Each axis then passes through two linear [`AxisFilter`]s of `N_k` periods,
 //!   which spread a step of an axis's velocity (a corner, a chord's vertex) over `2·T_k` and
-//!   keep the end exact (their position-error accumulator).
+//!   keep the end exact (their position-error accumulator). A move planned alone from where
+//!   they have settled bypasses them ([`crate::planner::Segment::axis_filters`]); they are
+//!   switched only at rest, off only once settled, on again settled where the motion stands.
 //!
 //! - **Contour pre-compensation.** A moving average pulls a curve towards its centre: a circle
 //!   of curvature `κ` run at `v` comes out of the two axis filters with its radius scaled by
@@ -49,6 +51,9 @@ pub struct Smoother {
     time_law: bool,
     /// The two filters of each axis, in order.
     axes: [[AxisFilter; 3]; 2],
+    /// Whether the axis filters are on (off for moves planned alone from where they had
+    /// settled, see [`crate::planner::Segment::axis_filters`]).
+    axes_on: bool,
     /// The plan times of the last `settle_periods + 1` samples, a ring (`next_tau` next):
     /// the oldest is a plan time whose point the output has certainly reached.
     taus: Box<[f64]>,
@@ -90,6 +95,7 @@ impl Smoother {
             still: n_f,
             time_law: true,
             axes,
+            axes_on: true,
             taus: vec![0.0; spec.settle_periods() + 1].into_boxed_slice(),
             next_tau: 0,
             prev_s_mm: 0.0,
@@ -128,6 +134,30 @@ impl Smoother {
         self.still = self.ring.len();
     }
 
+    /// Whether the axis filters are on.
+    pub fn axis_filters(&self) -> bool {
+        self.axes_on
+    }
+
+    /// Turns the axis filters on or off, at rest at `rest_mm` (the point the output stands
+    /// at). They are turned off only where they have settled (their output is `rest_mm`),
+    /// so that the output does not move; otherwise they stay on (the planner turns them off
+    /// only after their settling time, which an override never shortens: it does not speed
+    /// up stills). On again, they start settled at `rest_mm`. Returns whether they are on.
+    pub fn set_axis_filters(&mut self, on: bool, rest_mm: Vector3<f64>) -> bool {
+        if on && !self.axes_on {
+            for stage in &mut self.axes {
+                for (i, f) in stage.iter_mut().enumerate() {
+                    f.reset(rest_mm[i]);
+                }
+            }
+            self.axes_on = true;
+        } else if !on && self.axes_on && self.axes.iter().flatten().all(AxisFilter::is_settled) {
+            self.axes_on = false;
+        }
+        self.axes_on
+    }
+
     /// Takes the raw path distance of this sample and gives the filtered one.
     pub fn filter_distance(&mut self, raw_mm: f64) -> f64 {
         if !self.time_law {
@@ -163,9 +193,12 @@ impl Smoother {
         self.taus[self.next_tau]
     }
 
-    /// Passes the point on the path through the axis filters.
+    /// Passes the point on the path through the axis filters (where they are on).
     pub fn filter_point(&mut self, point_mm: Vector3<f64>) -> Vector3<f64> {
         let mut out = point_mm;
+        if !self.axes_on {
+            return out;
+        }
         for stage in &mut self.axes {
             for (i, f) in stage.iter_mut().enumerate() {
                 out[i] = f.update(out[i]);
@@ -247,6 +280,32 @@ mod tests {
         assert!((out[3] - (0.1 + 0.30000000000000004 + 1.4) / 4.0).abs() < 1e-15);
         assert_eq!(out[6], 0.7);
         assert!(out.windows(2).all(|w| w[1] >= w[0]), "{out:?}");
+    }
+
+    #[test]
+    fn the_axis_filters_turn_off_only_once_settled_and_on_again_without_a_step() {
+        let (a, b) = (Vector3::new(1.0, 2.0, 3.0), Vector3::new(1.5, 2.0, 3.0));
+        let mut s = Smoother::new(spec(1, 3), 0.001, a);
+        // Moving: the output trails the input, and the filters stay on.
+        assert_ne!(s.filter_point(b), b);
+        assert!(
+            s.set_axis_filters(false, b),
+            "turned off while holding motion"
+        );
+        for _ in 0..4 {
+            s.filter_point(b);
+        }
+        assert!(!s.set_axis_filters(false, b));
+        // Off: the points pass as they are.
+        let c = Vector3::new(2.0, 2.5, 3.0);
+        assert_eq!(s.filter_point(c), c);
+        // On again where the motion stands: settled there, the next point filtered from it.
+        assert!(s.set_axis_filters(true, c));
+        assert!(s.is_settled());
+        assert_eq!(s.filter_point(c), c);
+        let d = Vector3::new(2.3, 2.5, 3.0);
+        let out = s.filter_point(d);
+        assert!(out.x > c.x && out.x < c.x + 0.3 / 3.0 + 1e-12, "{out:?}");
     }
 
     #[test]

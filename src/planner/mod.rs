@@ -138,7 +138,14 @@
 //!   end wait for the rest.
 //! - **Moves alone.** A move from rest to rest (a sharp corner before and after it) is planned
 //!   as an exact, time-optimal S-curve of its own and bypasses the time-law filter, which would
-//!   cost it `T_f` of standing still; the filter is switched only at rest.
+//!   cost it `T_f` of standing still; the filter is switched only at rest. Where it starts with
+//!   every filter settled (`Planner::filters_quiet_s`: the plan's start, a stand that waited
+//!   for them, another such move), it bypasses the axis filters too
+//!   ([`Segment::axis_filters`]): the exact profile keeps every axis's limits and the path on
+//!   its own, and nothing of it is left in the filters, so the next move needs no settling
+//!   time (consecutive moves alone under a tiny tolerance waited `2·(T_k − T)` at each corner
+//!   for the filters, whose mix of the two legs would have cut it). Moves of the auxiliary
+//!   axes keep them.
 //! - **Geometry.** Each axis then passes through two moving averages of `T_k`
 //!   ([`AXIS_FILTER_S`]), which spread the velocity step of a polyline's vertex over `2·T_k`:
 //!   a vertex's step `Δv` reaches the drive as an acceleration of at most `Δv/T_k` and a jerk
@@ -621,6 +628,12 @@ pub struct Segment {
     /// ([`Smoothing`]); false for moves planned as exact jerk-limited profiles on their own, and
     /// for every move of a plan without smoothing. Stills keep whatever came before.
     pub time_law: bool,
+    /// Whether the interpolator passes its points through the axis filters (and their
+    /// contour pre-compensation, [`Smoothing`]); false for a move planned alone that starts
+    /// where every filter has settled (its exact profile needs none, and it then leaves
+    /// nothing in them to settle), and for every move of a plan without smoothing. Stills
+    /// keep whatever came before.
+    pub axis_filters: bool,
 }
 
 impl Segment {
@@ -1070,6 +1083,10 @@ pub struct Planner {
     /// lets an element start at its whole acceleration where this lies at least the filter's
     /// length (and two periods) behind it.
     decel_until_s: f64,
+    /// Plan time from which the filters' output stands where the plan does (every move
+    /// settled so far has ended, and the filters it ran through have had their settling
+    /// time): a move alone starting then bypasses the axis filters.
+    filters_quiet_s: f64,
     /// The sequence number of the next element pushed ([`Pending::seq`]).
     next_seq: u64,
     /// The elements of the window whose start junction is provisional, in order.
@@ -1163,6 +1180,7 @@ impl Planner {
             axes_unsettled: None,
             time_law_unsettled: None,
             decel_until_s: f64::NEG_INFINITY,
+            filters_quiet_s: 0.0,
             next_seq: 0,
             provisional: VecDeque::new(),
             curve: curve::CurveState::default(),
@@ -1901,6 +1919,13 @@ impl Planner {
                 self.axes_unsettled = None;
             }
         }
+        // A move alone from where the filters have settled needs none of them: its exact
+        // profile keeps every limit, and its path is followed exactly. Moves of the auxiliary
+        // axes keep them (their samples pass through filters of their own).
+        let bypass = alone.is_some()
+            && !seg.aux.moves()
+            && self.time_s >= self.filters_quiet_s - 0.5 * self.config.period_s;
+        seg.axis_filters = self.smoothing.is_some() && !bypass;
         seg.v_limit_mm_s = self.window[i].v_limit_mm_s;
         seg.v_start_limit_mm_s = self.window[i].cap_start_limit_mm_s;
         if let Some(mut parts) = parts {
@@ -1909,6 +1934,7 @@ impl Planner {
             for (k, (mut piece, p)) in parts.into_iter().enumerate() {
                 // The junctions between the parts do not turn: the line's own limit.
                 piece.v_limit_mm_s = seg.v_limit_mm_s;
+                piece.axis_filters = seg.axis_filters;
                 piece.v_start_limit_mm_s = if k == 0 {
                     seg.v_start_limit_mm_s
                 } else {
@@ -1916,14 +1942,27 @@ impl Planner {
                 };
                 self.put_out(&mut piece, p)?;
             }
-            let v_limit = seg.v_limit_mm_s;
+            let (v_limit, axis_filters) = (seg.v_limit_mm_s, seg.axis_filters);
             (seg, profile) = tail;
             seg.v_limit_mm_s = v_limit;
+            seg.axis_filters = axis_filters;
             seg.v_start_limit_mm_s = v_limit;
         }
         self.put_out(&mut seg, profile)?;
         self.aux_settled = Some(seg.aux.end);
-        if alone.is_some() {
+        if let Some(smoothing) = self.smoothing {
+            // The filters this move ran through settle after its end.
+            let periods = match (seg.time_law, seg.axis_filters) {
+                (true, _) => smoothing.settle_periods(),
+                (false, true) => 2 * (smoothing.axis_periods - 1),
+                (false, false) => 0,
+            };
+            self.filters_quiet_s = self.time_s + periods as f64 * self.config.period_s;
+        }
+        if bypass {
+            // Nothing of it is left in the filters.
+            self.axes_unsettled = None;
+        } else if alone.is_some() {
             let duration_s = profile.duration_s();
             let mut behind_mm = [0.0; MAX_FILTER_TAPS];
             for (k, d) in behind_mm.iter_mut().enumerate() {
@@ -3632,6 +3671,7 @@ fn moving(
         hold_s: 0.0,
         start_time_s: 0.0,
         time_law: false,
+        axis_filters: false,
     }
 }
 
@@ -3660,6 +3700,7 @@ fn still(
         hold_s: duration_s,
         start_time_s,
         time_law: false,
+        axis_filters: false,
     }
 }
 
