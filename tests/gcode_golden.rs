@@ -31,7 +31,10 @@ fn element(e: &Element) -> String {
     let blend = match e.blend {
         BlendMode::ExactPath => " G61".to_string(),
         BlendMode::ExactStop => " G61.1".to_string(),
-        BlendMode::Blend { p_mm, q_mm } if p_mm == 0.0 && q_mm == 0.0 => String::new(),
+        // The mode a program starts in: LinuxCNC's G64 without P.
+        BlendMode::Blend { p_mm, q_mm } if p_mm == f64::INFINITY && q_mm == f64::INFINITY => {
+            String::new()
+        }
         BlendMode::Blend { p_mm, q_mm } => format!(" G64P{}Q{}", num(p_mm), num(q_mm)),
     };
     let comp = match e.comp {
@@ -324,6 +327,8 @@ fn feed_modes_blending_dwell_stops() {
          G1 X0\n\
          G64 P0.1\n\
          G4 P1.5\n\
+         G64 P0 X1\n\
+         G64 X0\n\
          G61 Y1\n\
          M0\n\
          M1\n\
@@ -332,10 +337,12 @@ fn feed_modes_blending_dwell_stops() {
          2 arc G2 (10,0,0)->(20,0,0) c(15,0,0) n(0,0,-1) r5 turns0 F15.708
          4 line G1 (20,0,0)->(0,0,0) F2 G64P0.05Q0.01
          6 dwell 1.5 s
-         7 line G1 (0,0,0)->(0,1,0) F2 G61
-         8 stop M0
-         9 stop M1
-         10 end M2",
+         7 line G1 (0,0,0)->(1,0,0) F2 G64P0Q0
+         8 line G1 (1,0,0)->(0,0,0) F2
+         9 line G1 (0,0,0)->(0,1,0) F2 G61
+         10 stop M0
+         11 stop M1
+         12 end M2",
     );
     let mut s = setup();
     s.optional_stop = false;

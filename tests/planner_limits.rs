@@ -335,7 +335,8 @@ proptest! {
 /// Issue 11, item 2: a bare `G64` (LinuxCNC's "no limit") allows the machine's
 /// `default_tolerance_mm` in the jerk-limited mode, never more: there the 1° corners of a
 /// 360-gon are passed faster than under `G64 P0`, whose corners keep within `chord_tol_mm`.
-/// Trapezoids plan both alike.
+/// Trapezoids plan both alike. A program without G61/G64 words starts in a bare `G64`, as in
+/// LinuxCNC (it started in `G64 P0` until session 30).
 #[test]
 fn bare_g64_deviates_within_the_default_tolerance() {
     let corners: Vec<Vector3<f64>> = (0..=360)
@@ -370,6 +371,9 @@ fn bare_g64_deviates_within_the_default_tolerance() {
     let (bare_mm, bare_s) = run("G64", ProfileKind::SCurve);
     let (exact_mm, exact_s) = run("G64 P0", ProfileKind::SCurve);
     assert!(bare_mm <= 0.02 + 1e-9, "{bare_mm} mm off the polygon");
+    // A program that writes neither G61 nor G64 runs in LinuxCNC's start mode, a bare G64.
+    let (unsaid_mm, unsaid_s) = run("", ProfileKind::SCurve);
+    assert_eq!((unsaid_mm, unsaid_s), (bare_mm, bare_s), "no G64 word");
     let chord_tol_mm = config(ProfileKind::SCurve).chord_tol_mm;
     assert!(
         exact_mm <= chord_tol_mm + 1e-9,

@@ -419,9 +419,11 @@ impl State {
             arc_absolute: false,
             inverse_time: false,
             feed_mm_s: None,
+            // LinuxCNC starts in G64 without P (its canon's continuous mode, tolerance 0:
+            // no limit), which the planner caps at `default_tolerance_mm`.
             blend: BlendMode::Blend {
-                p_mm: 0.0,
-                q_mm: 0.0,
+                p_mm: f64::INFINITY,
+                q_mm: f64::INFINITY,
             },
             comp: CompState::Off,
             ended_comp: None,

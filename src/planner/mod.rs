@@ -325,7 +325,7 @@ pub const PRECOMP_JERK: f64 = 1.05;
 const ISOLATED_TURN: f64 = 1.0e-6;
 
 /// Default of [`PlannerConfig::default_tolerance_mm`]: 0.01 mm, the deviation a bare `G64`
-/// allows in the jerk-limited mode.
+/// allows in the jerk-limited mode (and the mode a program starts in, as in LinuxCNC).
 pub const DEFAULT_TOLERANCE_MM: f64 = 0.01;
 
 /// Longest time-law filter: past it the tangential acceleration is lowered instead
