@@ -259,6 +259,17 @@ impl Planner {
         })))
     }
 
+    /// The speed through the corner from `a` into `b` left sharp, as the plan would pass it:
+    /// with a programmed arc's use of the axes at that speed ([`Planner::cap_at_speed`]),
+    /// though the blend's own caps are chosen with the uses at the caps its estimate was
+    /// made for (`steps_at_caps`). A blend is taken only where faster than that corner.
+    fn sharp_corner_mm_s(&self, a: &Pending, b: &Pending) -> f64 {
+        let at_caps = self.steps_at_caps.replace(false);
+        let v = self.junction_mm_s(a, b);
+        self.steps_at_caps.set(at_caps);
+        v
+    }
+
     /// The blend of a corner where an arc takes part (see the module documentation), or
     /// `None` where the corner stays sharp. Errors building the arcs (none are expected: their
     /// lengths are positive and finite) keep the corner sharp too.
@@ -282,7 +293,7 @@ impl Planner {
         let corner_mm = a.seg.end_mm;
         let corner = Corner::new(corner_mm, (ca, room_a), (cb, room_b))?;
         let feed_mm_s = a.limits.v_max_mm_s().min(b.limits.v_max_mm_s());
-        let v_sharp = self.junction_mm_s(a, b);
+        let v_sharp = self.sharp_corner_mm_s(a, b);
         if v_sharp >= feed_mm_s {
             return None;
         }

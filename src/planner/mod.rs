@@ -162,12 +162,13 @@
 //!   accelerating at most at four times its acceleration (a feed override up to 200 %),
 //!   needs `2·T_k` to cross them (`L ≥ 2·T_k·v + 8·a·T_k²`, for `v` up to there), a turn of
 //!   the tangent between two lines, or a curvature step at a tangent junction, meets no
-//!   other and takes all of it. What a programmed arc leaves a curvature step at its end is
-//!   taken at the junction's speed: its jerk along an axis,
+//!   other and takes all of it. What a programmed arc leaves a curvature step or a turn at
+//!   its end is taken at the junction's speed: its jerk along an axis,
 //!   `(2·a_t/T_f + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` (and a helix's `v³κτ·|Bᵢ|`), is its whole
 //!   budget only at its cap
-//!   (`Planner::step_cap_at_speed`; a line into a 6.35 mm arc, `sam-tail-slowdown.ngc`:
-//!   17 → 36 mm/s). Blend arcs, and every junction while a corner's blend is chosen, keep the
+//!   (`Planner::cap_at_speed`; a line into a 6.35 mm arc, `sam-tail-slowdown.ngc`:
+//!   17 → 36 mm/s; arcs of CAM output meeting at kinks of about 1°, `spreadsheeterrors.ngc`:
+//!   20–50 → 50–130 mm/s). Blend arcs, and every junction while a corner's blend is chosen, keep the
 //!   use at the cap that the blend's estimate was made for.
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
@@ -1097,8 +1098,9 @@ pub struct Planner {
     smoother: smooth::ChordSmoother,
     /// The chord refiner after it ([`refine`]).
     refiner: refine::ChordRefiner,
-    /// While a corner's blend is chosen: curvature steps with the arcs' uses of the axes at
-    /// their caps, as the blend's estimate was made for ([`Planner::step_cap_at_speed`]).
+    /// While a corner's blend is chosen: curvature steps and turns with the arcs' uses of the
+    /// axes at their caps, as the blend's estimate was made for ([`Planner::cap_at_speed`];
+    /// the sharp corner it is compared with is taken at speed, as it would run).
     steps_at_caps: std::cell::Cell<bool>,
     /// Collinear lines after them, merged ([`merge`]).
     merger: merge::CollinearMerger,
@@ -1265,10 +1267,10 @@ impl Planner {
                 };
                 p.refined = refined;
                 self.choose_kink_share(&mut p);
-                // The blend is chosen with the curvature steps' rule at the arcs' caps, which
-                // its estimate of the time was made for: at the junction's speed, blend arcs
-                // that ran slower than the sharp corner were taken (two lines of 30 mm turning
-                // 4°: 0.78 s sharp, 1.01 s blended).
+                // The blend is chosen with the curvature steps' and turns' rules at the arcs'
+                // caps, which its estimate of the time was made for: at the junction's speed,
+                // blend arcs that ran slower than the sharp corner were taken (two lines of
+                // 30 mm turning 4°: 0.78 s sharp, 1.01 s blended).
                 self.steps_at_caps.set(true);
                 let blend = match self.window.back() {
                     Some(prev) => self.blend_arc(prev, &p),
@@ -2373,7 +2375,7 @@ impl Planner {
             }
             let (cap_b, bottom_b) = caps(&a, &b);
             // Passed barely above its dip, a junction is slower than a stop
-            // ([`STEP_CAP_MIN_PASS`], as [`Planner::step_cap_at_speed`]).
+            // ([`STEP_CAP_MIN_PASS`], as [`Planner::cap_at_speed`]).
             if bottom_b <= bottom.max(STEP_CAP_MIN_PASS * (cap_b - bottom_b)) {
                 continue;
             }
@@ -2771,12 +2773,16 @@ impl Planner {
                     // pre-compensation adds to its step counts, as at a curvature step
                     // ([`PRECOMP_JERK`]: without it two lines of 24.5 and 37.1 mm turning by
                     // 1.2° at 123 mm/s broke Y's jerk by 1.3 % at 4 ms).
-                    let (budget, precomp) = if turn_alone {
-                        (2.0 * jerk_budget, PRECOMP_JERK)
+                    let (share, precomp) = if turn_alone {
+                        (2.0, PRECOMP_JERK)
                     } else {
-                        (jerk_budget, 1.0)
+                        (1.0, 1.0)
                     };
-                    v = v.min(tk * tk * budget / (precomp * d));
+                    let cap = tk * tk * share * jerk_budget / (precomp * d);
+                    // A programmed arc's use of the axis at the junction's speed, as at a
+                    // curvature step below (arcs meeting at a slight kink).
+                    let holds = |v: f64, half: f64| precomp * v * d <= tk * tk * share * half;
+                    v = v.min(self.cap_at_speed(a, b, i, cap, v, &holds, smoothing));
                 }
             }
             // The jerk of following that curve, `v³·κ̄²·T`, lies along the tangent `T` (a
@@ -2801,7 +2807,8 @@ impl Planner {
                     }
                 };
                 let cap = (tk * step_budget(jerk_budget) / (PRECOMP_JERK * k)).sqrt();
-                v = v.min(self.step_cap_at_speed(a, b, i, k, cap, v, &step_budget, smoothing));
+                let holds = |v: f64, half: f64| PRECOMP_JERK * v * v * k <= tk * step_budget(half);
+                v = v.min(self.cap_at_speed(a, b, i, cap, v, &holds, smoothing));
             }
             let k = dk_vertex[i].abs();
             if k > 0.0 && (exact || noise_mm_s3(k) > jerk_budget) {
@@ -2812,11 +2819,13 @@ impl Planner {
         v.max(0.0)
     }
 
-    /// The curvature-step rule of axis `i` ([`Planner::junction_rules_mm_s`]) with a
-    /// programmed arc's use of the axis taken at the junction's speed rather than at its cap: `cap`, the
-    /// rule with the elements' uses at their caps, raised as far as (at most) `ceiling` where
-    /// `PRECOMP_JERK·v²·|Δκᵢ| ≤ T_k·budget(v)`, `budget` the step's share
-    /// (`step_budget`) of what the elements leave at `v`.
+    /// A jerk rule of axis `i` ([`Planner::junction_rules_mm_s`]: a curvature step's, a
+    /// turn's) with a programmed arc's use of the axis taken at the junction's speed rather
+    /// than at its cap: `cap`, the rule with the elements' uses at their caps, raised as far as
+    /// (at most) `ceiling` where `holds(v, half)`, `half` half of what the elements leave of
+    /// the axis's jerk at `v` (the curvature step: `PRECOMP_JERK·v²·|Δκᵢ| ≤ T_k·budget`, the
+    /// turn: `v·|Δuᵢ| ≤ T_k²·budget`, `budget` the step's share of it; `holds` must fail
+    /// from some speed on, and keep failing above it).
     ///
     /// An arc's jerk along an axis is at most `(j_t + v³κ²)·|Tᵢ| + 3·v·κ·a_t·|Nᵢ|` (the
     /// tangential jerk, under the time-law filter within `2·a_t/T_f`, and the jerk of
@@ -2828,15 +2837,14 @@ impl Planner {
     /// binormal). Lines and blend arcs keep their use at the cap, and so does every junction
     /// while a blend is chosen ([`Planner::steps_at_caps`]).
     #[allow(clippy::too_many_arguments)]
-    fn step_cap_at_speed(
+    fn cap_at_speed(
         &self,
         a: &Pending,
         b: &Pending,
         i: usize,
-        k: f64,
         cap: f64,
         ceiling: f64,
-        step_budget: &dyn Fn(f64) -> f64,
+        holds: &dyn Fn(f64, f64) -> bool,
         smoothing: &Smoothing,
     ) -> f64 {
         let cfg = &self.config;
@@ -2857,10 +2865,7 @@ impl Planner {
         if !arcs || !ceiling.is_finite() || ceiling <= cap || self.steps_at_caps.get() {
             return cap;
         }
-        let holds = |v: f64| {
-            let half = 0.5 * (cfg.max_jerk_mm_s3[i] - used(v)).max(0.0);
-            PRECOMP_JERK * v * v * k <= tk * step_budget(half)
-        };
+        let holds = |v: f64| holds(v, 0.5 * (cfg.max_jerk_mm_s3[i] - used(v)).max(0.0));
         let raised = if holds(ceiling) {
             ceiling
         } else if !holds(cap) {
@@ -3349,15 +3354,15 @@ fn shared_jump_mm_s(c: f64, d: f64, k: f64) -> f64 {
     }
 }
 
-/// Most bisection steps of [`Planner::step_cap_at_speed`].
+/// Most bisection steps of [`Planner::cap_at_speed`].
 const STEP_CAP_ITERATIONS: usize = 64;
 
-/// [`Planner::step_cap_at_speed`] turns a stop into a junction passed at speed only where its
+/// [`Planner::cap_at_speed`] turns a stop into a junction passed at speed only where its
 /// dipped cap is at least this share of the dip's depth.
 const STEP_CAP_MIN_PASS: f64 = 0.5;
 
 /// A programmed arc's or helix's use of axis `i`'s jerk near its end (`at_end`) or start, at
-/// the speed `v_mm_s` ([`Planner::step_cap_at_speed`]); `None` for anything else.
+/// the speed `v_mm_s` ([`Planner::cap_at_speed`]); `None` for anything else.
 fn arc_jerk_use_at(
     p: &Pending,
     at_end: bool,
