@@ -32,9 +32,12 @@
 //! and no axis sees more than that times its share of the plane spanned by `T` and `N` (1 for
 //! an axis of the arc's plane, `sin α` for the helix axis). With `A` the smallest
 //! `s · max_acc_i / share_i`, the path acceleration is `a_t = A/2` and the centripetal
-//! acceleration is held to `a_n = v²/r ≤ A·√3/2` (LinuxCNC's 0.5 tangential ratio). The chord
-//! (bow-height) error of one period's step is held within ε (`shared/seeds` 001, 003):
-//! `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
+//! acceleration is held to `a_n = v²/r ≤ A·√3/2` (LinuxCNC's 0.5 tangential ratio); or, on a
+//! programmed arc where it is more, `a_t` is what every axis leaves of its share beside the
+//! centripetal acceleration at the element's top speed, `a_t·|Tᵢ| + v²κ·|Nᵢ| ≤ s·Aᵢ` (a steep
+//! helix moves its plane's axes by `cos α` of its path only), and its tangential jerk likewise
+//! beside the curve's parts (`arc_limits`). The chord (bow-height) error of one period's
+//! step is held within ε (`shared/seeds` 001, 003): `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
 //! `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk budget `J` by
 //! `|j_t| ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ (√7/4)·J`: its two parts are orthogonal, so
 //! its magnitude is at most `√((3J/4)² + (√7·J/4)²) = J` (a plain sum of the three terms,
@@ -2959,7 +2962,7 @@ impl Planner {
         if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
             return Err(PlanError::Overflow { line });
         }
-        let mut a = arc_limits(&arc, feed_mm_s, &self.limits, cfg, ARC_SPLIT);
+        let mut a = arc_limits(&arc, feed_mm_s, &self.limits, cfg, ARC_SPLIT, programmed);
         if programmed && let Some(smoothing) = self.smoothing {
             // A programmed arc long enough to run mostly at its cap takes more of the budget
             // for the curve and less for its tangential acceleration, where that is faster
@@ -2979,7 +2982,7 @@ impl Planner {
             };
             let mut best_s = time_s(&a) / ARC_CRUISE_GAIN;
             for split in ARC_CRUISE_SPLITS {
-                let other = arc_limits(&arc, feed_mm_s, &self.limits, cfg, split);
+                let other = arc_limits(&arc, feed_mm_s, &self.limits, cfg, split, true);
                 let t_s = time_s(&other);
                 if t_s < best_s {
                     (a, best_s) = (other, t_s);
@@ -3766,12 +3769,18 @@ const ARC_CRUISE_SPLITS: [ArcSplit; 2] = [
 const ARC_CRUISE_GAIN: f64 = 1.05;
 const ARC_CRUISE_ENDS: f64 = 0.5;
 
+/// Limits along an arc (see the module documentation) with the jerk budget shared as `split`;
+/// `from_axes`: the tangential acceleration and jerk may be what the axes leave beside the
+/// curve's parts where that is more (programmed arcs; a blend arc keeps the split, which the
+/// estimate of its corner's time is made for: with it, `blends_do_not_slow_a_program` found
+/// a `G64 P0.1` 0.004 % slower than the exact corners).
 fn arc_limits(
     arc: &ArcGeometry,
     feed_mm_s: f64,
     limits: &Limits,
     cfg: &PlannerConfig,
     split: ArcSplit,
+    from_axes: bool,
 ) -> ArcLimits {
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
@@ -3781,9 +3790,16 @@ fn arc_limits(
     let mut jerk_budget_mm_s3 = f64::INFINITY;
     let mut acc_share = Vector3::zeros();
     let mut jerk_share = Vector3::zeros();
+    // Each axis's largest share of the tangent and of the (radial, in-plane) normal.
+    let mut tangent_share = Vector3::zeros();
+    let mut normal_share = Vector3::zeros();
+    let mut binormal_share = Vector3::zeros();
     for i in 0..3 {
         let n_i = arc.normal[i].abs().min(1.0);
         let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
+        tangent_share[i] = (p_i * cos_a + n_i * sin_a).min(1.0);
+        normal_share[i] = p_i;
+        binormal_share[i] = (p_i * sin_a + n_i * cos_a).min(1.0);
         let speed_share = (p_i * cos_a + n_i * sin_a).min(1.0);
         if speed_share > 0.0 {
             v_max_mm_s = v_max_mm_s.min(limits.max_vel_mm_s[i] / speed_share);
@@ -3836,12 +3852,52 @@ fn arc_limits(
     // has no speed limit from them (its ends have one, `Planner::smoothed_junction_limit_mm_s`).
     let v_limit_mm_s = v_max_mm_s;
     let v_max_mm_s = v_max_mm_s.min(feed_mm_s);
-    let mut acc_mm_s2 = (0.5 * acc_budget_mm_s2).min(cfg.path_acc_mm_s2);
+    // The tangential acceleration: half the budget (LinuxCNC's tangential ratio), leaving the
+    // centripetal part `A·√3/2` in quadrature; or, where more, what each axis leaves of its
+    // share beside the centripetal acceleration at the element's top speed, `a_t·|Tᵢ| +
+    // v²κ·|Nᵢ| ≤ s·Aᵢ` (a steep helix moves its plane's axes by `cos α` of its path only: a
+    // G2 of 0.86 mm radius rising 85 mm, LinuxCNC's `sam_violation1.ngc`, may accelerate
+    // along its axis as a line does, not at half the plane axes' budget).
+    let a_n_mm_s2 = v_max_mm_s * v_max_mm_s * curvature_per_mm;
+    let mut by_axes_mm_s2 = f64::INFINITY;
+    for i in 0..3 {
+        if tangent_share[i] > 0.0 {
+            let left = share * limits.max_acc_mm_s2[i] - a_n_mm_s2 * normal_share[i];
+            by_axes_mm_s2 = by_axes_mm_s2.min(left.max(0.0) / tangent_share[i]);
+        }
+    }
+    let acc_from_axes = from_axes && by_axes_mm_s2 > 0.5 * acc_budget_mm_s2;
+    let mut acc_mm_s2 = if acc_from_axes {
+        by_axes_mm_s2
+    } else {
+        0.5 * acc_budget_mm_s2
+    }
+    .min(cfg.path_acc_mm_s2);
     let mut jerk_mm_s3 = split.tangential * jerk_budget_mm_s3;
+    // As the acceleration: where more, the tangential jerk each axis leaves beside the
+    // curve's parts at the top speed, `j_t·|Tᵢ| + v³κ²·|Tᵢ| + 3·v·κ·a_t·|Nᵢ| + v³κτ·|Bᵢ| ≤
+    // s·Jᵢ` (the binormal's share `sin α` in the plane, `cos α` along the axis).
+    let mut axis_jerk_mm_s3 = jerk_share * jerk_budget_mm_s3;
     if cfg.jerk_limited() {
         if v_max_mm_s > 0.0 {
             acc_mm_s2 = acc_mm_s2
                 .min(split.normal() * jerk_budget_mm_s3 / (3.0 * v_max_mm_s * curvature_per_mm));
+        }
+        let v = v_max_mm_s;
+        let curve = v * v * v * curvature_per_mm * curvature_per_mm;
+        let normal = 3.0 * v * curvature_per_mm * acc_mm_s2;
+        let torsion = v * v * v * curvature_per_mm * sin_a * cos_a / radius_mm;
+        let parts = tangent_share * curve + normal_share * normal + binormal_share * torsion;
+        let mut by_axes_mm_s3 = f64::INFINITY;
+        for i in 0..3 {
+            if tangent_share[i] > 0.0 {
+                let left = share * cfg.max_jerk_mm_s3[i] - parts[i];
+                by_axes_mm_s3 = by_axes_mm_s3.min(left.max(0.0) / tangent_share[i]);
+            }
+        }
+        if from_axes && by_axes_mm_s3 > jerk_mm_s3 {
+            jerk_mm_s3 = by_axes_mm_s3;
+            axis_jerk_mm_s3 = axis_jerk_mm_s3.sup(&(tangent_share * jerk_mm_s3 + parts));
         }
     } else {
         jerk_mm_s3 = f64::INFINITY;
@@ -3851,8 +3907,13 @@ fn arc_limits(
         v_limit_mm_s,
         acc_mm_s2,
         jerk_mm_s3,
-        axis_acc_mm_s2: acc_share * acc_budget_mm_s2,
-        axis_jerk_mm_s3: jerk_share * jerk_budget_mm_s3,
+        axis_acc_mm_s2: if acc_from_axes {
+            (acc_share * acc_budget_mm_s2)
+                .sup(&(tangent_share * acc_mm_s2 + normal_share * a_n_mm_s2))
+        } else {
+            acc_share * acc_budget_mm_s2
+        },
+        axis_jerk_mm_s3,
     }
 }
 
