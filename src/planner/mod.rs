@@ -37,11 +37,11 @@
 //! centripetal acceleration at the element's top speed, `a_t·|Tᵢ| + v²κ·|Nᵢ| ≤ s·Aᵢ` (a steep
 //! helix moves its plane's axes by `cos α` of its path only), and its tangential jerk likewise
 //! beside the curve's parts (`arc_limits`). The chord (bow-height) error of one period's
-//! step is held within ε (`shared/seeds` 001, 003): `v ≤ 2·√(2rε − ε²)/T`. For S-curves the jerk of circular motion,
-//! `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk budget `J` by
-//! `|j_t| ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ (√7/4)·J`: its two parts are orthogonal, so
-//! its magnitude is at most `√((3J/4)² + (√7·J/4)²) = J` (a plain sum of the three terms,
-//! `J/4` for the last, left a short arc under half the acceleration it may use).
+//! step is held within ε (`shared/seeds` 001, 003): `v ≤ 2·√(2rε − ε²)/T`. For S-curves the
+//! jerk of circular motion, `(j_t − v³/r²) T + (3 v a_t / r) N`, is held within the jerk
+//! budget `J` by `|j_t| ≤ J/2`, `v³/r² ≤ J/4` and `3 v a_t / r ≤ (√7/4)·J`: its two parts are
+//! orthogonal, so its magnitude is at most `√((3J/4)² + (√7·J/4)²) = J` (a plain sum of the
+//! three terms, `J/4` for the last, left a short arc under half the acceleration it may use).
 //! In the jerk-limited mode a programmed arc long enough to run mostly at its cap may share
 //! its budget otherwise (`ArcSplit`): `0.45·J` or `0.6·J` for the curve, `0.4·J` or `0.25·J`
 //! tangential, the rest in quadrature for the normal part, whichever is estimated fastest
@@ -171,8 +171,9 @@
 //!   budget only at its cap
 //!   (`Planner::cap_at_speed`; a line into a 6.35 mm arc, `sam-tail-slowdown.ngc`:
 //!   17 → 36 mm/s; arcs of CAM output meeting at kinks of about 1°, `spreadsheeterrors.ngc`:
-//!   20–50 → 50–130 mm/s). Blend arcs, and every junction while a corner's blend is chosen, keep the
-//!   use at the cap that the blend's estimate was made for.
+//!   20–50 → 50–130 mm/s). Blend arcs, and every junction while a corner's blend is chosen,
+//!   keep the use at the cap that the blend's estimate was made for (the sharp corner it is
+//!   compared with is taken at speed, as it would run).
 //! - **Curvature.** On arcs and helices the jerk of following the curve, `v³κ²`, is capped as
 //!   with S-curves; on chord polylines the discrete curvature `|Δu|/L` is capped the same way.
 //! - **Chord smoothing.** Before any of this, a dense run of G64 lines (chords of 0.1 mm at
