@@ -147,8 +147,9 @@
 //!   ([`Segment::axis_filters`]): the exact profile keeps every axis's limits and the path on
 //!   its own, and nothing of it is left in the filters, so the next move needs no settling
 //!   time (consecutive moves alone under a tiny tolerance waited `2·(T_k − T)` at each corner
-//!   for the filters, whose mix of the two legs would have cut it). Moves of the auxiliary
-//!   axes keep them.
+//!   for the filters, whose mix of the two legs would have cut it). The settling time counts
+//!   one period more than the filters' own, since the first sample standing at a move's end
+//!   may come up to a period after it. Moves of the auxiliary axes keep them.
 //! - **Geometry.** Each axis then passes through two moving averages of `T_k`
 //!   ([`AXIS_FILTER_S`]), which spread the velocity step of a polyline's vertex over `2·T_k`:
 //!   a vertex's step `Δv` reaches the drive as an acceleration of at most `Δv/T_k` and a jerk
@@ -1957,10 +1958,16 @@ impl Planner {
         self.put_out(&mut seg, profile)?;
         self.aux_settled = Some(seg.aux.end);
         if let Some(smoothing) = self.smoothing {
-            // The filters this move ran through settle after its end.
+            // The filters this move ran through settle after its end: their settling time
+            // counts from the first sample that stands at the end, which may come up to a
+            // period after it (the move's last sample falls before its end, unless it ends on
+            // a sample), so one period more. (Without it a move alone after a stand of exactly
+            // the settling time was planned as bypassing filters that had not settled, the
+            // interpolator kept them on, and the next corner under `G64 P0.0001` was cut by
+            // 0.12 µm: `a_move_alone_after_a_filtered_run_keeps_the_filters_until_they_settle`.)
             let periods = match (seg.time_law, seg.axis_filters) {
-                (true, _) => smoothing.settle_periods(),
-                (false, true) => 2 * (smoothing.axis_periods - 1),
+                (true, _) => smoothing.settle_periods() + 1,
+                (false, true) => 2 * (smoothing.axis_periods - 1) + 1,
                 (false, false) => 0,
             };
             self.filters_quiet_s = self.time_s + periods as f64 * self.config.period_s;
