@@ -5,7 +5,7 @@
 //! Seeded random programs (proptest), trapezoid and S-curve modes.
 
 use canmotion::gcode::{Program, parse_program};
-use canmotion::interpolator::Interpolator;
+use canmotion::interpolator::{Interpolator, OverrideRamp};
 use canmotion::planner::{Limits, Plan, PlannerConfig, ProfileKind, SegmentPath, plan_with};
 use nalgebra::Vector3;
 use proptest::prelude::*;
@@ -520,6 +520,117 @@ fn moves_alone_run_back_to_back_on_their_exact_path() {
     assert!(worst <= 1e-9, "{worst} mm off the zigzag");
     assert_eq!(q, corners[corners.len() - 1]);
     setpoints::limits_hold(plan, &limits(), &cfg).unwrap();
+}
+
+/// A move from rest to rest takes more of each axis than `path_acc_share`: the share keeps
+/// the rest for the velocity steps of junctions passed at speed, which such a move has none
+/// of, and for the feed override's ramp, whose terms it leaves room for with its own peaks
+/// (`Planner::alone_at_axes`). On the demo machine a rapid of 50.8 mm along X then runs at
+/// more than 1500 mm/s² and ends sooner than at the share; and a hold (or a lower override)
+/// asked at any point of it, while it accelerates, cruises or brakes, keeps every axis's
+/// limits at 1 ms, as does the resume. With the axes' whole limits instead, the hold asked
+/// at sample 50 (while it accelerates) made X's jerk 51 101 mm/s³ against 50 000.
+#[test]
+fn a_move_alone_takes_the_axes_beyond_the_share_and_keeps_the_override_ramp_s_room() {
+    let (l, cfg) = demo_s_curve();
+    let text = "G21 G90 G17 G64 P0.01\nG0 X-50.8\nG1 X-4 F3000\nG1 X10 Y1\nM2\n";
+    let prog = parse_program(text, "rapid.ngc", Vector3::zeros()).unwrap();
+    let plan = plan_with(&prog, &l, &cfg).unwrap();
+    let first = plan.segments()[0];
+    let profile = first.profile.expect("the rapid moves");
+    assert!(!first.time_law, "the rapid runs alone");
+    let share = cfg.path_acc_share;
+    assert!(profile.limits().a_max_mm_s2() > share * l.max_acc_mm_s2.x);
+    let at_share = canmotion::planner::profile::plan(
+        first.length_mm,
+        0.0,
+        0.0,
+        &canmotion::planner::profile::ProfileLimits::new(
+            profile.limits().v_max_mm_s(),
+            share * l.max_acc_mm_s2.x,
+            share * cfg.max_jerk_mm_s3.x,
+            profile.limits().shape(),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert!(
+        first.duration_s() < 0.99 * at_share.duration_s(),
+        "{} s against {} s at the share",
+        first.duration_s(),
+        at_share.duration_s()
+    );
+    let ramp = OverrideRamp::for_machine(&l, &cfg).unwrap();
+    let t = cfg.period_s;
+    let end = (first.duration_s() / t).ceil() as u64;
+    for hold_at in (1..end).step_by(7) {
+        let interp = Interpolator::new(plan.clone(), t)
+            .unwrap()
+            .with_override_ramp(ramp);
+        let mut drive = |k: u64, interp: &mut Interpolator| {
+            if k == hold_at {
+                interp.hold().map_err(|e| e.to_string())?;
+            }
+            if k == hold_at + 400 {
+                interp.resume().map_err(|e| e.to_string())?;
+            }
+            Ok(())
+        };
+        setpoints::limits_hold_driven(interp, &l, &cfg, &mut drive)
+            .unwrap_or_else(|e| panic!("hold at sample {hold_at}: {e}"));
+    }
+}
+
+/// Where a move alone has bypassed the axis filters, the filtered move after it turns them
+/// on at rest: they start settled at the point the move ended, exactly. They started at the
+/// latest sample, which a move ending on a sample (that sample already belongs to the next
+/// segment) left a period short of its end: 6–8 nm on the demo machine, and the next move's
+/// first samples pulled that in as a jerk of up to 16 % over X's limit (LinuxCNC's
+/// `rickg-arcs.ngc`, found with the moves alone at the axes' whole limits). Here the rapid's
+/// length is found so that it ends on a sample, and the sample there is its end point.
+#[test]
+fn the_axis_filters_turn_on_at_the_exact_end_of_a_move_alone() {
+    let (l, cfg) = demo_s_curve();
+    let plan_of = |x_mm: f64| {
+        let text = format!("G21 G90 G17 G64 P0.01\nG0 X{x_mm}\nG1 X10 F3000\nG1 X20 Y1\nM2\n");
+        let prog = parse_program(&text, "rapid.ngc", Vector3::zeros()).unwrap();
+        plan_with(&prog, &l, &cfg).unwrap()
+    };
+    // The rapid's duration grows with its length: bisect for 400 periods exactly.
+    let t = cfg.period_s;
+    let target_s = 400.0 * t;
+    let (mut lo, mut hi) = (-80.0, -10.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if plan_of(mid).segments()[0].duration_s() > target_s {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let plan = plan_of(hi);
+    let first = plan.segments()[0];
+    assert!(
+        !first.time_law && !first.axis_filters,
+        "a move alone, filters bypassed"
+    );
+    assert!(
+        (first.end_time_s() - target_s).abs() < 1e-12,
+        "{}",
+        first.end_time_s()
+    );
+    assert!(plan.segments()[1].axis_filters, "the next move is filtered");
+    let mut interp = Interpolator::new(plan.clone(), t).unwrap();
+    let mut q = Vector3::zeros();
+    for _ in 0..400 {
+        interp.update(&mut q);
+    }
+    assert!(
+        (q - first.end_mm).norm() < 1e-12,
+        "{q:?} at the rapid's end {:?}",
+        first.end_mm
+    );
+    setpoints::limits_hold(plan, &l, &cfg).unwrap();
 }
 
 /// The other side of `moves_alone_run_back_to_back_on_their_exact_path`: a move alone that

@@ -113,7 +113,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Vector3;
 
-use crate::planner::{Limits, Plan, PlannerConfig, ProfileKind, Segment, SegmentPath, Smoothing};
+use crate::planner::{Limits, Plan, PlannerConfig, Segment, SegmentPath, Smoothing};
 use smooth::{Smoother, precompensation};
 
 /// A sample time within this fraction of a period before the plan's end counts as the end, so
@@ -222,37 +222,8 @@ impl OverrideRamp {
         limits: &Limits,
         config: &PlannerConfig,
     ) -> Result<OverrideRamp, InterpError> {
-        let s = config.path_acc_share;
-        let free = 1.0 - s;
-        if free <= 0.0 || free.is_nan() {
-            return Err(InterpError::NoOverrideBudget);
-        }
-        let jerk_limited = config.profile != ProfileKind::Trapezoid;
-        let mut d = f64::INFINITY;
-        let mut j = f64::INFINITY;
-        let mut bound = |v: f64, a: f64, jerk: f64| {
-            d = d.min(free * a / v);
-            if jerk.is_finite() {
-                if jerk_limited {
-                    d = d.min(free * jerk / (6.0 * s * a));
-                }
-                j = j.min(free * jerk / (2.0 * v));
-            }
-        };
-        for i in 0..3 {
-            let v = limits.max_vel_mm_s[i].min(limits.max_feed_mm_s);
-            bound(v, limits.max_acc_mm_s2[i], config.max_jerk_mm_s3[i]);
-        }
-        // The auxiliary axes the machine has, likewise (their own speed bounds them).
-        let aux = &config.aux;
-        for i in 0..crate::gcode::AUX_LETTERS.len() {
-            if aux.max_vel[i].is_finite() {
-                bound(aux.max_vel[i], aux.max_acc[i], aux.max_jerk[i]);
-            }
-        }
-        if !j.is_finite() {
-            j = d / (4.0 * config.period_s);
-        }
+        let (d, j) = crate::planner::override_ramp_rates(limits, config)
+            .ok_or(InterpError::NoOverrideBudget)?;
         OverrideRamp::new(d, j)
     }
 
@@ -983,6 +954,26 @@ impl Interpolator {
         }
     }
 
+    /// The first of the moving segments `from..=self.raw` that run on into segment `raw`
+    /// with `same` holding for each: where a filter that segment `raw` switches began to be
+    /// needed. The plan switches the filters only at rest, so that is the point they start
+    /// settled at; the sample that switches them may lie in a later segment of the run (a
+    /// short one, or one that a move ending on a sample hands over to at once). Started at
+    /// the latest sample instead, the axis filters pulled a move alone's last period into
+    /// the next move (6–8 nm, X's jerk 16 % over on LinuxCNC's `rickg-arcs.ngc` at 1 ms), and
+    /// started at segment `raw`'s own start, the time-law filter jumped over a segment of
+    /// 10 µm passed over (`tangent_check.ngc` at 4 ms: X's jerk 35 % over).
+    fn run_start(&self, from: usize, same: impl Fn(&Segment) -> bool) -> usize {
+        let mut j = self.raw;
+        while j > from && {
+            let before = &self.queue[j - 1];
+            before.length_mm > 0.0 && same(before)
+        } {
+            j -= 1;
+        }
+        j
+    }
+
     /// Queues the next segment: it must start exactly where and when the last queued one ended
     /// (`start_mm` bit for bit; `start_time_s` within a nanosecond), on a queue not closed.
     pub fn push(&mut self, segment: Segment) -> Result<(), InterpError> {
@@ -1061,6 +1052,7 @@ impl Interpolator {
         let k = self.k_at(n);
         let t_s = self.tau_at(n);
         let snap_s = END_SNAP_PERIODS * self.period_s;
+        let entered = self.raw;
         while let Some(seg) = self.queue.get(self.raw) {
             // The last segment of an open queue is kept: it is what a starved call holds to.
             if t_s < seg.end_time_s() - snap_s {
@@ -1068,12 +1060,17 @@ impl Interpolator {
                 self.last_k = k;
                 self.last_tau_s = t_s;
                 let local_s = t_s - seg.start_time_s;
+                // The filters switch at rest, where the run of segments that needs them so
+                // begins: this sample may have passed over its first ones.
+                let time_law_from = self.run_start(entered, |s| s.time_law == seg.time_law);
+                let filters_from = self.run_start(entered, |s| s.axis_filters == seg.axis_filters);
                 self.last_mm = if let Some(smoother) = self.smoother.as_mut() {
                     if seg.length_mm > 0.0 && seg.time_law != smoother.time_law() {
-                        smoother.set_time_law(seg.time_law, self.starts_mm[self.raw]);
+                        smoother.set_time_law(seg.time_law, self.starts_mm[time_law_from]);
                     }
                     if seg.length_mm > 0.0 && seg.axis_filters != smoother.axis_filters() {
-                        smoother.set_axis_filters(seg.axis_filters, self.last_mm);
+                        let rest_mm = self.queue[filters_from].start_mm;
+                        smoother.set_axis_filters(seg.axis_filters, rest_mm);
                     }
                     smoother.note_plan_time(t_s);
                     let raw_mm = self.starts_mm[self.raw] + seg.distance_at(local_s);
@@ -1323,8 +1320,8 @@ impl Interpolator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::planner::Limits;
     use crate::planner::tests::{Move, feed, plan_moves, v};
+    use crate::planner::{Limits, ProfileKind};
     use proptest::prelude::*;
 
     fn limits() -> Limits {

@@ -1109,6 +1109,9 @@ pub struct Planner {
     steps_at_caps: std::cell::Cell<bool>,
     /// Collinear lines after them, merged ([`merge`]).
     merger: merge::CollinearMerger,
+    /// The feed override ramp's rates `(D, J)` the profiles leave room for
+    /// ([`override_ramp_rates`]); `None` where `path_acc_share` leaves none.
+    ramp_rates: Option<(f64, f64)>,
 }
 
 /// The end of a move planned alone, where the axis filters have not settled: the next move
@@ -1198,6 +1201,7 @@ impl Planner {
             smoother: smooth::ChordSmoother::default(),
             refiner,
             steps_at_caps: std::cell::Cell::new(false),
+            ramp_rates: override_ramp_rates(limits, config),
         })
     }
 
@@ -1869,7 +1873,10 @@ impl Planner {
             v_start_mm_s: v0,
             v_end_mm_s: v1,
         };
-        let alone = self.window[i].alone.filter(|_| v0 == 0.0 && v1 == 0.0);
+        let alone = self.window[i]
+            .alone
+            .filter(|_| v0 == 0.0 && v1 == 0.0)
+            .map(|share| self.alone_at_axes(&self.window[i], seg.length_mm, share));
         let limits = alone.unwrap_or(limits);
         let mut profile = profile::plan(seg.length_mm, v0, v1, &limits).ok_or(no_profile)?;
         seg.time_law = self.smoothing.is_some() && alone.is_none();
@@ -3641,6 +3648,131 @@ fn discrete_curvature(a: &Pending, b: &Pending) -> Vector3<f64> {
         du / mean_mm
     } else {
         Vector3::zeros()
+    }
+}
+
+/// The rates `(D, J)` of the feed override's ramp of `k` (`|k'| ≤ D`, `|k''| ≤ J`) that keep
+/// every axis within its limits on top of profiles using the share `s = path_acc_share` of
+/// them (see [`crate::interpolator`] for the bounds): `D ≤ (1 − s)·A/V` and, with a jerk
+/// limit, `D ≤ (1 − s)·Jₐ/(6·s·A)` and `J ≤ (1 − s)·Jₐ/(2·V)` for every axis (the
+/// auxiliary axes the machine has included), `V = min(max_vel, max_feed)`. Without a jerk
+/// limit `J` is `D` over four periods. `None` where `s = 1` leaves nothing.
+pub fn override_ramp_rates(limits: &Limits, config: &PlannerConfig) -> Option<(f64, f64)> {
+    let s = config.path_acc_share;
+    let free = 1.0 - s;
+    if free <= 0.0 || free.is_nan() {
+        return None;
+    }
+    let jerk_limited = config.profile != ProfileKind::Trapezoid;
+    let mut d = f64::INFINITY;
+    let mut j = f64::INFINITY;
+    let mut bound = |v: f64, a: f64, jerk: f64| {
+        d = d.min(free * a / v);
+        if jerk.is_finite() {
+            if jerk_limited {
+                d = d.min(free * jerk / (6.0 * s * a));
+            }
+            j = j.min(free * jerk / (2.0 * v));
+        }
+    };
+    for i in 0..3 {
+        let v = limits.max_vel_mm_s[i].min(limits.max_feed_mm_s);
+        bound(v, limits.max_acc_mm_s2[i], config.max_jerk_mm_s3[i]);
+    }
+    // The auxiliary axes the machine has, likewise (their own speed bounds them).
+    let aux = &config.aux;
+    for i in 0..crate::gcode::AUX_LETTERS.len() {
+        if aux.max_vel[i].is_finite() {
+            bound(aux.max_vel[i], aux.max_acc[i], aux.max_jerk[i]);
+        }
+    }
+    if !j.is_finite() {
+        j = d / (4.0 * config.period_s);
+    }
+    Some((d, j))
+}
+
+/// Bisection steps of [`Planner::alone_at_axes`]'s search (the last step's share of the
+/// difference, 2⁻⁸, is below half a percent of the axes' limits).
+const ALONE_SEARCH_STEPS: usize = 8;
+
+impl Planner {
+    /// The limits a line run alone from rest to rest is planned with: `share`, the move's
+    /// limits at `path_acc_share` of each axis's, raised towards the axes' whole limits as far
+    /// as the feed override's ramp keeps its room. The share keeps the rest of each axis's
+    /// budget for two things: the velocity steps of junctions passed at speed, which a move
+    /// from rest to rest has none of (at each end it is at rest with no acceleration, so what
+    /// runs before and after it never adds to its use of an axis, not even in the axis
+    /// filters, whose moving averages keep the limits of what they average); and the ramp
+    /// of `k` ([`override_ramp_rates`]), whose terms on top of a profile with the peak speed
+    /// `v` and the peak acceleration `a` are at most `D·v` of acceleration and
+    /// `3·D·a + J·v` of jerk along the path (with `k ≤ 1`; above 100 % `k` stays at 1 where
+    /// a profile accelerates). So each axis keeps `|uᵢ|·(a + D·v) ≤ Aᵢ` and
+    /// `|uᵢ|·(j + 3·D·a + J·v) ≤ Jᵢ` with the profile's own peaks, the largest step towards
+    /// the whole limits found by bisection. Arcs and moves of the auxiliary axes keep
+    /// `share`.
+    fn alone_at_axes(&self, p: &Pending, length_mm: f64, share: ProfileLimits) -> ProfileLimits {
+        let SegmentPath::Line { direction } = p.seg.path else {
+            return share;
+        };
+        let Some((d, jk)) = self.ramp_rates else {
+            return share;
+        };
+        if p.seg.aux.moves() || share.is_trapezoid() {
+            return share;
+        }
+        let (acc, jerk) = (self.limits.max_acc_mm_s2, self.config.max_jerk_mm_s3);
+        let (mut a_axes, mut j_axes) = (self.config.path_acc_mm_s2, f64::INFINITY);
+        for i in 0..3 {
+            let u = direction[i].abs();
+            if u > 0.0 {
+                a_axes = a_axes.min(acc[i] / u);
+                j_axes = j_axes.min(jerk[i] / u);
+            }
+        }
+        let (a0, j0) = (share.a_max_mm_s2(), share.j_max_mm_s3());
+        let (da, dj) = ((a_axes - a0).max(0.0), (j_axes - j0).max(0.0));
+        if !(da > 0.0 || dj > 0.0) {
+            return share;
+        }
+        let at = |x: f64| {
+            ProfileLimits::new(share.v_max_mm_s(), a0 + x * da, j0 + x * dj, share.shape())
+        };
+        let fits = |l: &ProfileLimits| {
+            let Some(profile) = profile::plan(length_mm, 0.0, 0.0, l) else {
+                return false;
+            };
+            let v = profile.v_cruise_mm_s();
+            let t = profile.phase_start_times_s();
+            let a = profile
+                .at(t[1])
+                .a_mm_s2
+                .abs()
+                .max(profile.at(t[5]).a_mm_s2.abs());
+            (0..3).all(|i| {
+                let u = direction[i].abs();
+                u == 0.0
+                    || (u * (a + d * v) <= acc[i]
+                        && u * (l.j_max_mm_s3() + 3.0 * d * a + jk * v) <= jerk[i])
+            })
+        };
+        if let Some(whole) = at(1.0).filter(&fits) {
+            return whole;
+        }
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..ALONE_SEARCH_STEPS {
+            let mid = 0.5 * (lo + hi);
+            if at(mid).is_some_and(|l| fits(&l)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        if lo > 0.0 {
+            at(lo).unwrap_or(share)
+        } else {
+            share
+        }
     }
 }
 
