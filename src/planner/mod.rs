@@ -3709,18 +3709,33 @@ impl Planner {
     /// `3·D·a + J·v` of jerk along the path (with `k ≤ 1`; above 100 % `k` stays at 1 where
     /// a profile accelerates). So each axis keeps `|uᵢ|·(a + D·v) ≤ Aᵢ` and
     /// `|uᵢ|·(j + 3·D·a + J·v) ≤ Jᵢ` with the profile's own peaks, the largest step towards
-    /// the whole limits found by bisection. Arcs and moves of the auxiliary axes keep
+    /// the whole limits found by bisection (an arc's likewise with its curve's parts,
+    /// [`arc_alone_at_axes`](Self::arc_alone_at_axes)). Moves of the auxiliary axes keep
     /// `share`.
     fn alone_at_axes(&self, p: &Pending, length_mm: f64, share: ProfileLimits) -> ProfileLimits {
-        let SegmentPath::Line { direction } = p.seg.path else {
-            return share;
-        };
-        let Some((d, jk)) = self.ramp_rates else {
+        let Some(rates) = self.ramp_rates else {
             return share;
         };
         if p.seg.aux.moves() || share.is_trapezoid() {
             return share;
         }
+        match p.seg.path {
+            SegmentPath::Line { direction } => {
+                self.line_alone_at_axes(direction, length_mm, share, rates)
+            }
+            SegmentPath::Arc(arc) => self.arc_alone_at_axes(&arc, length_mm, share, rates),
+            _ => share,
+        }
+    }
+
+    /// [`alone_at_axes`](Self::alone_at_axes) of a line along `direction`.
+    fn line_alone_at_axes(
+        &self,
+        direction: Vector3<f64>,
+        length_mm: f64,
+        share: ProfileLimits,
+        (d, jk): (f64, f64),
+    ) -> ProfileLimits {
         let (acc, jerk) = (self.limits.max_acc_mm_s2, self.config.max_jerk_mm_s3);
         let (mut a_axes, mut j_axes) = (self.config.path_acc_mm_s2, f64::INFINITY);
         for i in 0..3 {
@@ -3739,16 +3754,9 @@ impl Planner {
             ProfileLimits::new(share.v_max_mm_s(), a0 + x * da, j0 + x * dj, share.shape())
         };
         let fits = |l: &ProfileLimits| {
-            let Some(profile) = profile::plan(length_mm, 0.0, 0.0, l) else {
+            let Some((v, a)) = alone_peaks(length_mm, l) else {
                 return false;
             };
-            let v = profile.v_cruise_mm_s();
-            let t = profile.phase_start_times_s();
-            let a = profile
-                .at(t[1])
-                .a_mm_s2
-                .abs()
-                .max(profile.at(t[5]).a_mm_s2.abs());
             (0..3).all(|i| {
                 let u = direction[i].abs();
                 u == 0.0
@@ -3756,23 +3764,105 @@ impl Planner {
                         && u * (l.j_max_mm_s3() + 3.0 * d * a + jk * v) <= jerk[i])
             })
         };
-        if let Some(whole) = at(1.0).filter(&fits) {
-            return whole;
+        largest_fit(share, at, fits)
+    }
+
+    /// [`alone_at_axes`](Self::alone_at_axes) of an arc or a helix: its limits as
+    /// [`arc_limits`] gives them with a larger `path_acc_share` (and the share's own where
+    /// higher), kept where every axis's part of the centripetal acceleration `v²κ·|Nᵢ|`, of
+    /// the jerk of following the curve (`v³κ²·|Tᵢ| + 3·v·κ·a·|Nᵢ| + v³κτ·|Bᵢ|`, each at the
+    /// axis's largest share of the tangent, normal and binormal along the arc) and of the
+    /// ramp's terms (`D·v·|Tᵢ|`; `3·D·(a·|Tᵢ| + v²κ·|Nᵢ|) + J·v·|Tᵢ|`) stays within its limits
+    /// at the profile's peaks, all taken together.
+    fn arc_alone_at_axes(
+        &self,
+        arc: &ArcGeometry,
+        length_mm: f64,
+        share: ProfileLimits,
+        (d, jk): (f64, f64),
+    ) -> ProfileLimits {
+        let sin_a = arc.helix_sin();
+        let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
+        let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
+        let kappa = cos_a * cos_a / radius_mm;
+        let tau = sin_a * cos_a / radius_mm;
+        let (mut t_sh, mut n_sh, mut b_sh) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+        for i in 0..3 {
+            let n_i = arc.normal[i].abs().min(1.0);
+            let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
+            t_sh[i] = (p_i * cos_a + n_i * sin_a).min(1.0);
+            n_sh[i] = p_i;
+            b_sh[i] = (p_i * sin_a + n_i * cos_a).min(1.0);
         }
-        let (mut lo, mut hi) = (0.0, 1.0);
-        for _ in 0..ALONE_SEARCH_STEPS {
-            let mid = 0.5 * (lo + hi);
-            if at(mid).is_some_and(|l| fits(&l)) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        if lo > 0.0 {
-            at(lo).unwrap_or(share)
+        let (acc, jerk) = (self.limits.max_acc_mm_s2, self.config.max_jerk_mm_s3);
+        let s = self.config.path_acc_share;
+        let feed = share.v_max_mm_s();
+        let at = |x: f64| {
+            let mut cfg = self.config;
+            cfg.path_acc_share = s + x * (1.0 - s);
+            let a = arc_limits(arc, feed, &self.limits, &cfg, ARC_SPLIT, true);
+            ProfileLimits::new(
+                a.v_max_mm_s.min(feed).max(share.v_max_mm_s()),
+                a.acc_mm_s2.max(share.a_max_mm_s2()),
+                a.jerk_mm_s3.max(share.j_max_mm_s3()),
+                share.shape(),
+            )
+        };
+        let fits = |l: &ProfileLimits| {
+            let Some((v, a)) = alone_peaks(length_mm, l) else {
+                return false;
+            };
+            let centripetal = v * v * kappa;
+            let curve = v * v * v * kappa * kappa;
+            let torsion = v * v * v * kappa * tau;
+            (0..3).all(|i| {
+                let acc_i = t_sh[i] * (a + d * v) + n_sh[i] * centripetal;
+                let jerk_i = t_sh[i] * (l.j_max_mm_s3() + curve + 3.0 * d * a + jk * v)
+                    + n_sh[i] * (3.0 * v * kappa * a + 3.0 * d * centripetal)
+                    + b_sh[i] * torsion;
+                acc_i <= acc[i] && jerk_i <= jerk[i]
+            })
+        };
+        largest_fit(share, at, fits)
+    }
+}
+
+/// The peak speed and the largest acceleration of the profile of a move of `length_mm` from
+/// rest to rest with `limits`.
+fn alone_peaks(length_mm: f64, limits: &ProfileLimits) -> Option<(f64, f64)> {
+    let profile = profile::plan(length_mm, 0.0, 0.0, limits)?;
+    let t = profile.phase_start_times_s();
+    let a = profile
+        .at(t[1])
+        .a_mm_s2
+        .abs()
+        .max(profile.at(t[5]).a_mm_s2.abs());
+    Some((profile.v_cruise_mm_s(), a))
+}
+
+/// The limits `at(x)` for the largest `x` in `[0, 1]` that `fits` finds (`at(1)` first, then
+/// by bisection); `share` where none above 0 does.
+fn largest_fit(
+    share: ProfileLimits,
+    at: impl Fn(f64) -> Option<ProfileLimits>,
+    fits: impl Fn(&ProfileLimits) -> bool,
+) -> ProfileLimits {
+    if let Some(whole) = at(1.0).filter(&fits) {
+        return whole;
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..ALONE_SEARCH_STEPS {
+        let mid = 0.5 * (lo + hi);
+        if at(mid).is_some_and(|l| fits(&l)) {
+            lo = mid;
         } else {
-            share
+            hi = mid;
         }
+    }
+    if lo > 0.0 {
+        at(lo).unwrap_or(share)
+    } else {
+        share
     }
 }
 
