@@ -657,6 +657,11 @@ pub(super) fn floor_back_reach(
     let mut best = (reach(a)?, (a, v_max));
     if let Some((a_m, valid)) = p.reach_memo {
         let a_m = a_m.min(a_static);
+        // Most often the pair kept is the floor's own ([`Planner::memo_pushed`]): the same
+        // reach, which cannot reach higher within `valid`.
+        if a_m == a {
+            return Some((best.0.min(cap_mm_s), best.1));
+        }
         let v = reach(a_m)?.min(valid);
         if v > best.0 {
             best = (v, (a_m, valid));
@@ -1175,26 +1180,28 @@ impl Planner {
         let mut shared: Option<CurveFit> = None;
         let mut shared_v_max = 0.0;
         for (k, e) in self.window.range_mut(first..).enumerate() {
-            let f = match &e.curve_acc {
-                Some(f) if !f.charge.covers(charge) => *f,
-                _ => continue,
+            // In place: a curve is large, and copying it in and out cost more than the rest.
+            let Some(merged) = e.curve_acc.as_mut().filter(|f| !f.charge.covers(charge)) else {
+                continue;
             };
+            let was = merged.charge;
             undo.push(Changed {
                 at: first + k,
-                charge: f.charge,
+                charge: was,
                 memo: e.reach_memo,
                 floor_mm_s2: e.acc_floor_mm_s2,
             });
             // Its speed is held within its limits (the erosion of the caps of the curves
-            // within reach among them): the acceleration need hold up to there only.
-            let merged = f.worst(wide).within(e.limits.v_max_mm_s());
-            e.curve_acc = Some(merged);
-            e.reach_memo = None;
+            // within reach among them): the acceleration need hold up to there only
+            // (`worst(wide).within(v_max)`).
             let v_max = e.limits.v_max_mm_s();
-            if wide.covers(&f.charge) {
+            merged.charge = was.sup(wide);
+            merged.cap_mm_s = merged.cap_mm_s.min(v_max);
+            e.reach_memo = None;
+            if wide.covers(&was) {
                 match shared.as_mut() {
-                    None => (shared, shared_v_max) = (Some(merged), v_max),
-                    Some(s) if s.same_but_cap(&merged) && shared_v_max == v_max => {
+                    None => (shared, shared_v_max) = (Some(*merged), v_max),
+                    Some(s) if s.same_but_cap(merged) && shared_v_max == v_max => {
                         s.cap_mm_s = s.cap_mm_s.max(merged.cap_mm_s);
                         e.acc_floor_mm_s2 = f64::NAN;
                         continue;

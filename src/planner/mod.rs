@@ -1371,7 +1371,12 @@ impl Planner {
                 }
                 // The part of a line beyond the reach of what was held ahead of it
                 // ([`Planner::hold_on`]), after all of `p`.
-                let mut held_rest = self.curve.held_rest.take();
+                // Taken only where there is one: a pending element is large, and `take` copies it
+                // whole either way.
+                let mut held_rest = match self.curve.held_rest {
+                    Some(_) => self.curve.held_rest.take(),
+                    None => None,
+                };
                 if let Some(held) = held_rest.as_mut() {
                     curve::link_floor(rest.as_ref().unwrap_or(&p), held);
                 }
@@ -1388,10 +1393,11 @@ impl Planner {
                 }
                 self.window.push_back(p);
                 let pushed = 1 + usize::from(rest.is_some()) + usize::from(held_rest.is_some());
-                for mut rest in rest.into_iter().chain(held_rest) {
+                // By reference: chaining the options moved both, each a large element.
+                for rest in [rest.as_mut(), held_rest.as_mut()].into_iter().flatten() {
                     rest.seq = self.next_seq;
                     self.next_seq += 1;
-                    self.window.push_back(rest);
+                    self.window.push_back(*rest);
                 }
                 self.memo_pushed(pushed);
                 self.finalize_junctions(false);
