@@ -1800,11 +1800,11 @@ impl Planner {
         }
         // Apply: `behind_mm`, what lies within reach before each element's start.
         let mut behind_mm = reach_mm;
-        for k in (j..n).rev() {
+        // By iterator: on tiny segments the run capped is often over a hundred long.
+        for (k, e) in (j..n).zip(self.window.range_mut(j..)).rev() {
             if k < n - 1 {
-                behind_mm -= self.window[k].seg.length_mm;
+                behind_mm -= e.seg.length_mm;
             }
-            let e = &mut self.window[k];
             let was = e.v_limit_mm_s;
             cap_speed(e, cap, cap);
             // A provisional junction's plateau comes no higher than the cap. Its ceiling

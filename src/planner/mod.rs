@@ -3542,6 +3542,7 @@ fn caps_under(own_mm_s: f64, a: &Pending, b: &Pending) -> (f64, f64) {
 
 /// Caps an element of a plateau ([`Planner::finalize_junction`]) at `fed_mm_s` (and its
 /// ceiling under a feed override at `limit_mm_s`).
+#[inline]
 fn cap_speed(p: &mut Pending, fed_mm_s: f64, limit_mm_s: f64) {
     if p.v_limit_mm_s > limit_mm_s {
         p.floor_reach_mm = 0.0;
