@@ -641,6 +641,7 @@ pub(super) fn back_reach(
 /// lower bound of [`back_reach`]'s speed for one or two speed changes (no curve's acceleration
 /// to find); the look-ahead's passes, which take the pair as a candidate, never find less.
 /// `None` where `p` is no line of a chord run or `v_next_mm_s` is above its limit.
+#[inline]
 pub(super) fn floor_back_reach(
     p: &Pending,
     v_next_mm_s: f64,

@@ -1319,8 +1319,12 @@ impl Planner {
                                 p.kink_in = discrete_curvature(prev, &p);
                             }
                         }
-                        if !provisional && p.cap_start_mm_s > 0.0 {
-                            rest = self.share_at_junction(&mut p, (fed_mm_s, limit_mm_s));
+                        // Moved into `rest` only where there is one (an element is large).
+                        if !provisional
+                            && p.cap_start_mm_s > 0.0
+                            && let Some(r) = self.share_at_junction(&mut p, (fed_mm_s, limit_mm_s))
+                        {
+                            rest = Some(r);
                         }
                     }
                     Some(blend) => {

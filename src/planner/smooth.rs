@@ -273,10 +273,13 @@ impl ChordSmoother {
             // `Σ c_j·P_{i+j}` with `c_j = (3(3w² + 3w − 1) − 15j²)/((2w + 1)(4w² + 4w − 3))`.
             let (wf, mut sum) = (w as f64, Vector3::zeros());
             let norm = (2.0 * wf + 1.0) * (4.0 * wf * wf + 4.0 * wf - 3.0);
-            for j in 0..=2 * w {
+            // The window's vertices by iterator (up to 33 of them, at every vertex).
+            let p_i = self.p(i);
+            let window = (i - w - self.pts_base)..=(i + w - self.pts_base);
+            for (j, &p_j) in self.pts.range(window).enumerate() {
                 let k = j.abs_diff(w) as f64;
                 let c = (3.0 * (3.0 * wf * wf + 3.0 * wf - 1.0) - 15.0 * k * k) / norm;
-                sum += (self.p(i + j - w) - self.p(i)) * c;
+                sum += (p_j - p_i) * c;
             }
             // Across the window's chord only: the vertex keeps its place along the run (where
             // the feed changes, say), and only what bends the run moves.
