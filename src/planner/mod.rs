@@ -3765,14 +3765,13 @@ impl Planner {
             ProfileLimits::new(share.v_max_mm_s(), a0 + x * da, j0 + x * dj, share.shape())
         };
         let fits = |l: &ProfileLimits| {
-            let Some((v, a)) = alone_peaks(length_mm, l) else {
-                return false;
-            };
-            (0..3).all(|i| {
-                let u = direction[i].abs();
-                u == 0.0
-                    || (u * (a + d * v) <= acc[i]
-                        && u * (l.j_max_mm_s3() + 3.0 * d * a + jk * v) <= jerk[i])
+            alone_phases(length_mm, l).is_some_and(|phases| {
+                phases.iter().all(|&(v, a, j)| {
+                    (0..3).all(|i| {
+                        let u = direction[i].abs();
+                        u * (a + d * v) <= acc[i] && u * (j + 3.0 * d * a + jk * v) <= jerk[i]
+                    })
+                })
             })
         };
         largest_fit(share, at, fits)
@@ -3808,47 +3807,70 @@ impl Planner {
         let (acc, jerk) = (self.limits.max_acc_mm_s2, self.config.max_jerk_mm_s3);
         let s = self.config.path_acc_share;
         let feed = share.v_max_mm_s();
+        // Towards the whole of the most loaded axis along the tangent, for the tangential
+        // acceleration and jerk; the cap from the arc's limits at the larger share.
+        let (mut a_tan, mut j_tan) = (self.config.path_acc_mm_s2, f64::INFINITY);
+        for i in 0..3 {
+            if t_sh[i] > 0.0 {
+                a_tan = a_tan.min(acc[i] / t_sh[i]);
+                j_tan = j_tan.min(jerk[i] / t_sh[i]);
+            }
+        }
+        let (a0, j0) = (share.a_max_mm_s2(), share.j_max_mm_s3());
         let at = |x: f64| {
             let mut cfg = self.config;
             cfg.path_acc_share = s + x * (1.0 - s);
             let a = arc_limits(arc, feed, &self.limits, &cfg, ARC_SPLIT, true);
             ProfileLimits::new(
                 a.v_max_mm_s.min(feed).max(share.v_max_mm_s()),
-                a.acc_mm_s2.max(share.a_max_mm_s2()),
-                a.jerk_mm_s3.max(share.j_max_mm_s3()),
+                (a0 + x * (a_tan - a0)).max(a0),
+                (j0 + x * (j_tan - j0)).max(j0),
                 share.shape(),
             )
         };
         let fits = |l: &ProfileLimits| {
-            let Some((v, a)) = alone_peaks(length_mm, l) else {
-                return false;
-            };
-            let centripetal = v * v * kappa;
-            let curve = v * v * v * kappa * kappa;
-            let torsion = v * v * v * kappa * tau;
-            (0..3).all(|i| {
-                let acc_i = t_sh[i] * (a + d * v) + n_sh[i] * centripetal;
-                let jerk_i = t_sh[i] * (l.j_max_mm_s3() + curve + 3.0 * d * a + jk * v)
-                    + n_sh[i] * (3.0 * v * kappa * a + 3.0 * d * centripetal)
-                    + b_sh[i] * torsion;
-                acc_i <= acc[i] && jerk_i <= jerk[i]
+            alone_phases(length_mm, l).is_some_and(|phases| {
+                phases.iter().all(|&(v, a, j)| {
+                    let centripetal = v * v * kappa;
+                    let curve = v * v * v * kappa * kappa;
+                    let torsion = v * v * v * kappa * tau;
+                    (0..3).all(|i| {
+                        let acc_i = t_sh[i] * (a + d * v) + n_sh[i] * centripetal;
+                        let jerk_i = t_sh[i] * (j + curve + 3.0 * d * a + jk * v)
+                            + n_sh[i] * (3.0 * v * kappa * a + 3.0 * d * centripetal)
+                            + b_sh[i] * torsion;
+                        acc_i <= acc[i] && jerk_i <= jerk[i]
+                    })
+                })
             })
         };
         largest_fit(share, at, fits)
     }
 }
 
-/// The peak speed and the largest acceleration of the profile of a move of `length_mm` from
-/// rest to rest with `limits`.
-fn alone_peaks(length_mm: f64, limits: &ProfileLimits) -> Option<(f64, f64)> {
+/// For each phase of the profile of a move of `length_mm` from rest to rest with `limits`:
+/// its highest speed, its largest acceleration (magnitude) and its jerk (magnitude). Within a
+/// phase the jerk is constant and the speed and the acceleration are monotone, so each is
+/// largest at one of the phase's ends: a bound that increases with all three holds over the
+/// phase where it holds for these.
+fn alone_phases(length_mm: f64, limits: &ProfileLimits) -> Option<[(f64, f64, f64); 7]> {
     let profile = profile::plan(length_mm, 0.0, 0.0, limits)?;
     let t = profile.phase_start_times_s();
-    let a = profile
-        .at(t[1])
-        .a_mm_s2
-        .abs()
-        .max(profile.at(t[5]).a_mm_s2.abs());
-    Some((profile.v_cruise_mm_s(), a))
+    let mut out = [(0.0, 0.0, 0.0); 7];
+    for (k, phase) in out.iter_mut().enumerate() {
+        let (start, end) = (profile.at(t[k]), profile.at(t[k + 1]));
+        let mid = profile.at(0.5 * (t[k] + t[k + 1]));
+        *phase = (
+            start.v_mm_s.max(end.v_mm_s),
+            start.a_mm_s2.abs().max(end.a_mm_s2.abs()),
+            if t[k + 1] > t[k] {
+                mid.j_mm_s3.abs()
+            } else {
+                0.0
+            },
+        );
+    }
+    Some(out)
 }
 
 /// The limits `at(x)` for the largest `x` in `[0, 1]` that `fits` finds (`at(1)` first, then
