@@ -3796,13 +3796,13 @@ impl Planner {
         let radius_mm = arc.start_radius_mm.min(arc.end_radius_mm);
         let kappa = cos_a * cos_a / radius_mm;
         let tau = sin_a * cos_a / radius_mm;
-        let (mut t_sh, mut n_sh, mut b_sh) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+        // Each axis's share of the arc's plane (`pᵢ`) and of its axis (`nᵢ`), and its largest
+        // share of the tangent along the arc.
+        let (mut p_sh, mut n_sh, mut t_sh) = (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
         for i in 0..3 {
-            let n_i = arc.normal[i].abs().min(1.0);
-            let p_i = (1.0 - n_i * n_i).max(0.0).sqrt();
-            t_sh[i] = (p_i * cos_a + n_i * sin_a).min(1.0);
-            n_sh[i] = p_i;
-            b_sh[i] = (p_i * sin_a + n_i * cos_a).min(1.0);
+            n_sh[i] = arc.normal[i].abs().min(1.0);
+            p_sh[i] = (1.0 - n_sh[i] * n_sh[i]).max(0.0).sqrt();
+            t_sh[i] = (p_sh[i] * cos_a + n_sh[i] * sin_a).min(1.0);
         }
         let (acc, jerk) = (self.limits.max_acc_mm_s2, self.config.max_jerk_mm_s3);
         let s = self.config.path_acc_share;
@@ -3831,14 +3831,22 @@ impl Planner {
         let fits = |l: &ProfileLimits| {
             alone_phases(length_mm, l).is_some_and(|phases| {
                 phases.iter().all(|&(v, a, j)| {
-                    let centripetal = v * v * kappa;
-                    let curve = v * v * v * kappa * kappa;
-                    let torsion = v * v * v * kappa * tau;
+                    // The parts along the tangent, the (radial) normal and the binormal,
+                    // each at its largest with the ramp's terms (`k ≤ 1`).
+                    let acc_t = a + d * v;
+                    let acc_n = v * v * kappa;
+                    let jerk_t = j + v * v * v * kappa * kappa + 3.0 * d * a + jk * v;
+                    let jerk_n = 3.0 * v * kappa * a + 3.0 * d * acc_n;
+                    let jerk_b = v * v * v * kappa * tau;
+                    // In the plane the tangent's part `cos α` (and the binormal's `sin α`)
+                    // and the normal are at right angles: an axis sees at most `pᵢ` times
+                    // their vector's length, and `nᵢ` times the part along the arc's axis.
+                    let in_plane_acc = (cos_a * acc_t).hypot(acc_n);
+                    let in_plane_jerk = (cos_a * jerk_t + sin_a * jerk_b).hypot(jerk_n);
                     (0..3).all(|i| {
-                        let acc_i = t_sh[i] * (a + d * v) + n_sh[i] * centripetal;
-                        let jerk_i = t_sh[i] * (j + curve + 3.0 * d * a + jk * v)
-                            + n_sh[i] * (3.0 * v * kappa * a + 3.0 * d * centripetal)
-                            + b_sh[i] * torsion;
+                        let acc_i = p_sh[i] * in_plane_acc + n_sh[i] * sin_a * acc_t;
+                        let jerk_i =
+                            p_sh[i] * in_plane_jerk + n_sh[i] * (sin_a * jerk_t + cos_a * jerk_b);
                         acc_i <= acc[i] && jerk_i <= jerk[i]
                     })
                 })
