@@ -560,25 +560,7 @@ fn a_move_alone_takes_the_axes_beyond_the_share_and_keeps_the_override_ramp_s_ro
         first.duration_s(),
         at_share.duration_s()
     );
-    let ramp = OverrideRamp::for_machine(&l, &cfg).unwrap();
-    let t = cfg.period_s;
-    let end = (first.duration_s() / t).ceil() as u64;
-    for hold_at in (1..end).step_by(7) {
-        let interp = Interpolator::new(plan.clone(), t)
-            .unwrap()
-            .with_override_ramp(ramp);
-        let mut drive = |k: u64, interp: &mut Interpolator| {
-            if k == hold_at {
-                interp.hold().map_err(|e| e.to_string())?;
-            }
-            if k == hold_at + 400 {
-                interp.resume().map_err(|e| e.to_string())?;
-            }
-            Ok(())
-        };
-        setpoints::limits_hold_driven(interp, &l, &cfg, &mut drive)
-            .unwrap_or_else(|e| panic!("hold at sample {hold_at}: {e}"));
-    }
+    holds_keep_the_limits(&plan, first.duration_s(), 7, &l, &cfg);
 }
 
 /// The same for arcs and helices: a helix of 3 mm radius rising 40 mm, run alone from rest to
@@ -595,10 +577,16 @@ fn an_arc_alone_keeps_the_override_ramp_s_room() {
     let plan = plan_with(&prog, &l, &cfg).unwrap();
     let first = plan.segments()[0];
     assert!(matches!(first.path, SegmentPath::Arc(_)) && !first.time_law);
-    let ramp = OverrideRamp::for_machine(&l, &cfg).unwrap();
+    holds_keep_the_limits(&plan, first.duration_s(), 3, &l, &cfg);
+}
+
+/// A hold asked at every `step`-th sample of the first `span_s` of `plan` (and a resume 400
+/// samples later) keeps every axis's limits, sampled at the planner's period.
+fn holds_keep_the_limits(plan: &Plan, span_s: f64, step: usize, l: &Limits, cfg: &PlannerConfig) {
+    let ramp = OverrideRamp::for_machine(l, cfg).unwrap();
     let t = cfg.period_s;
-    let end = (first.duration_s() / t).ceil() as u64;
-    for hold_at in (1..end).step_by(3) {
+    let end = (span_s / t).ceil() as u64;
+    for hold_at in (1..end).step_by(step) {
         let interp = Interpolator::new(plan.clone(), t)
             .unwrap()
             .with_override_ramp(ramp);
@@ -611,7 +599,7 @@ fn an_arc_alone_keeps_the_override_ramp_s_room() {
             }
             Ok(())
         };
-        setpoints::limits_hold_driven(interp, &l, &cfg, &mut drive)
+        setpoints::limits_hold_driven(interp, l, cfg, &mut drive)
             .unwrap_or_else(|e| panic!("hold at sample {hold_at}: {e}"));
     }
 }
