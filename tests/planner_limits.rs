@@ -565,7 +565,7 @@ fn a_move_alone_takes_the_axes_beyond_the_share_and_keeps_the_override_ramp_s_ro
 
 /// The same for arcs and helices: a helix of 3 mm radius rising 40 mm, run alone from rest to
 /// rest, takes its limits from a larger share of the axes only where its centripetal
-/// acceleration, the jerk of following it and the ramp's terms all fit at its peaks, so a
+/// acceleration, the jerk of following it and the ramp's terms all fit (phase by phase), so a
 /// hold asked anywhere on it keeps every axis's limits at 1 ms, as does the resume. Taken
 /// towards the axes' whole limits without that check, the hold asked at sample 37 made Z's
 /// jerk 20 273 mm/s³ against 20 000.
