@@ -149,7 +149,12 @@
 //!   time (consecutive moves alone under a tiny tolerance waited `2·(T_k − T)` at each corner
 //!   for the filters, whose mix of the two legs would have cut it). The settling time counts
 //!   one period more than the filters' own, since the first sample standing at a move's end
-//!   may come up to a period after it. Moves of the auxiliary axes keep them.
+//!   may come up to a period after it. Moves of the auxiliary axes keep them. A move alone
+//!   passes no junction, so it takes more of each axis than `path_acc_share`: as much as
+//!   leaves the feed override's ramp its terms (`D·v` of acceleration, `3·D·a + J·v` of
+//!   jerk) at each phase of its profile (`Planner::alone_at_axes`; a 1 mm line 6.6 % sooner
+//!   on the demo machine). Where the filters switch on again, they start settled at the
+//!   point the run that needs them begins, exactly (`Interpolator::run_start`).
 //! - **Geometry.** Each axis then passes through two moving averages of `T_k`
 //!   ([`AXIS_FILTER_S`]), which spread the velocity step of a polyline's vertex over `2·T_k`:
 //!   a vertex's step `Δv` reaches the drive as an acceleration of at most `Δv/T_k` and a jerk
