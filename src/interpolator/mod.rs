@@ -1062,15 +1062,22 @@ impl Interpolator {
                 let local_s = t_s - seg.start_time_s;
                 // The filters switch at rest, where the run of segments that needs them so
                 // begins: this sample may have passed over its first ones.
-                let time_law_from = self.run_start(entered, |s| s.time_law == seg.time_law);
-                let filters_from = self.run_start(entered, |s| s.axis_filters == seg.axis_filters);
+                let (time_law_from, filters_from) = match self.smoother.as_ref() {
+                    Some(smoother) if seg.length_mm > 0.0 => (
+                        (seg.time_law != smoother.time_law())
+                            .then(|| self.run_start(entered, |s| s.time_law == seg.time_law)),
+                        (seg.axis_filters != smoother.axis_filters()).then(|| {
+                            self.run_start(entered, |s| s.axis_filters == seg.axis_filters)
+                        }),
+                    ),
+                    _ => (None, None),
+                };
                 self.last_mm = if let Some(smoother) = self.smoother.as_mut() {
-                    if seg.length_mm > 0.0 && seg.time_law != smoother.time_law() {
-                        smoother.set_time_law(seg.time_law, self.starts_mm[time_law_from]);
+                    if let Some(j) = time_law_from {
+                        smoother.set_time_law(seg.time_law, self.starts_mm[j]);
                     }
-                    if seg.length_mm > 0.0 && seg.axis_filters != smoother.axis_filters() {
-                        let rest_mm = self.queue[filters_from].start_mm;
-                        smoother.set_axis_filters(seg.axis_filters, rest_mm);
+                    if let Some(j) = filters_from {
+                        smoother.set_axis_filters(seg.axis_filters, self.queue[j].start_mm);
                     }
                     smoother.note_plan_time(t_s);
                     let raw_mm = self.starts_mm[self.raw] + seg.distance_at(local_s);

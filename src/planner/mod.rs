@@ -3724,8 +3724,8 @@ impl Planner {
     /// `v` and the peak acceleration `a` are at most `D·v` of acceleration and
     /// `3·D·a + J·v` of jerk along the path (with `k ≤ 1`; above 100 % `k` stays at 1 where
     /// a profile accelerates). So each axis keeps `|uᵢ|·(a + D·v) ≤ Aᵢ` and
-    /// `|uᵢ|·(j + 3·D·a + J·v) ≤ Jᵢ` with the profile's own peaks, the largest step towards
-    /// the whole limits found by bisection (an arc's likewise with its curve's parts,
+    /// `|uᵢ|·(j + 3·D·a + J·v) ≤ Jᵢ` in every phase of the profile ([`alone_phases`]), the
+    /// largest step towards the whole limits found by bisection (an arc's likewise with its curve's parts,
     /// [`arc_alone_at_axes`](Self::arc_alone_at_axes)). Moves of the auxiliary axes keep
     /// `share`.
     fn alone_at_axes(&self, p: &Pending, length_mm: f64, share: ProfileLimits) -> ProfileLimits {
