@@ -30,6 +30,8 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy --all-targets -- -D warnings (2-4 minutes the first time)"
 cargo clippy --all-targets --features vcan-tests -- -D warnings
+echo "== cargo doc --no-deps (links in the documentation resolve; about a minute)"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet
 echo "== building the tests (5-8 minutes the first time on 2 cores)"
 cargo test --no-run
 echo "== cargo test (unit, property, golden, in-process integration; about 6 minutes)"

@@ -52,7 +52,7 @@
 //! costs more: a 1 mm move with `A = 1500 mm/s²` and `J = 37 500 mm/s³` takes `2√(L/A)` =
 //! 51.6 ms as a trapezoid and `4·(L/2J)^⅓` = 94.9 ms as the time-optimal S-curve, 43.2 ms
 //! more, beyond `A/J` = 40 ms. Such a run is charged at least its exact cost
-//! ([`lone_run_cost_s`]: the time-optimal S-curve from rest to rest with the trapezoid's
+//! (`lone_run_cost_s`: the time-optimal S-curve from rest to rest with the trapezoid's
 //! limits and the machine's `J/A`, as the jerk-limited mode plans a move alone), so `T_ref`
 //! stays what a jerk-limited plan cannot beat. Runs of several segments keep the estimate
 //! above.
@@ -126,7 +126,7 @@ pub struct ExactStops {
     /// Moving segments that start at rest (the first one included).
     pub count: usize,
     /// What a jerk-limited plan pays for the runs they start, summed: [`run_cost_s`], and for
-    /// a run of one segment at least its exact cost ([`lone_run_cost_s`]).
+    /// a run of one segment at least its exact cost (`lone_run_cost_s`).
     pub cost_s: f64,
 }
 

@@ -190,13 +190,13 @@
 //!   the tolerance less what its chord and the next one spent. The rounding of CAM output to
 //!   4 decimals makes every vertex a kink of ±0.16 rad on 16 µm chords (`contour.ngc`);
 //!   smoothed, the run turns by its curve's few milliradians per vertex and runs at its
-//!   curvature's speed instead of a crawl ([`smooth`]).
+//!   curvature's speed instead of a crawl (`src/planner/smooth.rs`).
 //! - **Chord refinement.** Then each chord of a run of G64 lines between 0.1 and 2 mm whose
 //!   vertices turn by more than the axis filters take at the curve's speed (a vertex's step
 //!   `v·|Δu|` leaves up to `v·|Δu|/T_k²` of jerk, however dense the chords) is replaced by
 //!   shorter chords on the curve through the run's vertices that blends the circles through
 //!   each three of them, curvature-continuous at the programmed vertices, within a quarter of
-//!   the tolerance ([`refine`]). The pieces' vertices are computed, so the vertex rules'
+//!   the tolerance (`src/planner/refine.rs`). The pieces' vertices are computed, so the vertex rules'
 //!   allowance for the rounding of written coordinates does not apply to them; and no blend
 //!   arc goes between two pieces, whose curve the run already follows (an arc would step
 //!   the curvature at both of its ends).
@@ -204,7 +204,7 @@
 //!   another exactly along one straight line (the vertex within a nanometre of the merged
 //!   line, same feed, mode, compensation and plane, the auxiliary axes still) become one line
 //!   where the run is at least as long as the axis filters' span at the max feed `2·T_k·F`
-//!   ([`merge`]; shorter, it may be a few written vertices of a curve that line up): a
+//!   (`src/planner/merge.rs`; shorter, it may be a few written vertices of a curve that line up): a
 //!   straight move written as many short lines is then a move alone, an exact S-curve,
 //!   instead of a run of trapezoids at the time-law filter's `J·T_f/2`
 //!   (`straight_short_lines_X.ngc`: 0.422 s → 0.318 s, against 0.261 s in trapezoid mode).
@@ -213,7 +213,7 @@
 //!   their own budget as an arc does, with the run's curvature estimated over a window of
 //!   chords that averages the rounding's noise away; the vertices are then charged only what
 //!   they turn beyond the curve, and each line's cap holds over the time-law filter's reach
-//!   on either side instead of a dip at every vertex ([`curve`]). A steady curve may use most
+//!   on either side instead of a dip at every vertex (`src/planner/curve.rs`). A steady curve may use most
 //!   of each axis's acceleration and jerk (the centripetal part and the jerk of following
 //!   it, the rate of its curvature's change included); where the speed changes, each line
 //!   plans with the tangential acceleration the curve leaves at the faster end of its speed
