@@ -1298,7 +1298,11 @@ impl Planner {
             v_next = v;
             if k > 0 && failing >= k as isize - 1 {
                 match self.marks_come_down(k, v) {
-                    Ok(()) => return true,
+                    Ok(()) => {
+                        // Every link below the first holds, whatever the pass finds later.
+                        self.window.set_marks_ok(k - 1, self.v_settled_mm_s);
+                        return true;
+                    }
                     Err(j) => failing = j,
                 }
             }
@@ -1312,8 +1316,15 @@ impl Planner {
     /// pass makes faster than the element's speed limit), the first's start at least the
     /// settled speed. `Err` with the highest link that fails (−1: the settled speed).
     fn marks_come_down(&self, k: usize, v_mm_s: f64) -> Result<(), isize> {
+        // The links from the window's start that an earlier walk found to hold, the elements
+        // unchanged since ([`super::window::Window`]).
+        let ok_below = self.window.marks_ok_below(self.v_settled_mm_s);
         let mut start = v_mm_s;
         for j in (0..k).rev() {
+            // Past the first link (from `v_mm_s`), each link is the one checked before.
+            if j + 1 < k && j < ok_below {
+                return Ok(());
+            }
             let e = &self.window[j];
             let cap = if j == 0 {
                 f64::INFINITY

@@ -262,6 +262,7 @@ mod merge;
 pub mod profile;
 mod refine;
 mod smooth;
+mod window;
 
 pub use aux_axes::AuxLimits;
 
@@ -1060,7 +1061,8 @@ pub struct Planner {
     aux_settled: Option<AuxPos>,
     /// End time of everything settled.
     time_s: f64,
-    window: VecDeque<Pending>,
+    /// The elements pushed and not settled, oldest first ([`window`]).
+    window: window::Window,
     /// Start speed of the window's first element (the last settled end speed).
     v_settled_mm_s: f64,
     /// Backward-pass speeds, scratch.
@@ -1182,7 +1184,7 @@ impl Planner {
             aux_pushed: None,
             aux_settled: None,
             time_s: 0.0,
-            window: VecDeque::with_capacity(config.lookahead.min(1 << 16) + 1),
+            window: window::Window::with_capacity(config.lookahead.min(1 << 16) + 1),
             v_settled_mm_s: 0.0,
             back_mm_s: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
             back_acc: Vec::with_capacity(config.lookahead.min(1 << 16) + 2),
