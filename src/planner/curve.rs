@@ -848,7 +848,7 @@ fn curve_limits(
             v3 = v3.min(CURVE_JERK_SHARE * jerk_budget_mm_s3[i] / q_i);
         }
     }
-    let v = v2.sqrt().min(v3.cbrt());
+    let v = super::min_cbrt(v2.sqrt(), v3);
     let fit = CurveFit {
         tangent,
         normal: n,
@@ -1636,7 +1636,7 @@ impl Planner {
         let s_vertex = s_new - 0.5 * w_mm;
         let j_min = self.config.max_jerk_mm_s3.min();
         let k2 = best.norm_squared().max(f64::MIN_POSITIVE);
-        let v_k = v_max.min((CURVE_JERK_SHARE * CURVE_BUDGET * j_min / k2).cbrt());
+        let v_k = super::min_cbrt(v_max, CURVE_JERK_SHARE * CURVE_BUDGET * j_min / k2);
         // Its turn with the tangent, `−κ²·T`, is taken at the tangent midway (the chord
         // there), where the difference quotient has it.
         // The estimate a baseline back: where the nearest one that far back is much further
