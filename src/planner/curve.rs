@@ -607,8 +607,26 @@ pub(super) fn reach_mm_s(p: &Pending, v_from_mm_s: f64, vmax_mm_s: f64) -> Optio
         ProfileLimits::trapezoid(vmax_mm_s, a)
             .and_then(|l| super::profile::max_end_speed(p.seg.length_mm, v_from_mm_s, &l))
     };
-    reach(p.limits.a_max_mm_s2())?;
-    Some(reach_with(p, |a| reach(a).unwrap_or(v_from_mm_s)))
+    let a_static = p.limits.a_max_mm_s2();
+    let v_static = reach(a_static)?;
+    // [`reach_with`] asks again for the reach with the element's own acceleration, and may
+    // ask twice for another one (the floor's where the pair kept is the floor's, as
+    // [`Planner::memo_pushed`] leaves it): each is computed once, the reach being a function
+    // of the acceleration alone here (`max_end_speed` was 13 % of the look-ahead's time on
+    // tiny segments).
+    let last = std::cell::Cell::new((f64::NAN, f64::NAN));
+    Some(reach_with(p, |a| {
+        if a == a_static {
+            return v_static;
+        }
+        let (a_last, v_last) = last.get();
+        if a == a_last {
+            return v_last;
+        }
+        let v = reach(a).unwrap_or(v_from_mm_s);
+        last.set((a, v));
+        v
+    }))
 }
 
 /// One step of the look-ahead's backward pass: the highest start speed of `p`, within its
