@@ -191,16 +191,29 @@
 //!   4 decimals makes every vertex a kink of ±0.16 rad on 16 µm chords (`contour.ngc`);
 //!   smoothed, the run turns by its curve's few milliradians per vertex and runs at its
 //!   curvature's speed instead of a crawl (`src/planner/smooth.rs`).
+//! - **Chord fairing.** Then the inner vertices of a run of G64 lines between 0.02 and 2 mm
+//!   that turn by at most 0.35 rad each are moved, within a quarter of the tolerance (and of
+//!   the shorter chord beside), where the curvature zig-zags from vertex to vertex, until
+//!   each vertex's curvature is about the mean of its neighbours' (a discrete smoothing
+//!   spline with the tolerance as its obstacle; `src/planner/fair.rs`). CAM output of a 3D
+//!   surface is such a polyline, every vertex within the CAM's chordal tolerance of the
+//!   surface's smooth section, and any curve through its vertices bends back and forth at
+//!   each: `3D_Chips.ngc` ran at 5–12 mm/s where the trapezoid plan runs at 20–48 (session
+//!   33: 156.1 → 120.9 s, `LHchips4.ngc` 547.7 → 510.5 s, no corpus program slower). A
+//!   clean polyline (a circle's, any evenly sampled smooth curve's) stays as it is, and so do
+//!   the run's first and last chords; each line goes on with the tolerance less what its
+//!   chord and the next one spent.
 //! - **Chord refinement.** Then each chord of a run of G64 lines between 0.1 and 2 mm whose
 //!   vertices turn by more than the axis filters take at the curve's speed (a vertex's step
 //!   `v·|Δu|` leaves up to `v·|Δu|/T_k²` of jerk, however dense the chords) is replaced by
-//!   shorter chords on the curve through the run's vertices that blends the circles through
-//!   each three of them, curvature-continuous at the programmed vertices, within a quarter of
-//!   the tolerance (`src/planner/refine.rs`). The pieces' vertices are computed, so the vertex rules'
+//!   shorter chords on a curve through the run's vertices, the quintic Hermite curve with the
+//!   tangent and curvature of the circle through each vertex and its neighbours at either
+//!   end, curvature-continuous at the programmed vertices, within a quarter of the tolerance
+//!   (`src/planner/refine.rs`). The pieces' vertices are computed, so the vertex rules'
 //!   allowance for the rounding of written coordinates does not apply to them; and no blend
 //!   arc goes between two pieces, whose curve the run already follows (an arc would step
 //!   the curvature at both of its ends).
-//! - **Collinear lines.** After the smoother and the refiner, G64 lines that continue one
+//! - **Collinear lines.** After the smoother, the fairer and the refiner, G64 lines that continue one
 //!   another exactly along one straight line (the vertex within a nanometre of the merged
 //!   line, same feed, mode, compensation and plane, the auxiliary axes still) become one line
 //!   where the run is at least as long as the axis filters' span at the max feed `2·T_k·F`
@@ -258,6 +271,7 @@ pub mod aux_axes;
 mod blend;
 pub mod bounds;
 mod curve;
+mod fair;
 mod merge;
 pub mod profile;
 mod refine;
@@ -1108,6 +1122,8 @@ pub struct Planner {
     curve: curve::CurveState,
     /// Dense runs of lines on their way in, smoothed (jerk-limited mode, [`smooth`]).
     smoother: smooth::ChordSmoother,
+    /// The chord fairer after it ([`fair`]).
+    fairer: fair::ChordFairer,
     /// The chord refiner after it ([`refine`]).
     refiner: refine::ChordRefiner,
     /// While a corner's blend is chosen: curvature steps and turns with the arcs' uses of the
@@ -1206,6 +1222,7 @@ impl Planner {
                 2.0 * s.axis_s(config.period_s) * limits.max_feed_mm_s
             })),
             smoother: smooth::ChordSmoother::default(),
+            fairer: fair::ChordFairer::default(),
             refiner,
             steps_at_caps: std::cell::Cell::new(false),
             ramp_rates: override_ramp_rates(limits, config),
@@ -1218,8 +1235,8 @@ impl Planner {
         if self.smoothing.is_none() {
             return self.push_item(item, false);
         }
-        // Jerk-limited mode: dense runs of G64 lines pass through the chord smoother, then
-        // the refiner, then collinear lines merge.
+        // Jerk-limited mode: runs of G64 lines pass through the chord smoother, the fairer
+        // and the refiner, then collinear lines merge.
         let tol_mm = match item {
             Item::Motion(e) => self.blend_tolerance_mm(e.blend),
             _ => 0.0,
@@ -1231,6 +1248,19 @@ impl Planner {
     /// Plans what the chord smoother has passed on, through the chord refiner.
     fn push_smoothed(&mut self) -> Result<(), PlanError> {
         while let Some(item) = self.smoother.out.pop_front() {
+            let tol_mm = match &item {
+                Item::Motion(e) => self.blend_tolerance_mm(e.blend),
+                _ => 0.0,
+            };
+            self.fairer.push(&item, tol_mm);
+            self.push_faired()?;
+        }
+        Ok(())
+    }
+
+    /// Plans what the chord fairer has passed on, through the chord refiner.
+    fn push_faired(&mut self) -> Result<(), PlanError> {
+        while let Some(item) = self.fairer.out.pop_front() {
             let tol_mm = match &item {
                 Item::Motion(e) => self.blend_tolerance_mm(e.blend),
                 _ => 0.0,
@@ -1255,6 +1285,7 @@ impl Planner {
             };
             if let Err(e) = pushed {
                 self.smoother.out.clear();
+                self.fairer.out.clear();
                 self.refiner.out.clear();
                 return Err(e);
             }
@@ -1460,6 +1491,8 @@ impl Planner {
     pub fn finish(&mut self) -> Result<(), PlanError> {
         self.smoother.flush();
         self.push_smoothed()?;
+        self.fairer.flush();
+        self.push_faired()?;
         self.refiner.flush();
         self.push_refined()?;
         self.merger.flush();
