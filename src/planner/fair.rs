@@ -47,6 +47,12 @@
 //! [`super::smooth`] shares it). The refiner and the blends and filters after it work within
 //! what is left, so together they stay within `tol` of the programmed path.
 //!
+//! What the fairing spends, the refiner no longer has: where it would cut a chord as
+//! programmed, the curve over the faired chord ([`super::refine::ChordCurve`]) must still sag
+//! within its share of what is left ([`REFINE_MARGIN`]). Where it does not, the vertices that
+//! shape that curve stay, and the rest are faired again ([`ROUNDS`]). A long chord between
+//! short ones is where that binds: its curve bends much as its neighbours' vertices move.
+//!
 //! # Which lines, and when
 //!
 //! Feed moves along a straight line in X/Y/Z longer than [`SHORTEST_MM`] and at most

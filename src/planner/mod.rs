@@ -199,10 +199,11 @@
 //!   surface is such a polyline, every vertex within the CAM's chordal tolerance of the
 //!   surface's smooth section, and any curve through its vertices bends back and forth at
 //!   each: `3D_Chips.ngc` ran at 5–12 mm/s where the trapezoid plan runs at 20–48 (session
-//!   33: 156.1 → 120.9 s, `LHchips4.ngc` 547.7 → 510.5 s, no corpus program slower). A
+//!   33: 156.1 → 117.3 s, `LHchips4.ngc` 547.7 → 486.4 s, no corpus program slower). A
 //!   clean polyline (a circle's, any evenly sampled smooth curve's) stays as it is, and so do
-//!   the run's first and last chords; each line goes on with the tolerance less what its
-//!   chord and the next one spent.
+//!   the run's first and last chords and the vertices that shape the curve of a chord the
+//!   refiner would cut as programmed but not as faired; each line goes on with the tolerance
+//!   less what its chord and the next one spent.
 //! - **Chord refinement.** Then each chord of a run of G64 lines between 0.1 and 2 mm whose
 //!   vertices turn by more than the axis filters take at the curve's speed (a vertex's step
 //!   `v·|Δu|` leaves up to `v·|Δu|/T_k²` of jerk, however dense the chords) is replaced by
