@@ -24,8 +24,11 @@
 //! mean of the neighbours' *positions*) was tried first: on chords of unequal length its fixed
 //! point makes `κ·l₁·l₂` uniform, not `κ`, and `3D_Chips` came out slower.
 //!
-//! Only rough vertices move: where the curvature's second difference over the chords (per
-//! mm²) is above both `|K_i|²` (the curve's own jerk term) and [`ROUGH_PER_MM2`]. A clean polyline of a circle or of any smooth curve
+//! Only rough vertices beside a chord longer than [`DENSE_MM`] move: runs of shorter chords
+//! are the chord smoother's ([`super::smooth`]), and fairing them too took the look-ahead twice
+//! the instructions on 20 µm chords; and rough means where the curvature's second difference
+//! over the chords (per mm²) is above both `|K_i|²` (the curve's own jerk term) and
+//! [`ROUGH_PER_MM2`]. A clean polyline of a circle or of any smooth curve
 //! stays as it is: fairing it would only spend tolerance that the refiner needs (LinuxCNC's
 //! `trochoidal.ngc`, 0.29 mm chords of circles under a bare G64, planned 2.5 times slower when
 //! every vertex could move). The run's first and last chords keep their directions, so the
@@ -61,8 +64,10 @@
 //! [`super::refine::MAX_TURN`] (the sharpest vertex the planner takes as a point of a curve).
 //! Anything else ends the run. A vertex is final once [`AHEAD`] more are known: the fairing
 //! runs [`ITERATIONS`] steps over the vertices not final each time `2·AHEAD + 1` of them have
-//! come, and the oldest `AHEAD` become final (all of them at the run's end). The planner
-//! receives each line up to `2·AHEAD + 3` lines late.
+//! come, and the oldest `AHEAD` become final (all of them at the run's end). Where no chord
+//! longer than [`DENSE_MM`] has come since the last final vertex, every vertex but the newest
+//! is final at once. The planner receives each line up to `2·AHEAD + 3` lines late, and two
+//! lines late along short chords.
 
 use std::collections::VecDeque;
 
@@ -126,6 +131,8 @@ pub(super) struct ChordFairer {
     /// `lbase` to the next.
     lines: VecDeque<(Element, f64)>,
     lbase: usize,
+    /// The last chord of the run longer than [`DENSE_MM`] (absolute index of its start).
+    last_long: Option<usize>,
     /// Scratch: the programmed and faired curvature vectors, the balls' radii.
     k: Vec<Option<Vector3<f64>>>,
     radius: Vec<f64>,
@@ -156,7 +163,15 @@ impl ChordFairer {
             self.q.push_back(e.end_mm);
             self.lines.push_back((*e, tol_mm));
             let n = self.vbase + self.p.len();
-            if n - self.nfinal > 2 * AHEAD + 1 {
+            if (e.end_mm - e.start_mm).norm() > DENSE_MM {
+                self.last_long = Some(n - 2);
+            }
+            if self.last_long.is_none_or(|j| j + 1 < self.nfinal) {
+                // No chord longer than the smoother's since the final vertices: the vertices
+                // before the newest stay as they are (see `fair`), and are final at once.
+                self.nfinal = n - 1;
+                self.emit(false);
+            } else if n - self.nfinal > 2 * AHEAD + 1 {
                 self.fair(n, false);
                 self.nfinal += AHEAD;
                 self.emit(false);
@@ -181,6 +196,7 @@ impl ChordFairer {
         self.vbase = 0;
         self.lbase = 0;
         self.nfinal = 0;
+        self.last_long = None;
     }
 
     /// Length of the programmed chord from vertex `i` (absolute).
@@ -240,6 +256,14 @@ impl ChordFairer {
         if from + 1 >= n {
             return;
         }
+        // Only a vertex beside a chord longer than the smoother's moves: runs of short chords
+        // are its ([`DENSE_MM`]).
+        if !(from - 1..n - 1).any(|j| self.chord_mm(j) > DENSE_MM) {
+            for i in from..n - 1 {
+                self.q[i - self.vbase] = self.p[i - self.vbase];
+            }
+            return;
+        }
         // Curvatures are needed from the vertex before the first that moves.
         let lo = from - 1;
         // Which vertices are rough, and how far each may move.
@@ -251,13 +275,14 @@ impl ChordFairer {
         self.radius.clear();
         for i in from..n - 1 {
             let end_chord = i == 1 || ended && i + 2 == n;
+            let beside_long = self.chord_mm(i - 1).max(self.chord_mm(i)) > DENSE_MM;
             let kb = self.k[i - lo].expect("an inner vertex");
             let ka = self.k[i - 1 - lo].unwrap_or(kb);
             let kc = self.k[i + 1 - lo].unwrap_or(kb);
             let (l1, l2) = (self.chord_mm(i - 1), self.chord_mm(i));
             let rate = (ka - kb * 2.0 + kc).norm() / (0.5 * (l1 + l2));
             let rough = rate > kb.norm_squared().max(ROUGH_PER_MM2);
-            let r = if rough && !end_chord {
+            let r = if rough && beside_long && !end_chord {
                 (SHARE * self.tol_mm(i - 1).min(self.tol_mm(i))).min(CHORD_SHARE * l1.min(l2))
             } else {
                 0.0
@@ -511,6 +536,36 @@ mod tests {
             let moved = p.iter().zip(&f).filter(|(a, b)| a != b).count();
             assert_eq!(moved, 0, "{moved} of {} lines changed", p.len());
         }
+    }
+
+    #[test]
+    fn runs_of_short_chords_are_the_smoother_s_and_pass_two_lines_late() {
+        // The CAM section's scatter on chords of 30 and 60 µm: rough, but no chord longer
+        // than the smoother's; nothing moves, and each line comes out as soon as the one two
+        // after it has come.
+        let points = cam_section(300, (0.03, 0.06), 0.005);
+        let program = parse_program(&polyline(&points), "t.ngc", Vector3::zeros()).expect("parses");
+        let mut f = ChordFairer::default();
+        let (mut pushed, mut out) = (Vec::new(), Vec::new());
+        for item in &program.items {
+            let tol = match item {
+                Item::Motion(e) if matches!(e.blend, BlendMode::Blend { .. }) => TOL_MM,
+                _ => 0.0,
+            };
+            f.push(item, tol);
+            out.extend(f.out.drain(..));
+            pushed.push(item.clone());
+            let (p, o) = (lines(&pushed), lines(&out));
+            assert!(
+                o.len() + 2 >= p.len(),
+                "{} lines out of {}",
+                o.len(),
+                p.len()
+            );
+        }
+        f.flush();
+        out.extend(f.out.drain(..));
+        assert_eq!(lines(&program.items), lines(&out));
     }
 
     #[test]

@@ -192,14 +192,15 @@
 //!   smoothed, the run turns by its curve's few milliradians per vertex and runs at its
 //!   curvature's speed instead of a crawl (`src/planner/smooth.rs`).
 //! - **Chord fairing.** Then the inner vertices of a run of G64 lines between 0.02 and 2 mm
-//!   that turn by at most 0.35 rad each are moved, within a quarter of the tolerance (and of
-//!   the shorter chord beside), where the curvature zig-zags from vertex to vertex, until
+//!   that turn by at most 0.35 rad each, beside a chord longer than 0.1 mm (shorter runs are
+//!   the smoother's), are moved, within a quarter of the tolerance (and of the shorter chord
+//!   beside), where the curvature zig-zags from vertex to vertex, until
 //!   each vertex's curvature is about the mean of its neighbours' (a discrete smoothing
 //!   spline with the tolerance as its obstacle; `src/planner/fair.rs`). CAM output of a 3D
 //!   surface is such a polyline, every vertex within the CAM's chordal tolerance of the
 //!   surface's smooth section, and any curve through its vertices bends back and forth at
 //!   each: `3D_Chips.ngc` ran at 5–12 mm/s where the trapezoid plan runs at 20–48 (session
-//!   33: 156.1 → 117.3 s, `LHchips4.ngc` 547.7 → 486.4 s, no corpus program slower). A
+//!   33: 156.1 → 117.6 s, `LHchips4.ngc` 547.7 → 486.4 s, no corpus program slower). A
 //!   clean polyline (a circle's, any evenly sampled smooth curve's) stays as it is, and so do
 //!   the run's first and last chords and the vertices that shape the curve of a chord the
 //!   refiner would cut as programmed but not as faired; each line goes on with the tolerance
