@@ -381,20 +381,10 @@ impl ChordFairer {
 mod tests {
     use super::*;
     use crate::gcode::{BlendMode, parse_program};
+    use crate::planner::refine::tests::polyline;
     use crate::planner::smooth::closest_on_segment;
 
     const TOL_MM: f64 = 0.1;
-
-    /// A G64 P0.1 run at F7500 through `points` after a G0 to the first, then a dwell.
-    fn polyline(points: &[(f64, f64)]) -> String {
-        let (x0, y0) = points[0];
-        let mut text = format!("G21 G90 G64 P{TOL_MM} F7500\nG0 X{x0:.6} Y{y0:.6}\n");
-        for (x, y) in &points[1..] {
-            text.push_str(&format!("G1 X{x:.6} Y{y:.6}\n"));
-        }
-        text.push_str("G4 P0.1\nM2\n");
-        text
-    }
 
     /// A CAM section of a surface: points on `y = 2·sin(x/3)` with chords alternating between
     /// about `steps.0` and `steps.1` mm along X, each point off the curve across it by up to
@@ -412,21 +402,28 @@ mod tests {
             .collect()
     }
 
-    fn run(text: &str) -> (Vec<Item>, Vec<Item>) {
+    /// The program's items, and what the fairer makes of them; `each` sees the items pushed
+    /// so far and what has come out, after each push.
+    fn run_with(text: &str, mut each: impl FnMut(&[Item], &[Item])) -> (Vec<Item>, Vec<Item>) {
         let program = parse_program(text, "t.ngc", Vector3::zeros()).expect("parses");
         let mut f = ChordFairer::default();
         let mut out = Vec::new();
-        for item in &program.items {
+        for (k, item) in program.items.iter().enumerate() {
             let tol = match item {
                 Item::Motion(e) if matches!(e.blend, BlendMode::Blend { .. }) => TOL_MM,
                 _ => 0.0,
             };
             f.push(item, tol);
             out.extend(f.out.drain(..));
+            each(&program.items[..=k], &out);
         }
         f.flush();
         out.extend(f.out.drain(..));
         (program.items, out)
+    }
+
+    fn run(text: &str) -> (Vec<Item>, Vec<Item>) {
+        run_with(text, |_, _| {})
     }
 
     fn lines(items: &[Item]) -> Vec<Element> {
@@ -544,28 +541,16 @@ mod tests {
         // than the smoother's; nothing moves, and each line comes out as soon as the one two
         // after it has come.
         let points = cam_section(300, (0.03, 0.06), 0.005);
-        let program = parse_program(&polyline(&points), "t.ngc", Vector3::zeros()).expect("parses");
-        let mut f = ChordFairer::default();
-        let (mut pushed, mut out) = (Vec::new(), Vec::new());
-        for item in &program.items {
-            let tol = match item {
-                Item::Motion(e) if matches!(e.blend, BlendMode::Blend { .. }) => TOL_MM,
-                _ => 0.0,
-            };
-            f.push(item, tol);
-            out.extend(f.out.drain(..));
-            pushed.push(item.clone());
-            let (p, o) = (lines(&pushed), lines(&out));
+        let (programmed, out) = run_with(&polyline(&points), |pushed, out| {
+            let (p, o) = (lines(pushed), lines(out));
             assert!(
                 o.len() + 2 >= p.len(),
                 "{} lines out of {}",
                 o.len(),
                 p.len()
             );
-        }
-        f.flush();
-        out.extend(f.out.drain(..));
-        assert_eq!(lines(&program.items), lines(&out));
+        });
+        assert_eq!(lines(&programmed), lines(&out));
     }
 
     #[test]

@@ -411,7 +411,7 @@ fn distance_to_segment(q: Vector3<f64>, a: Vector3<f64>, b: Vector3<f64>) -> f64
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::gcode::parse_program;
 
@@ -429,7 +429,7 @@ mod tests {
     }
 
     /// A G64 P0.1 run at F7500 through `points` after a G0 to the first, then a dwell.
-    fn polyline(points: &[(f64, f64)]) -> String {
+    pub(in crate::planner) fn polyline(points: &[(f64, f64)]) -> String {
         let (x0, y0) = points[0];
         let mut text = format!("G21 G90 G64 P{TOL_MM} F7500\nG0 X{x0:.6} Y{y0:.6}\n");
         for (x, y) in &points[1..] {
