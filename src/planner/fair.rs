@@ -145,7 +145,6 @@ impl ChordFairer {
     /// under the element's blend mode (0: none). Items ready for the refiner go to `out`.
     pub fn push(&mut self, item: &Item, tol_mm: f64) {
         if let Item::Motion(e) = item
-            && std::env::var("ZZNOFAIR").is_err()
             && g64_chord(e, tol_mm, SHORTEST_MM, super::refine::LONGEST_MM)
         {
             let continues = self.lines.back().is_some_and(|(last, _)| {
