@@ -215,9 +215,10 @@
 //!   allowance for the rounding of written coordinates does not apply to them; and no blend
 //!   arc goes between two pieces, whose curve the run already follows (an arc would step
 //!   the curvature at both of its ends).
-//! - **Collinear lines.** After the smoother, the fairer and the refiner, G64 lines that continue one
-//!   another exactly along one straight line (the vertex within a nanometre of the merged
-//!   line, same feed, mode, compensation and plane, the auxiliary axes still) become one line
+//! - **Collinear lines.** After the smoother, the fairer and the refiner, G64 lines that
+//!   continue one another exactly along one straight line (the vertex within a nanometre of
+//!   the merged line, same feed, mode, compensation and plane, the auxiliary axes still)
+//!   become one line
 //!   where the run is at least as long as the axis filters' span at the max feed `2·T_k·F`
 //!   (`src/planner/merge.rs`; shorter, it may be a few written vertices of a curve that line up): a
 //!   straight move written as many short lines is then a move alone, an exact S-curve,
@@ -1239,21 +1240,15 @@ impl Planner {
         }
         // Jerk-limited mode: runs of G64 lines pass through the chord smoother, the fairer
         // and the refiner, then collinear lines merge.
-        let tol_mm = match item {
-            Item::Motion(e) => self.blend_tolerance_mm(e.blend),
-            _ => 0.0,
-        };
+        let tol_mm = self.item_tolerance_mm(item);
         self.smoother.push(item, tol_mm);
         self.push_smoothed()
     }
 
-    /// Plans what the chord smoother has passed on, through the chord refiner.
+    /// Plans what the chord smoother has passed on, through the chord fairer.
     fn push_smoothed(&mut self) -> Result<(), PlanError> {
         while let Some(item) = self.smoother.out.pop_front() {
-            let tol_mm = match &item {
-                Item::Motion(e) => self.blend_tolerance_mm(e.blend),
-                _ => 0.0,
-            };
+            let tol_mm = self.item_tolerance_mm(&item);
             self.fairer.push(&item, tol_mm);
             self.push_faired()?;
         }
@@ -1263,10 +1258,7 @@ impl Planner {
     /// Plans what the chord fairer has passed on, through the chord refiner.
     fn push_faired(&mut self) -> Result<(), PlanError> {
         while let Some(item) = self.fairer.out.pop_front() {
-            let tol_mm = match &item {
-                Item::Motion(e) => self.blend_tolerance_mm(e.blend),
-                _ => 0.0,
-            };
+            let tol_mm = self.item_tolerance_mm(&item);
             self.refiner.push(item, tol_mm);
             self.push_refined()?;
         }
@@ -2995,6 +2987,15 @@ impl Planner {
         match self.blend_tolerance_mm(blend) {
             p_mm if p_mm > 0.0 => 0.5 * p_mm,
             _ => self.config.chord_tol_mm,
+        }
+    }
+
+    /// The G64 tolerance of a motion item ([`Planner::blend_tolerance_mm`]); 0 for anything
+    /// else.
+    fn item_tolerance_mm(&self, item: &Item) -> f64 {
+        match item {
+            Item::Motion(e) => self.blend_tolerance_mm(e.blend),
+            _ => 0.0,
         }
     }
 
