@@ -522,10 +522,18 @@ struct CornerCost {
     /// The accelerations either side: each element's own in the trapezoid mode, the lower of
     /// the two under the time-law filter (joined elements share it, `share_acceleration`).
     acc: (f64, f64),
-    /// The acceleration where the sharp corner stops in the jerk-limited mode (the moves run
-    /// alone there, as exact S-curves), and the jerk.
-    sharp_acc: f64,
+    /// The accelerations either side where the sharp corner stops in the jerk-limited mode
+    /// (each move runs alone there, as an exact S-curve), the shared one where it does not;
+    /// and the jerk.
+    sharp_acc: (f64, f64),
     jerk: f64,
+    /// Each element's acceleration away from the corner: under the time-law filter the shared
+    /// one holds within the filter's reach of the corner only (`Planner::share_at_junction`
+    /// splits a line there), the element's own beyond it, and the whole of its move alone
+    /// (`J·T_f`) in the middle of a long speed change (`Planner::split_for_acceleration`).
+    far: (f64, f64),
+    /// The time-law filter's length (0 in the trapezoid mode).
+    t_f: f64,
     /// What joining the two through the time-law filter costs (jerk-limited mode).
     joined_s: f64,
     /// The sharp corner's cost.
@@ -556,40 +564,73 @@ impl CornerCost {
         // motion stops next. Beyond that the filtered plan's dips and shared accelerations
         // make the estimate rougher there: a blend must save at least that settling time.
         let period_s = planner.config.period_s;
+        let t_f = planner.smoothing.map_or(0.0, |s| s.time_law_s(period_s));
+        let far_acc = |p: &Pending, own: f64| match p.alone {
+            Some(alone)
+                if t_f > 0.0
+                    && matches!(p.seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
+                    && p.curve_acc.is_none()
+                    && !p.seg.aux.moves() =>
+            {
+                own.max(alone.a_max_mm_s2().min(alone.j_max_mm_s3() * t_f))
+            }
+            _ => own,
+        };
+        let far = (far_acc(a, acc_a), far_acc(b, acc_b));
         let (joined_s, sharp_acc) = match planner.smoothing {
             Some(smoothing) if v_sharp == 0.0 => {
-                let alone = match (a.alone, b.alone) {
-                    (Some(x), Some(y)) => lower.max(x.a_max_mm_s2().min(y.a_max_mm_s2())),
-                    _ => lower,
-                };
-                (2.0 * smoothing.time_law_s(period_s), alone)
+                let alone =
+                    |p: &Pending, own: f64| p.alone.map_or(own, |x| own.max(x.a_max_mm_s2()));
+                let sharp_acc = (alone(a, acc_a), alone(b, acc_b));
+                (2.0 * smoothing.time_law_s(period_s), sharp_acc)
             }
-            Some(smoothing) => (smoothing.time_law_s(period_s), lower),
-            None => (0.0, lower),
+            Some(smoothing) => (smoothing.time_law_s(period_s), (lower, lower)),
+            None => (0.0, (lower, lower)),
         };
         let mut cost = CornerCost {
-            v_a: reach(a, acc.0),
-            v_b: reach(b, acc.1),
+            v_a: reach(a, far.0),
+            v_b: reach(b, far.1),
             acc,
             sharp_acc,
             jerk,
+            far,
+            t_f,
             joined_s,
             sharp_s: 0.0,
             smoothing: planner.smoothing.is_some(),
         };
-        let sharp_acc = if cost.smoothing {
-            (sharp_acc, sharp_acc)
+        cost.sharp_s = if cost.smoothing && v_sharp == 0.0 {
+            // (Alone: each move's whole profile at its own higher acceleration.)
+            cost.corner_s((v_sharp, v_sharp), sharp_acc, sharp_acc)
         } else {
-            acc
+            cost.corner_s((v_sharp, v_sharp), acc, cost.far)
         };
-        cost.sharp_s = cost.corner_s((v_sharp, v_sharp), sharp_acc);
         cost
     }
 
-    /// The dips to `v.0` at the end of `a` and to `v.1` at the start of `b`, one way each.
-    fn corner_s(&self, v: (f64, f64), acc: (f64, f64)) -> f64 {
-        0.5 * (corner_cost_s(self.v_a, v.0, acc.0, self.jerk)
-            + corner_cost_s(self.v_b, v.1, acc.1, self.jerk))
+    /// The dips to `v.0` at the end of `a` and to `v.1` at the start of `b`, one way each, at
+    /// the acceleration `near` within the time-law filter's reach of the corner and `far`
+    /// beyond it.
+    fn corner_s(&self, v: (f64, f64), near: (f64, f64), far: (f64, f64)) -> f64 {
+        self.dip_s(self.v_a, v.0, near.0, far.0) + self.dip_s(self.v_b, v.1, near.1, far.1)
+    }
+
+    /// One way of a dip from `v_cruise` to `v` against cruising: the last part, within the
+    /// reach `L = T_f·(a·T_f + √((a·T_f)² + v²))` of the corner
+    /// (`Planner::share_at_junction`), at `near`, the rest at `far`.
+    fn dip_s(&self, v_cruise: f64, v: f64, near: f64, far: f64) -> f64 {
+        if self.t_f == 0.0 || near >= far {
+            return 0.5 * corner_cost_s(v_cruise, v, near.min(far), self.jerk);
+        }
+        if v_cruise <= 0.0 || v >= v_cruise {
+            return 0.0;
+        }
+        // The time lost from `u` down to `w` at `acc`, against cruising at `v_cruise`.
+        let lost = |u: f64, w: f64, acc: f64| (u - w) / acc * (1.0 - (u + w) / (2.0 * v_cruise));
+        let at = near * self.t_f;
+        let reach_mm = self.t_f * (at + (at * at + v * v).sqrt());
+        let v_r = (v * v + 2.0 * near * reach_mm).sqrt().min(v_cruise);
+        lost(v_r, v, near) + lost(v_cruise, v_r, far)
     }
 
     /// The blended corner: `arc` instead of `taken_mm` of each element, entered under `v_in`
@@ -604,7 +645,8 @@ impl CornerCost {
         let arc_acc = arc.limits.a_max_mm_s2();
         let (acc, arc_acc, ramps_s) = if self.smoothing {
             let acc = self.acc.0.min(arc_acc);
-            let ramps_s = 0.5 * (self.v_a + self.v_b) * (1.0 / acc - 1.0 / self.sharp_acc);
+            let ramps_s = 0.5 * self.v_a * (1.0 / acc - 1.0 / self.sharp_acc.0)
+                + 0.5 * self.v_b * (1.0 / acc - 1.0 / self.sharp_acc.1);
             ((acc, acc), acc, ramps_s)
         } else {
             (self.acc, arc_acc, 0.0)
@@ -620,7 +662,8 @@ impl CornerCost {
             ((v1 * v1 - v0 * v0 + 2.0 * arc_acc * len_mm) / (4.0 * arc_acc)).clamp(0.0, len_mm);
         let arc_s =
             ramp_s(v0, arc_acc, v_arc, meet_mm) + ramp_s(v1, arc_acc, v_arc, len_mm - meet_mm);
-        self.joined_s + ramps_s + self.corner_s((v0, v1), acc) + arc_s
+        let far = (self.far.0.max(acc.0), self.far.1.max(acc.1));
+        self.joined_s + ramps_s + self.corner_s((v0, v1), acc, far) + arc_s
             - taken_mm.0 / self.v_a
             - taken_mm.1 / self.v_b
     }
