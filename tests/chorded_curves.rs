@@ -250,7 +250,7 @@ fn chorded_curves_take_at_least_their_curvature_bound() {
 /// Issue 11's acceptance: the jerk-limited time of every chorded curve is within 1.10× of its
 /// `T_lb`.
 #[test]
-#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.48× T_lb on these curves (measured 2026-11-29, session 31: circles 1.10–1.25×, the 50×20 mm ellipse 1.32×, the 5×2 mm ellipse 2.48×, which no plan within the axes' acceleration alone takes under 1.10× T_lb: see the README, session 31); the target is 1.10×"]
+#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.45× T_lb on these curves (measured 2026-11-29, session 34: circles 1.10–1.21×, the 50×20 mm ellipse 1.30×, the 5×2 mm ellipse 2.45×, which no plan within the axes' acceleration alone takes under 1.10× T_lb: see the README, session 31); the target is 1.10×"]
 fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     let slow: Vec<String> = time_curves()
         .into_iter()

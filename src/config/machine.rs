@@ -853,8 +853,10 @@ fn program_setup(ctx: &Ctx, raw: &RawProgram) -> Result<ProgramSetup, ConfigErro
 pub const DEFAULT_PATH_ACC_SHARE: f64 = 0.75;
 /// Default chord (bow-height) error on arcs, mm (1 µm, as in `shared/seeds` 001).
 pub const DEFAULT_CHORD_TOL_MM: f64 = 0.001;
-/// Default look-ahead window, elements.
-pub const DEFAULT_LOOKAHEAD: usize = 1000;
+/// Default look-ahead window, elements: 2000 since session 34 (was 1000), so that on chorded
+/// curves of 30 µm the window holds the braking distance from near the curve's cap, where it
+/// leaves little tangential acceleration (see `src/planner/curve.rs`).
+pub const DEFAULT_LOOKAHEAD: usize = 2000;
 
 fn planner_config(
     ctx: &Ctx,

@@ -146,11 +146,15 @@ const CHORD_HISTORY: usize = 65;
 const CURVE_BUDGET: f64 = 0.85;
 
 /// Share of that budget the centripetal acceleration `v²κ·|Nᵢ|` may take at the run's cap:
-/// at the cap the tangential acceleration is what the rest leaves.
-const CENTRIPETAL_SHARE: f64 = 0.9;
+/// at the cap the tangential acceleration is what the rest leaves. (0.9 until session 34:
+/// near the cap the braking distance, with the little tangential acceleration left, outgrew
+/// a window of 1000 elements of 30 µm chords, and a 10 mm circle stopped every few laps; the
+/// default `lookahead` is 2000 since.)
+const CENTRIPETAL_SHARE: f64 = 0.97;
 
-/// Share of that budget the jerk of following the curve, `v³κ²·|Tᵢ|`, may take at the cap.
-const CURVE_JERK_SHARE: f64 = 0.8;
+/// Share of that budget the jerk of following the curve, `v³κ²·|Tᵢ|`, may take at the cap
+/// (0.8 until session 34).
+const CURVE_JERK_SHARE: f64 = 0.95;
 
 /// How much wider a curve's charge is taken for its neighbours ([`Charge::widened`]).
 const WIDEN: f64 = 0.02;
