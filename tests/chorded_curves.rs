@@ -398,3 +398,56 @@ fn collinear_chords_of_a_curve_stay_apart() {
         "a segment of {longest_mm} mm, the longest chord {longest_chord_mm} mm"
     );
 }
+
+/// A chorded spiral whose curvature rises steadily (a clothoid of 10 µm chords to 20 /mm,
+/// 6 decimals, as LinuxCNC's `quick-tests/spiral_tangent_test.ngc` writes one) runs through
+/// every vertex near its curve's own speed: within its middle, no line starts under half of
+/// `min(F, √(A/κ), (J/κ²)^⅓)` at its curvature. Until session 34 a vertex whose own rules
+/// capped it a little under its lines' caps was dipped by the time-law filter's `A·T_f/4`
+/// to a near-stop: 0.35 of that speed at worst here (2.06 mm/s), 4.27 s for the spiral;
+/// held as a cap of the run now (`Planner::start_caps`), 0.70 and 2.92 s.
+#[test]
+fn a_chorded_spiral_runs_through_its_vertices_near_its_curve_s_speed() {
+    let machine = jerk_machine();
+    let (limits, config) = (limits(&machine), machine.planner);
+    let (chord_mm, chords, kappa_max) = (0.01, 2000usize, 20.0);
+    let length_mm = chord_mm * chords as f64;
+    let mut text = String::from("G21 G90 G17 G64 F12000\n");
+    let (mut x, mut y) = (0.0f64, 0.0f64);
+    let mut kappa_at_line = Vec::with_capacity(chords);
+    for k in 0..chords {
+        // The heading θ(s) = κ_max·s²/(2L) at the chord's middle.
+        let s_mid = (k as f64 + 0.5) * chord_mm;
+        let theta = kappa_max * s_mid * s_mid / (2.0 * length_mm);
+        x += chord_mm * theta.cos();
+        y += chord_mm * theta.sin();
+        text.push_str(&format!("G1 X{x:.6} Y{y:.6}\n"));
+        kappa_at_line.push(kappa_max * (k as f64 + 1.0) * chord_mm / length_mm);
+    }
+    text.push_str("M2\n");
+    let items = items(&text, Vector3::zeros());
+    let plan = plan_items_with(Vector3::zeros(), &items, &limits, &config).expect("it plans");
+    let (a, j) = (limits.max_acc_mm_s2.x, config.max_jerk_mm_s3.x);
+    let f = limits.max_feed_mm_s;
+    let mut slowest: Option<(usize, f64, f64)> = None;
+    for s in plan.segments() {
+        // The chords are lines 2 …; their middle 10–90 %.
+        let Some(k) = s.line.checked_sub(2) else {
+            continue;
+        };
+        if k < chords / 10 || k > chords * 9 / 10 {
+            continue;
+        }
+        let kappa = kappa_at_line[k];
+        let v_ref = f.min((a / kappa).sqrt()).min((j / (kappa * kappa)).cbrt());
+        let share = s.v_start_mm_s / v_ref;
+        if slowest.is_none_or(|(_, _, worst)| share < worst) {
+            slowest = Some((s.line, s.v_start_mm_s, share));
+        }
+    }
+    let (line, v, share) = slowest.expect("the spiral's lines are planned");
+    assert!(
+        share >= 0.5,
+        "line {line} starts at {v:.2} mm/s, {share:.3} of its curve's speed"
+    );
+}
