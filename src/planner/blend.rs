@@ -565,15 +565,8 @@ impl CornerCost {
         // make the estimate rougher there: a blend must save at least that settling time.
         let period_s = planner.config.period_s;
         let t_f = planner.smoothing.map_or(0.0, |s| s.time_law_s(period_s));
-        let far_acc = |p: &Pending, own: f64| match p.alone {
-            Some(alone)
-                if t_f > 0.0
-                    && matches!(p.seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
-                    && p.curve_acc.is_none()
-                    && !p.seg.aux.moves() =>
-            {
-                own.max(alone.a_max_mm_s2().min(alone.j_max_mm_s3() * t_f))
-            }
+        let far_acc = |p: &Pending, own: f64| match super::split_acc_mm_s2(p, t_f) {
+            Some(split) if t_f > 0.0 => own.max(split),
             _ => own,
         };
         let far = (far_acc(a, acc_a), far_acc(b, acc_b));

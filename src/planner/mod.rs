@@ -2156,18 +2156,11 @@ impl Planner {
     ) -> Option<Vec<(Segment, SpeedProfile)>> {
         let p = &self.window[i];
         let smoothing = self.smoothing?;
-        if !matches!(seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
-            || p.curve_acc.is_some()
-            || seg.aux.moves()
-        {
-            return None;
-        }
-        let alone = p.alone?;
         let period_s = self.config.period_s;
         let t_f = smoothing.time_law_s(period_s);
+        let acc = split_acc_mm_s2(p, t_f)?;
         let t_z = (t_f + 2.0 * period_s) * (1.0 + 1e-9);
         let (v_max, a_e) = (p.limits.v_max_mm_s(), p.limits.a_max_mm_s2());
-        let acc = alone.a_max_mm_s2().min(alone.j_max_mm_s3() * t_f);
         // (NaN-safe: a limit that is not a number splits nothing.)
         if acc.is_nan() || acc <= a_e * 1.01 || v0 > v_max || v1 > v_max {
             return None;
@@ -3480,6 +3473,21 @@ fn arc_jerk_use_at(
 /// the half budget.
 fn isolated_step_budget(half_budget: f64, jump_mm_s: f64, tk: f64) -> f64 {
     (2.0 * half_budget - jump_mm_s / (tk * tk)).max(half_budget)
+}
+
+/// The acceleration the middle of a long speed change of the filtered element `p` may run
+/// at ([`Planner::split_for_acceleration`]): the whole of its move alone's, `min(A, J·T_f)`
+/// with the time-law filter's length `t_f`; `None` for a line of a chord run, an element
+/// that moves an auxiliary axis or has no move alone, and anything but a line or an arc.
+fn split_acc_mm_s2(p: &Pending, t_f: f64) -> Option<f64> {
+    if !matches!(p.seg.path, SegmentPath::Line { .. } | SegmentPath::Arc(_))
+        || p.curve_acc.is_some()
+        || p.seg.aux.moves()
+    {
+        return None;
+    }
+    let alone = p.alone?;
+    Some(alone.a_max_mm_s2().min(alone.j_max_mm_s3() * t_f))
 }
 
 /// Under the time-law filter the acceleration of one element reaches the next through a
