@@ -1122,8 +1122,7 @@ impl Planner {
             self.curve.last_back = Some((back_from_mm, until_mm, wide));
             self.curve.hold_fit_ahead(hold_until_mm, wide);
         }
-        let reach_mm = held_cap * t_f;
-        self.curve.hold_ahead(self.curve.pushed_mm + reach_mm, cap);
+        self.hold_cap_ahead(cap, t_f);
         // The element after the vertex plans with the tangential acceleration the curve
         // leaves at its speed ([`Pending::curve_acc`]), and that of every curve held ahead
         // over it; not passed on through further junctions beyond the time-law filter's
@@ -1749,8 +1748,7 @@ impl Planner {
             let c = on_grid(raw.1);
             if c > 0.0 && c.is_finite() && self.erode_back(c, &smoothing) {
                 let t_f = smoothing.time_law_s(self.config.period_s);
-                let held = c.min(self.limits.max_feed_mm_s);
-                self.curve.hold_ahead(self.curve.pushed_mm + held * t_f, c);
+                self.hold_cap_ahead(c, t_f);
                 cap_speed(p, c, c);
                 let prev = self.window.back()?;
                 let raw = caps_under(own.min(ahead_mm_s).min(c), prev, p);
@@ -1758,6 +1756,13 @@ impl Planner {
             }
         }
         Some((raw, dipped))
+    }
+
+    /// Holds the cap `c` of the vertex at the end of the window over its reach `c·T_f` ahead
+    /// (`t_f`), at most the max feed's: no element with X/Y/Z motion runs above it.
+    fn hold_cap_ahead(&mut self, c: f64, t_f: f64) {
+        let held = c.min(self.limits.max_feed_mm_s);
+        self.curve.hold_ahead(self.curve.pushed_mm + held * t_f, c);
     }
 
     /// The caps held ahead, on the next element `p` at the end of the window: one within
