@@ -250,7 +250,7 @@ fn chorded_curves_take_at_least_their_curvature_bound() {
 /// Issue 11's acceptance: the jerk-limited time of every chorded curve is within 1.10× of its
 /// `T_lb`.
 #[test]
-#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.45× T_lb on these curves (measured 2026-11-29, session 34: circles 1.10–1.21×, the 50×20 mm ellipse 1.30×, the 5×2 mm ellipse 2.45×, which no plan within the axes' acceleration alone takes under 1.10× T_lb: see the README, session 31); the target is 1.10×"]
+#[ignore = "issue 11: the jerk-limited mode takes 1.10–2.45× T_lb on these curves (measured 2026-11-29, session 35: circles 1.10–1.18×, the 50×20 mm ellipse 1.29×, the 5×2 mm ellipse 2.45×, which no plan within the axes' acceleration alone takes under 1.10× T_lb: see the README, session 31); the target is 1.10×"]
 fn chorded_curves_run_within_1_10_of_their_curvature_bound() {
     let slow: Vec<String> = time_curves()
         .into_iter()
@@ -296,6 +296,51 @@ fn a_chorded_circle_keeps_its_pace_lap_after_lap() {
             slowest <= 1.02 * fastest,
             "{}: laps of {fastest:.4}–{slowest:.4} s: {laps_s:.4?}",
             curve.name()
+        );
+    }
+}
+
+/// A chorded circle whose speed its centripetal acceleration caps runs its laps at nearly
+/// that cap: the 10 mm circle of 30 µm chords (4 decimals) at a mean speed of at least 0.92 of
+/// `√(A·r)` on every lap but the first two and the last two (its jerk allows 171 mm/s, the
+/// feed 200). The vertices' rounding costs the axes' jerk, not their acceleration, so the
+/// curve may take nearly all of each axis's acceleration (`CURVE_ACC_BUDGET`,
+/// `src/planner/curve.rs`). Seen failing at 0.883 when the curve had 0.85 of the acceleration
+/// as of the jerk (session 34); 0.937 since.
+#[test]
+fn a_chorded_circle_runs_near_its_centripetal_cap() {
+    let machine = jerk_machine();
+    let (limits, config) = (limits(&machine), machine.planner);
+    let curve = ChordedCurve::acceptance_set()
+        .into_iter()
+        .find(|c| c.a_mm == 10.0 && c.b_mm == 10.0)
+        .expect("the acceptance set has the 10 mm circle");
+    let acc = limits.max_acc_mm_s2.x;
+    assert_eq!(acc, limits.max_acc_mm_s2.y);
+    let cap_mm_s = (acc * curve.a_mm).sqrt();
+    let jerk_mm_s3 = config.max_jerk_mm_s3.x.min(config.max_jerk_mm_s3.y);
+    let jerk_cap_mm_s = (jerk_mm_s3 * curve.a_mm * curve.a_mm).cbrt();
+    assert!(
+        cap_mm_s < jerk_cap_mm_s.min(curve.feed_mm_s),
+        "the centripetal acceleration caps this circle"
+    );
+    let start = curve.start_mm(Some(4));
+    let items = items(&curve.program(Some(4)), start);
+    let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
+    let n = curve.chords_per_lap();
+    let laps = curve.laps as usize;
+    let (mut laps_s, mut laps_mm) = (vec![0.0; laps], vec![0.0; laps]);
+    for s in plan.segments().iter().filter(|s| s.line >= 2) {
+        let k = ((s.line - 2) / n).min(laps - 1);
+        laps_s[k] += s.duration_s();
+        laps_mm[k] += s.length_mm;
+    }
+    for k in 2..laps - 2 {
+        let mean_mm_s = laps_mm[k] / laps_s[k];
+        assert!(
+            mean_mm_s >= 0.92 * cap_mm_s,
+            "lap {k}: {mean_mm_s:.1} mm/s, {:.3} of √(A·r) = {cap_mm_s:.1} mm/s",
+            mean_mm_s / cap_mm_s
         );
     }
 }

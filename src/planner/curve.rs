@@ -27,7 +27,8 @@
 //!   them (LinuxCNC's `trochoidal.ngc`, 0.29 mm chords; `contour.ngc`, whose 2.5 µm inch
 //!   rounding on 16 µm chords holds it at 3 mm/s vertex by vertex).
 //! - **Limits.** The lines either side of the vertex take the curve of curvature `κ` (normal
-//!   `N`, tangent `T`) within [`CURVE_BUDGET`] of each axis's limits, and the rate at which
+//!   `N`, tangent `T`) within [`CURVE_ACC_BUDGET`] of each axis's acceleration and
+//!   [`CURVE_JERK_BUDGET`] of its jerk, and the rate at which
 //!   its curvature vector changes beyond its turn, `ρ = d(κN)/ds + κ²·T` (estimated over at
 //!   least twice the window and the axis filters' span `2·v·T_k`, from the curvature
 //!   estimated at every vertex of the run, taken as a curve or not): at constant speed the
@@ -143,9 +144,22 @@ pub(super) const CURVE_MAX_TURN: f64 = 0.35;
 /// Chords kept for the curvature's window.
 const CHORD_HISTORY: usize = 65;
 
-/// Share of each axis's acceleration and jerk a line of a chord run may use for its curve and
-/// its tangential acceleration together (what is left is the vertices' own, beyond the curve).
-const CURVE_BUDGET: f64 = 0.85;
+/// Share of each axis's jerk a line of a chord run may use for its curve and its tangential
+/// acceleration together; what is left is the vertices' own, beyond the curve. The rounding
+/// of written coordinates turns each chord's direction by up to `2ε/L` (`3·10⁻³` rad on
+/// 30 µm chords with 4 decimals), and the axis filters pass a velocity step `v·Δu` on as the
+/// jerk `v·Δu/T_k²`: at 130 mm/s with `T_k` = 8 ms, 6·10³ mm/s³ for one such vertex, an
+/// eighth of the demo machine's jerk, on top of the curve's.
+const CURVE_JERK_BUDGET: f64 = 0.85;
+
+/// Share of each axis's acceleration a line of a chord run may use for its curve and its
+/// tangential acceleration together. The same vertex reaches the axes' acceleration only as
+/// `v·Δu/T_k`, 50 mm/s² (2.5 % of the demo machine's `A`), and the vertex's own rule
+/// (`v·|Δuᵢ − κᵢ·L̄| ≤ T_k·(Aᵢ − usedᵢ)`, [`Planner::junction_rules_mm_s`]) dips any vertex
+/// that needs more than this leaves it. The jerk's 0.85 until session 35: a curve whose cap
+/// its centripetal acceleration sets (a 10 mm circle of 30 µm chords) ran at 126 mm/s where
+/// 0.95 lets it run at 133 (`tests/chorded_curves.rs`: 1.212 → 1.153 × `T_lb`).
+const CURVE_ACC_BUDGET: f64 = 0.95;
 
 /// Share of that budget the centripetal acceleration `v²κ·|Nᵢ|` may take at the run's cap:
 /// at the cap the tangential acceleration is what the rest leaves. (0.9 until session 34:
@@ -461,7 +475,8 @@ pub(super) struct CurveFit {
     base_jerk_used_mm_s3: Vector3<f64>,
     /// The speed its use is set for.
     pub(super) v_mm_s: f64,
-    /// Each axis's budget for the curve and the tangential acceleration ([`CURVE_BUDGET`]).
+    /// Each axis's budget for the curve and the tangential acceleration ([`CURVE_ACC_BUDGET`],
+    /// [`CURVE_JERK_BUDGET`]).
     acc_budget_mm_s2: Vector3<f64>,
     jerk_budget_mm_s3: Vector3<f64>,
     /// The time-law filter's length.
@@ -856,8 +871,8 @@ fn curve_limits(
     let n = kappa / k;
     let cfg = &planner.config;
     let t_f = smoothing.time_law_s(cfg.period_s);
-    let acc_budget_mm_s2 = planner.limits.max_acc_mm_s2 * CURVE_BUDGET;
-    let jerk_budget_mm_s3 = cfg.max_jerk_mm_s3 * CURVE_BUDGET;
+    let acc_budget_mm_s2 = planner.limits.max_acc_mm_s2 * CURVE_ACC_BUDGET;
+    let jerk_budget_mm_s3 = cfg.max_jerk_mm_s3 * CURVE_JERK_BUDGET;
     // The cap: each axis's part of the centripetal acceleration `v²κ·|Nᵢ|` within
     // [`CENTRIPETAL_SHARE`] of its budget, and of the jerk of following the curve,
     // `v³κ²·|Tᵢ|`, within [`CURVE_JERK_SHARE`].
@@ -1591,9 +1606,9 @@ impl Planner {
             let k = kappa.norm();
             (0..3).all(|i| {
                 let (t_i, n_i) = (prev.tangent_end[i].abs(), kappa[i].abs());
-                x * x * n_i <= CENTRIPETAL_SHARE * CURVE_BUDGET * self.limits.max_acc_mm_s2[i]
+                x * x * n_i <= CENTRIPETAL_SHARE * CURVE_ACC_BUDGET * self.limits.max_acc_mm_s2[i]
                     && x * x * x * k * k * t_i
-                        <= CURVE_JERK_SHARE * CURVE_BUDGET * self.config.max_jerk_mm_s3[i]
+                        <= CURVE_JERK_SHARE * CURVE_JERK_BUDGET * self.config.max_jerk_mm_s3[i]
             })
         };
         // The turn `θ` between the window's end chords over the distance between their
@@ -1659,7 +1674,7 @@ impl Planner {
         let s_vertex = s_new - 0.5 * w_mm;
         let j_min = self.config.max_jerk_mm_s3.min();
         let k2 = best.norm_squared().max(f64::MIN_POSITIVE);
-        let v_k = super::min_cbrt(v_max, CURVE_JERK_SHARE * CURVE_BUDGET * j_min / k2);
+        let v_k = super::min_cbrt(v_max, CURVE_JERK_SHARE * CURVE_JERK_BUDGET * j_min / k2);
         // Its turn with the tangent, `−κ²·T`, is taken at the tangent midway (the chord
         // there), where the difference quotient has it.
         // The estimate a baseline back: where the nearest one that far back is much further
