@@ -45,7 +45,15 @@
 //! In the jerk-limited mode a programmed arc long enough to run mostly at its cap may share
 //! its budget otherwise (`ArcSplit`): `0.45·J` or `0.6·J` for the curve, `0.4·J` or `0.25·J`
 //! tangential, the rest in quadrature for the normal part, whichever is estimated fastest
-//! from and to half its cap (three turns of a 10 mm circle: 114 mm/s instead of 97.9).
+//! from and to half its cap (three turns of a 10 mm circle: 114 mm/s instead of 97.9). Under
+//! the time-law filter a plane arc's plan may accelerate at more than the split gives: the
+//! filtered time law has `a_t ≤ a` and `|j_t| ≤ 2·a/T_f`, and an axis of the plane at the
+//! angle `φ` to the tangent sees `(j_t − v³κ²)·cos φ + 3·v·κ·a_t·sin φ`, at most its share of
+//! the plane times `√((2·a/T_f + v³κ²)² + (3·v·κ·a)²)`; the largest `a` that keeps this within
+//! `s·Jᵢ` (and `√(a² + (v²κ)²)` within `s·Aᵢ`) at the top speed is taken where it is more
+//! (session 35; the split, a sum over the same parts, gave `J_t·T_f/2` = 375 mm/s² on a
+//! 6.35 mm arc at 72 mm/s where this gives 485). A move alone, an exact S-curve without the
+//! time-law filter, keeps the split's limits.
 //!
 //! # Junctions
 //!
@@ -3023,7 +3031,16 @@ impl Planner {
         if !(length_mm > 0.0 && length_mm <= profile::MAX_LENGTH_MM) {
             return Err(PlanError::Overflow { line });
         }
-        let mut a = arc_limits(&arc, feed_mm_s, &self.limits, cfg, ARC_SPLIT, programmed);
+        let time_law_s = self.smoothing.map(|sm| sm.time_law_s(cfg.period_s));
+        let mut a = arc_limits(
+            &arc,
+            feed_mm_s,
+            &self.limits,
+            cfg,
+            ARC_SPLIT,
+            programmed,
+            time_law_s,
+        );
         if programmed && let Some(smoothing) = self.smoothing {
             // A programmed arc long enough to run mostly at its cap takes more of the budget
             // for the curve and less for its tangential acceleration, where that is faster
@@ -3032,7 +3049,9 @@ impl Planner {
             let t_f = smoothing.time_law_s(cfg.period_s);
             let v_ends = ARC_CRUISE_ENDS * a.v_max_mm_s;
             let time_s = |l: &ArcLimits| {
-                let acc = l.acc_mm_s2.min(0.5 * l.jerk_mm_s3 * t_f);
+                let acc = l
+                    .time_law_acc_mm_s2
+                    .unwrap_or(l.acc_mm_s2.min(0.5 * l.jerk_mm_s3 * t_f));
                 let (v, c) = (l.v_max_mm_s, v_ends.min(l.v_max_mm_s));
                 let ramps_mm = (v * v - c * c) / acc;
                 if length_mm >= ramps_mm {
@@ -3043,7 +3062,7 @@ impl Planner {
             };
             let mut best_s = time_s(&a) / ARC_CRUISE_GAIN;
             for split in ARC_CRUISE_SPLITS {
-                let other = arc_limits(&arc, feed_mm_s, &self.limits, cfg, split, true);
+                let other = arc_limits(&arc, feed_mm_s, &self.limits, cfg, split, true, time_law_s);
                 let t_s = time_s(&other);
                 if t_s < best_s {
                     (a, best_s) = (other, t_s);
@@ -3056,6 +3075,12 @@ impl Planner {
         a.v_max_mm_s = a.v_max_mm_s.min(aux_caps.v_mm_s);
         a.acc_mm_s2 = a.acc_mm_s2.min(aux_caps.acc_mm_s2);
         a.jerk_mm_s3 = a.jerk_mm_s3.min(aux_caps.jerk_mm_s3);
+        // The time-law filter's plan: its acceleration, and the jerk `2·a/T_f` it makes.
+        let (plan_acc_mm_s2, plan_jerk_mm_s3) =
+            match (a.time_law_acc_mm_s2, time_law_s.filter(|_| !aux.moves())) {
+                (Some(acc), Some(t_f)) => (acc, 2.0 * acc / t_f),
+                _ => (a.acc_mm_s2, a.jerk_mm_s3),
+            };
         let curvature = |s: f64| {
             let at = arc.point_at(s);
             let rel = at - arc.center_mm;
@@ -3067,10 +3092,10 @@ impl Planner {
                 Vector3::zeros()
             }
         };
-        let jerk_mm_s3 = if cfg.jerk_limited() {
-            a.jerk_mm_s3
+        let (jerk_mm_s3, plan_jerk_mm_s3) = if cfg.jerk_limited() {
+            (a.jerk_mm_s3, plan_jerk_mm_s3)
         } else {
-            f64::INFINITY
+            (f64::INFINITY, f64::INFINITY)
         };
         Ok(Pending {
             seg: moving(line, rapid, ends, SegmentPath::Arc(arc), length_mm),
@@ -3078,8 +3103,8 @@ impl Planner {
                 cfg,
                 self.smoothing,
                 a.v_max_mm_s,
-                a.acc_mm_s2,
-                jerk_mm_s3,
+                plan_acc_mm_s2,
+                plan_jerk_mm_s3,
                 line,
             )?,
             blend,
@@ -3888,7 +3913,7 @@ impl Planner {
         let at = |x: f64| {
             let mut cfg = self.config;
             cfg.path_acc_share = s + x * (1.0 - s);
-            let a = arc_limits(arc, feed, &self.limits, &cfg, ARC_SPLIT, true);
+            let a = arc_limits(arc, feed, &self.limits, &cfg, ARC_SPLIT, true, None);
             ProfileLimits::new(
                 a.v_max_mm_s.min(feed).max(share.v_max_mm_s()),
                 (a0 + x * (a_tan - a0)).max(a0),
@@ -4063,6 +4088,9 @@ struct ArcLimits {
     /// Largest acceleration and jerk of each axis on the arc.
     axis_acc_mm_s2: Vector3<f64>,
     axis_jerk_mm_s3: Vector3<f64>,
+    /// Under the time-law filter, the plan's acceleration where the plane's axes allow more
+    /// than `min(acc_mm_s2, jerk_mm_s3·T_f/2)` ([`arc_limits`]).
+    time_law_acc_mm_s2: Option<f64>,
 }
 
 /// How an arc shares its jerk budget `J` in the jerk-limited mode: the tangential jerk
@@ -4120,6 +4148,7 @@ fn arc_limits(
     cfg: &PlannerConfig,
     split: ArcSplit,
     from_axes: bool,
+    time_law_s: Option<f64>,
 ) -> ArcLimits {
     let sin_a = arc.helix_sin();
     let cos_a = (1.0 - sin_a * sin_a).max(0.0).sqrt();
@@ -4217,6 +4246,7 @@ fn arc_limits(
     // curve's parts at the top speed, `j_t·|Tᵢ| + v³κ²·|Tᵢ| + 3·v·κ·a_t·|Nᵢ| + v³κτ·|Bᵢ| ≤
     // s·Jᵢ` (the binormal's share `sin α` in the plane, `cos α` along the axis).
     let mut axis_jerk_mm_s3 = jerk_share * jerk_budget_mm_s3;
+    let mut time_law_acc_mm_s2 = None;
     if cfg.jerk_limited() {
         if v_max_mm_s > 0.0 {
             acc_mm_s2 = acc_mm_s2
@@ -4238,6 +4268,44 @@ fn arc_limits(
             jerk_mm_s3 = by_axes_mm_s3;
             axis_jerk_mm_s3 = axis_jerk_mm_s3.sup(&(tangent_share * jerk_mm_s3 + parts));
         }
+        // A plane arc under the time-law filter: its plan's acceleration `a` comes out as the
+        // tangential acceleration `a_t ≤ a` and jerk `j_t ≤ 2·a/T_f`, and an axis of the
+        // plane moves along `T` and `N` by `(cos φ, sin φ)` (its share `pᵢ` of the plane), so
+        // it sees the jerk `(j_t − v³κ²)·cos φ + 3·v·κ·a_t·sin φ`, at most
+        // `pᵢ·√((2·a/T_f + v³κ²)² + (3·v·κ·a)²)`, and the acceleration at most
+        // `pᵢ·√(a² + (v²κ)²)`: the largest `a` within `s·Jᵢ` and `s·Aᵢ` there, at the top
+        // speed (both grow with `v`), where more than the split's or the sum's above.
+        if let Some(t_f) = time_law_s.filter(|_| from_axes && sin_a == 0.0 && v > 0.0) {
+            let k = curvature_per_mm;
+            let a_n = v * v * k;
+            let (alpha, beta) = (2.0 / t_f, 3.0 * v * k);
+            let mut a_q = cfg.path_acc_mm_s2;
+            for i in 0..3 {
+                let p_i = normal_share[i];
+                if p_i > 0.0 {
+                    let j_i = share * cfg.max_jerk_mm_s3[i] / p_i;
+                    let acc_i = share * limits.max_acc_mm_s2[i] / p_i;
+                    // `(α·a + c)² + (β·a)² ≤ j²`: its positive root.
+                    let qa = alpha * alpha + beta * beta;
+                    let qb = 2.0 * alpha * curve;
+                    let qc = curve * curve - j_i * j_i;
+                    let root = if qc < 0.0 {
+                        (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa)
+                    } else {
+                        0.0
+                    };
+                    a_q = a_q
+                        .min(root)
+                        .min((acc_i * acc_i - a_n * a_n).max(0.0).sqrt());
+                }
+            }
+            // Each axis's use stays within what `axis_acc_mm_s2` and `axis_jerk_mm_s3` below
+            // report for the plane (`s·Aᵢ`, `s·Jᵢ` of the most loaded axis); a move alone keeps
+            // the split's limits, its profile's acceleration not filtered.
+            if a_q > acc_mm_s2.min(0.5 * jerk_mm_s3 * t_f) {
+                time_law_acc_mm_s2 = Some(a_q);
+            }
+        }
     } else {
         jerk_mm_s3 = f64::INFINITY;
     }
@@ -4253,6 +4321,7 @@ fn arc_limits(
             acc_share * acc_budget_mm_s2
         },
         axis_jerk_mm_s3,
+        time_law_acc_mm_s2,
     }
 }
 
@@ -4840,5 +4909,65 @@ pub(crate) mod tests {
                 proptest::prop_assert!(capped * t(capped - vb) <= l);
             }
         }
+    }
+
+    /// Under the time-law filter a plane arc's plan accelerates at the largest `a` whose parts,
+    /// taken in quadrature, keep each axis of its plane within `s·Jᵢ` at its top speed
+    /// (`√((2·a/T_f + v³κ²)² + (3·v·κ·a)²)`, [`arc_limits`]): the axes meet that budget
+    /// exactly, and the plan runs a good deal above the split's `J_t·T_f/2` (485 against
+    /// 375 mm/s² on this 6.35 mm arc at 72 mm/s). A move alone, without the filter, keeps the
+    /// split.
+    #[test]
+    fn a_plane_arc_s_time_law_acceleration_takes_its_parts_in_quadrature() {
+        let lim = Limits {
+            max_vel_mm_s: v(200.0, 200.0, 200.0),
+            max_acc_mm_s2: v(2000.0, 2000.0, 2000.0),
+            max_feed_mm_s: 200.0,
+        };
+        let cfg = PlannerConfig {
+            period_s: 0.001,
+            corner_acc_mm_s2: 2000.0,
+            path_acc_share: 0.75,
+            path_acc_mm_s2: f64::INFINITY,
+            max_jerk_mm_s3: v(50_000.0, 50_000.0, 50_000.0),
+            profile: ProfileKind::SCurve,
+            chord_tol_mm: 0.001,
+            default_tolerance_mm: 0.01,
+            lookahead: 64,
+            integer_periods: false,
+            aux: AuxLimits::NONE,
+        };
+        let (r, t_f) = (6.35, 0.04);
+        let arc = ArcGeometry::new(
+            v(r, 0.0, 0.0),
+            v(0.0, r, 0.0),
+            v(0.0, 0.0, 0.0),
+            v(0.0, 0.0, 1.0),
+            0,
+        )
+        .unwrap();
+        let l = arc_limits(&arc, 200.0, &lim, &cfg, ARC_SPLIT, true, Some(t_f));
+        let a = l.time_law_acc_mm_s2.expect("more than the split gives");
+        let split_mm_s2 = l.acc_mm_s2.min(0.5 * l.jerk_mm_s3 * t_f);
+        assert!(
+            a > 1.25 * split_mm_s2,
+            "{a} against the split's {split_mm_s2} mm/s²"
+        );
+        let (top, k) = (l.v_max_mm_s, 1.0 / r);
+        let jerk = (2.0 * a / t_f + top.powi(3) * k * k).hypot(3.0 * top * k * a);
+        let budget = 0.75 * 50_000.0;
+        assert!(
+            (jerk - budget).abs() <= 1e-9 * budget,
+            "{jerk} against {budget} mm/s³"
+        );
+        assert!(a.hypot(top * top * k) <= 0.75 * 2000.0);
+        // Every axis's use reported for the junctions covers it.
+        assert!((0..2).all(|i| l.axis_jerk_mm_s3[i] >= jerk * (1.0 - 1e-12)));
+        let alone = arc_limits(&arc, 200.0, &lim, &cfg, ARC_SPLIT, true, None);
+        assert_eq!(alone.time_law_acc_mm_s2, None);
+        assert_eq!(
+            (alone.acc_mm_s2, alone.jerk_mm_s3),
+            (l.acc_mm_s2, l.jerk_mm_s3)
+        );
     }
 }
