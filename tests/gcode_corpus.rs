@@ -172,6 +172,7 @@ fn config(profile: ProfileKind) -> PlannerConfig {
         lookahead: 1000,
         integer_periods: false,
         aux: canmotion::planner::AuxLimits::NONE,
+        axis_filter_s: canmotion::planner::AXIS_FILTER_S,
     }
 }
 

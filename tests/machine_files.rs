@@ -252,9 +252,39 @@ fn limits_the_planner_would_not_honour_are_refused_on_their_key() {
             "corner_acc_mm_s2",
             "0..=1e9",
         ),
+        (
+            "[planner]\naxis_filter_ms = 4\n\n[program]",
+            "axis_filter_ms",
+            "8..=16 ms",
+        ),
+        (
+            "[planner]\naxis_filter_ms = 20\n\n[program]",
+            "axis_filter_ms",
+            "8..=16 ms",
+        ),
     ] {
         assert_refused(planner, to, "planner", key, says);
     }
+}
+
+/// `[planner] axis_filter_ms` sets the jerk-limited mode's axis filters (8 ms without it),
+/// and the plan's filters follow it.
+#[test]
+fn the_axis_filter_time_is_the_machine_file_s() {
+    let machine = |extra: &str| {
+        parse(&DEMO_MACHINE.replacen("[program]", &format!("{extra}[program]"), 1))
+            .expect("the machine parses")
+    };
+    let default = machine("");
+    assert_eq!(default.planner.axis_filter_s, 0.008);
+    let longer = machine("[planner]\naxis_filter_ms = 12\nprofile = \"s-curve\"\n\n");
+    assert_eq!(longer.planner.axis_filter_s, 0.012);
+    let limits = canmotion::gateway::limits(&longer);
+    let smoothing = canmotion::planner::Smoothing::for_machine(&limits, &longer.planner)
+        .expect("the jerk-limited mode filters");
+    // 12 ms is three of the demo machine's 4 ms periods.
+    let axis_s = smoothing.axis_s(longer.planner.period_s);
+    assert!((axis_s - 0.012).abs() < 1e-12, "{axis_s} s");
 }
 
 #[test]

@@ -158,6 +158,19 @@ proptest! {
         check(&program(&moves), ProfileKind::SCurve, &schedule, final_override)?;
     }
 
+    /// The same with axis filters longer than the default 8 ms (`[planner] axis_filter_ms`):
+    /// a hold still stops within the limits once the filters have settled.
+    #[test]
+    fn s_curve_setpoints_with_longer_axis_filters_keep_the_limits_under_override_and_hold(
+        moves in prop::collection::vec(a_move(), 1..30),
+        schedule in a_schedule(),
+        final_override in 0.2..=2.0f64,
+        axis_filter_s in prop_oneof![Just(0.012), Just(0.016)],
+    ) {
+        let cfg = PlannerConfig { axis_filter_s, ..config(ProfileKind::SCurve) };
+        check_with(&program(&moves), cfg, &schedule, final_override)?;
+    }
+
     /// Long moves joined at speed: the middles of long elements planned at their whole
     /// acceleration (`Planner::split_for_acceleration`), under override, hold and resume.
     #[test]

@@ -129,6 +129,41 @@ proptest! {
     }
 }
 
+/// Plans `text` in the jerk-limited mode with axis filters of `axis_filter_s` and checks its
+/// setpoints' limits and their distance from the programmed path.
+fn check_axis_filter(text: &str, axis_filter_s: f64) -> Result<(), TestCaseError> {
+    let cfg = PlannerConfig {
+        axis_filter_s,
+        ..config(ProfileKind::SCurve)
+    };
+    let fail = |e: String| TestCaseError::fail(format!("{e}\n{text}"));
+    let prog =
+        parse_program(text, "random.ngc", Vector3::zeros()).map_err(|e| fail(e.to_string()))?;
+    let plan = plan_with(&prog, &limits(), &cfg).map_err(|e| fail(e.to_string()))?;
+    setpoints::limits_hold(plan.clone(), &limits(), &cfg).map_err(fail)?;
+    path_deviation::measure_items(prog.start_mm, &prog.items, plan, &cfg)
+        .map_err(|e| fail(e.to_string()))?
+        .check()
+        .map_err(|e| fail(e.to_string()))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// `[planner] axis_filter_ms`: with axis filters longer than the default 8 ms (up to the
+    /// 16 ms allowed), random programs and kinked polylines keep every axis's limits and
+    /// the tolerance.
+    #[test]
+    fn longer_axis_filters_keep_the_limits_and_the_tolerance(
+        moves in prop::collection::vec(a_move(), 1..30),
+        polyline in a_kinked_polyline(),
+        axis_filter_s in prop_oneof![Just(0.01), Just(0.012), Just(0.016)],
+    ) {
+        check_axis_filter(&program(&moves), axis_filter_s)?;
+        check_axis_filter(&polyline, axis_filter_s)?;
+    }
+}
+
 #[test]
 fn a_circle_of_tiny_lines_keeps_the_centripetal_acceleration() {
     // 2000 chords of a 10 mm circle (31 µm each, ~25 per period at speed): the velocity

@@ -14,7 +14,7 @@ use super::{ConfigError, parse_toml};
 use crate::canopen::dictionary::{DriveDictionary, int_value, type_name, value_as_i128};
 use crate::canopen::index;
 use crate::interpolator::filter::{AxisFilter, FilterKind, FilterSpec};
-use crate::planner::MAX_LIMIT;
+use crate::planner::{AXIS_FILTER_RANGE_S, MAX_LIMIT};
 
 use super::operation::{AxisLimits, RawHoming, RawOperation, RawSim};
 pub use super::operation::{
@@ -69,6 +69,7 @@ struct RawPlanner {
     lookahead: Option<usize>,
     #[serde(default)]
     integer_periods: bool,
+    axis_filter_ms: Option<f64>,
 }
 
 /// `[program]`: how programs are interpreted on this machine (all keys optional).
@@ -936,6 +937,22 @@ fn planner_config(
         },
         integer_periods: raw.integer_periods,
         aux,
+        axis_filter_s: match raw.axis_filter_ms {
+            None => crate::planner::AXIS_FILTER_S,
+            Some(ms) if AXIS_FILTER_RANGE_S.contains(&(ms / 1000.0)) => ms / 1000.0,
+            Some(ms) => {
+                return Err(ctx.err(
+                    "planner",
+                    "axis_filter_ms",
+                    format!(
+                        "{ms} ms must be in {}..={} ms, the filters the planner's vertex and \
+                         corner rules are made for",
+                        1000.0 * AXIS_FILTER_RANGE_S.start(),
+                        1000.0 * AXIS_FILTER_RANGE_S.end()
+                    ),
+                ));
+            }
+        },
     };
     config
         .validate()

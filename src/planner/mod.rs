@@ -341,8 +341,18 @@ pub enum ProfileKind {
 }
 
 /// Time of each of the two moving averages per axis of the jerk-limited mode (the geometry
-/// filter, see the module documentation), rounded up to whole periods (at least 2).
+/// filter, see the module documentation) by default, rounded up to whole periods (at least
+/// 2); [`PlannerConfig::axis_filter_s`].
 pub const AXIS_FILTER_S: f64 = 0.008;
+
+/// The range of [`PlannerConfig::axis_filter_s`]. Below: the chord runs keep [`curve`]'s
+/// share of each axis's jerk for their vertices' rounding, which reaches the jerk through the
+/// axis filters as `v·Δu/T_k²`, sized at 8 ms: it holds for longer filters (less), not
+/// shorter. Above: the corners' and curvature steps' contour rules take each junction alone,
+/// and from about 20 ms the filters' span reaches several corners of a kinked polyline whose
+/// cuts add up (`tests/planner_limits.rs` found 0.7 % over the tolerance at 32 ms and 2 % at
+/// 24 ms; none in 3000 random cases at 10, 12 and 16 ms).
+pub const AXIS_FILTER_RANGE_S: std::ops::RangeInclusive<f64> = 0.008..=0.016;
 
 /// Share of an arc's pull towards its centre (`v²·κ·σ²/2`) that the axis filters still take
 /// where the curvature steps by `Δκ` at speed, with the interpolator's contour
@@ -403,7 +413,7 @@ impl Smoothing {
             |t: f64, at_least: f64| (t / cfg.period_s - 1e-9).ceil().max(at_least) as usize;
         Some(Smoothing {
             time_law_periods: periods(t_f, 1.0),
-            axis_periods: periods(AXIS_FILTER_S, 2.0),
+            axis_periods: periods(cfg.axis_filter_s, 2.0),
         })
     }
 
@@ -453,6 +463,12 @@ pub struct PlannerConfig {
     pub integer_periods: bool,
     /// Limits of the auxiliary axes A B C U V W ([`aux_axes`]).
     pub aux: AuxLimits,
+    /// Time `T_k` of each of the two moving averages per axis of the jerk-limited mode (the
+    /// geometry filter), within [`AXIS_FILTER_RANGE_S`]; [`AXIS_FILTER_S`] by default. Longer
+    /// filters pass a polyline's vertices at a higher speed for the jerk (`v·Δu/T_k²`) and cut
+    /// corners and curvature steps by more (`v·|Δu|·T_k/4`, `v²·|Δκ|·T_k²/12`), which the
+    /// tolerance then holds to a lower speed.
+    pub axis_filter_s: f64,
 }
 
 impl PlannerConfig {
@@ -471,6 +487,7 @@ impl PlannerConfig {
             lookahead: 1000,
             integer_periods: false,
             aux: AuxLimits::NONE,
+            axis_filter_s: AXIS_FILTER_S,
         }
     }
 
@@ -513,6 +530,11 @@ impl PlannerConfig {
                 return Err(PlanError::InvalidLimit { name, value });
             }
         }
+        if !AXIS_FILTER_RANGE_S.contains(&self.axis_filter_s) {
+            return Err(PlanError::InvalidAxisFilter {
+                value_s: self.axis_filter_s,
+            });
+        }
         if self.profile != ProfileKind::Trapezoid {
             const JERK: [&str; 3] = ["max_jerk_mm_s3.x", "max_jerk_mm_s3.y", "max_jerk_mm_s3.z"];
             for (i, name) in JERK.iter().enumerate() {
@@ -538,6 +560,14 @@ impl PlannerConfig {
 
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum PlanError {
+    /// The axis filters' time is outside [`AXIS_FILTER_RANGE_S`].
+    #[error(
+        "axis_filter_s = {value_s} s must be in 0.008..=0.016 s, the filters the planner's vertex and corner rules are made for"
+    )]
+    InvalidAxisFilter {
+        /// The time asked for.
+        value_s: f64,
+    },
     /// A machine limit is not finite, not positive, or above [`MAX_LIMIT`].
     #[error("machine limit {name} = {value} must be greater than 0 and at most 1e9")]
     InvalidLimit {
@@ -4936,6 +4966,7 @@ pub(crate) mod tests {
             lookahead: 64,
             integer_periods: false,
             aux: AuxLimits::NONE,
+            axis_filter_s: AXIS_FILTER_S,
         };
         let (r, t_f) = (6.35, 0.04);
         let arc = ArcGeometry::new(
@@ -4969,5 +5000,28 @@ pub(crate) mod tests {
             (alone.acc_mm_s2, alone.jerk_mm_s3),
             (l.acc_mm_s2, l.jerk_mm_s3)
         );
+    }
+
+    /// The axis filters' time is refused outside the range the planner's rules are made
+    /// for, with the value asked for.
+    #[test]
+    fn an_axis_filter_time_outside_its_range_is_refused() {
+        let cfg = |axis_filter_s| PlannerConfig {
+            axis_filter_s,
+            profile: ProfileKind::SCurve,
+            max_jerk_mm_s3: v(50_000.0, 50_000.0, 50_000.0),
+            ..PlannerConfig::exact_stop()
+        };
+        for ok in [0.008, 0.012, 0.016] {
+            assert_eq!(cfg(ok).validate(), Ok(()), "{ok} s");
+        }
+        for refused in [0.0, 0.004, 0.0161, 0.032, f64::NAN] {
+            match cfg(refused).validate() {
+                Err(PlanError::InvalidAxisFilter { value_s }) => {
+                    assert!(value_s == refused || value_s.is_nan() && refused.is_nan());
+                }
+                other => panic!("{refused} s: {other:?}"),
+            }
+        }
     }
 }

@@ -30,6 +30,7 @@ pub fn config(profile: ProfileKind) -> PlannerConfig {
         lookahead: 64,
         integer_periods: false,
         aux: canmotion::planner::AuxLimits::NONE,
+        axis_filter_s: canmotion::planner::AXIS_FILTER_S,
     }
 }
 
