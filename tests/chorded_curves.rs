@@ -279,17 +279,8 @@ fn a_chorded_circle_keeps_its_pace_lap_after_lap() {
         .into_iter()
         .filter(|c| c.a_mm == c.b_mm && c.laps >= 8)
     {
-        let start = curve.start_mm(Some(4));
-        let items = items(&curve.program(Some(4)), start);
-        let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
-        // The chords are lines 2, 3, …: lap k is lines 2 + k·n to 1 + (k + 1)·n.
-        let n = curve.chords_per_lap();
-        let laps = curve.laps as usize;
-        let mut laps_s = vec![0.0; laps];
-        for s in plan.segments().iter().filter(|s| s.line >= 2) {
-            laps_s[((s.line - 2) / n).min(laps - 1)] += s.duration_s();
-        }
-        let inner = &laps_s[2..laps - 2];
+        let laps_s: Vec<f64> = laps(&curve, &limits, &config).iter().map(|l| l.0).collect();
+        let inner = &laps_s[2..laps_s.len() - 2];
         let fastest = inner.iter().copied().fold(f64::INFINITY, f64::min);
         let slowest = inner.iter().copied().fold(0.0, f64::max);
         assert!(
@@ -311,10 +302,7 @@ fn a_chorded_circle_keeps_its_pace_lap_after_lap() {
 fn a_chorded_circle_runs_near_its_centripetal_cap() {
     let machine = jerk_machine();
     let (limits, config) = (limits(&machine), machine.planner);
-    let curve = ChordedCurve::acceptance_set()
-        .into_iter()
-        .find(|c| c.a_mm == 10.0 && c.b_mm == 10.0)
-        .expect("the acceptance set has the 10 mm circle");
+    let curve = acceptance_circle(10.0);
     let acc = limits.max_acc_mm_s2.x;
     assert_eq!(acc, limits.max_acc_mm_s2.y);
     let cap_mm_s = (acc * curve.a_mm).sqrt();
@@ -324,25 +312,40 @@ fn a_chorded_circle_runs_near_its_centripetal_cap() {
         cap_mm_s < jerk_cap_mm_s.min(curve.feed_mm_s),
         "the centripetal acceleration caps this circle"
     );
-    let start = curve.start_mm(Some(4));
-    let items = items(&curve.program(Some(4)), start);
-    let plan = plan_items_with(start, &items, &limits, &config).expect("the curve plans");
-    let n = curve.chords_per_lap();
-    let laps = curve.laps as usize;
-    let (mut laps_s, mut laps_mm) = (vec![0.0; laps], vec![0.0; laps]);
-    for s in plan.segments().iter().filter(|s| s.line >= 2) {
-        let k = ((s.line - 2) / n).min(laps - 1);
-        laps_s[k] += s.duration_s();
-        laps_mm[k] += s.length_mm;
-    }
-    for k in 2..laps - 2 {
-        let mean_mm_s = laps_mm[k] / laps_s[k];
+    let laps = laps(&curve, &limits, &config);
+    for (k, (lap_s, lap_mm)) in laps.iter().enumerate().take(laps.len() - 2).skip(2) {
+        let mean_mm_s = lap_mm / lap_s;
         assert!(
             mean_mm_s >= 0.92 * cap_mm_s,
             "lap {k}: {mean_mm_s:.1} mm/s, {:.3} of √(A·r) = {cap_mm_s:.1} mm/s",
             mean_mm_s / cap_mm_s
         );
     }
+}
+
+/// The acceptance set's circle of radius `r_mm`.
+fn acceptance_circle(r_mm: f64) -> ChordedCurve {
+    ChordedCurve::acceptance_set()
+        .into_iter()
+        .find(|c| c.a_mm == r_mm && c.b_mm == r_mm)
+        .expect("the acceptance set has the circle")
+}
+
+/// The jerk-limited plan of `curve` (written with 4 decimals), lap by lap: each lap's time and
+/// length. The chords are lines 2, 3, …: lap `k` is lines `2 + k·n` to `1 + (k + 1)·n`.
+fn laps(curve: &ChordedCurve, limits: &Limits, config: &PlannerConfig) -> Vec<(f64, f64)> {
+    let start = curve.start_mm(Some(4));
+    let items = items(&curve.program(Some(4)), start);
+    let plan = plan_items_with(start, &items, limits, config).expect("the curve plans");
+    let n = curve.chords_per_lap();
+    let mut laps = vec![(0.0, 0.0); curve.laps as usize];
+    let last = laps.len() - 1;
+    for s in plan.segments().iter().filter(|s| s.line >= 2) {
+        let lap = &mut laps[((s.line - 2) / n).min(last)];
+        lap.0 += s.duration_s();
+        lap.1 += s.length_mm;
+    }
+    laps
 }
 
 /// The program time of `items` planned with `config` and streamed at its period; the plan
@@ -419,10 +422,7 @@ fn a_chorded_circle_runs_as_fast_as_its_arc() {
 fn collinear_chords_of_a_curve_stay_apart() {
     let machine = jerk_machine();
     let (limits, config) = (limits(&machine), machine.planner);
-    let curve = ChordedCurve::acceptance_set()
-        .into_iter()
-        .find(|c| c.a_mm == 50.0 && c.b_mm == 50.0)
-        .expect("the 50 mm circle");
+    let curve = acceptance_circle(50.0);
     let start = curve.start_mm(Some(4));
     let items = items(&curve.program(Some(4)), start);
     let longest_chord_mm = items
