@@ -345,7 +345,7 @@ pub enum ProfileKind {
 /// 2); [`PlannerConfig::axis_filter_s`].
 pub const AXIS_FILTER_S: f64 = 0.008;
 
-/// The range of [`PlannerConfig::axis_filter_s`]. Below: the chord runs keep [`curve`]'s
+/// The range of [`PlannerConfig::axis_filter_s`]. Below: the chord runs keep `curve`'s
 /// share of each axis's jerk for their vertices' rounding, which reaches the jerk through the
 /// axis filters as `v·Δu/T_k²`, sized at 8 ms: it holds for longer filters (less), not
 /// shorter. Above: the corners' and curvature steps' contour rules take each junction alone,
