@@ -562,7 +562,9 @@ impl PlannerConfig {
 pub enum PlanError {
     /// The axis filters' time is outside [`AXIS_FILTER_RANGE_S`].
     #[error(
-        "axis_filter_s = {value_s} s must be in 0.008..=0.016 s, the filters the planner's vertex and corner rules are made for"
+        "axis_filter_s = {value_s} s must be in {lo}..={hi} s, the filters the planner's vertex and corner rules are made for",
+        lo = AXIS_FILTER_RANGE_S.start(),
+        hi = AXIS_FILTER_RANGE_S.end()
     )]
     InvalidAxisFilter {
         /// The time asked for.
@@ -5017,8 +5019,9 @@ pub(crate) mod tests {
         }
         for refused in [0.0, 0.004, 0.0161, 0.032, f64::NAN] {
             match cfg(refused).validate() {
-                Err(PlanError::InvalidAxisFilter { value_s }) => {
+                Err(e @ PlanError::InvalidAxisFilter { value_s }) => {
                     assert!(value_s == refused || value_s.is_nan() && refused.is_nan());
+                    assert!(e.to_string().contains("0.008..=0.016 s"), "{e}");
                 }
                 other => panic!("{refused} s: {other:?}"),
             }
